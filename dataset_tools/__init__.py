@@ -1,0 +1,18 @@
+"""Scene folders, synthetic scenes with exact ground truth, and mask corruption.
+
+The scene folder (images, ``images_N``, ``sparse/0``, ``object_mask``, ``scene.json``) is
+the interchange format between every stage of the pipeline.
+"""
+
+from dataset_tools.errors import InputError
+from dataset_tools.scene import PinholeCamera, Scene, SparsePoints, View, load_scene, save_scene
+
+__all__ = [
+    "InputError",
+    "PinholeCamera",
+    "Scene",
+    "SparsePoints",
+    "View",
+    "load_scene",
+    "save_scene",
+]

@@ -1,0 +1,45 @@
+"""Camera intrinsics: the pinhole cameras renderers use, and distorted source cameras."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+PINHOLE_MODELS = ("PINHOLE", "SIMPLE_PINHOLE")
+
+
+@dataclass(frozen=True)
+class PinholeCamera:
+    """An undistorted pinhole camera. Pixel centres lie at half-integer coordinates
+    (COLMAP's convention): pixel (row i, column j) is centred at (u, v) = (j + 0.5, i + 0.5)."""
+
+    width: int
+    height: int
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+
+    @property
+    def K(self) -> np.ndarray:
+        """Intrinsic matrix, (3, 3) float64."""
+        return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
+
+    def resized(self, width: int, height: int) -> PinholeCamera:
+        """The same camera for an image resampled to ``width`` x ``height``."""
+        sx, sy = width / self.width, height / self.height
+        return PinholeCamera(width, height, self.fx * sx, self.fy * sy, self.cx * sx, self.cy * sy)
+
+
+@dataclass(frozen=True)
+class SourceCamera:
+    """A COLMAP camera with lens distortion, at the resolution of the image files.
+
+    ``model`` and ``params`` follow COLMAP's camera models (e.g. SIMPLE_RADIAL: f, cx, cy, k).
+    """
+
+    model: str
+    width: int
+    height: int
+    params: tuple[float, ...]

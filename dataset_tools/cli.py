@@ -1,0 +1,70 @@
+"""``python -m dataset_tools``: synthetic scenes, mask corruption and scene inspection."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from dataset_tools.cli_support import run_cli
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+def cli() -> None:
+    """Scene folders: make synthetic scenes, corrupt their masks, inspect any scene."""
+
+
+@cli.command()
+@click.option("--out", type=click.Path(path_type=Path), required=True, help="Scene folder to create.")
+@click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--views", type=int, default=24, show_default=True)
+@click.option("--res", type=int, default=256, show_default=True, help="Image width and height in pixels.")
+@click.option("--objects", type=int, default=6, show_default=True)
+@click.option("--path", "path_kind", type=click.Choice(["orbit", "forward"]), default="orbit", show_default=True)
+@click.option("--wall/--no-wall", default=None, help="Back wall (default: only for --path forward).")
+@click.option("--force", is_flag=True, help="Replace --out if it exists.")
+def synth(out: Path, seed: int, views: int, res: int, objects: int, path_kind: str, wall: bool | None, force: bool) -> None:
+    """Ray-cast a synthetic scene with exact object masks and SfM points."""
+    from dataset_tools.synth import SynthConfig, generate_scene
+
+    cfg = SynthConfig(views=views, res=res, objects=objects, path=path_kind, seed=seed, wall=wall)
+    result = generate_scene(cfg, out, overwrite=force)
+    click.echo(f"wrote {result.root}: {views} views at {res}x{res}, {objects} objects, "
+               f"{len(result.point_object_ids)} points3D")
+
+
+@cli.command()
+@click.option("--scene", type=click.Path(path_type=Path), required=True, help="Scene folder with exact masks.")
+@click.option("--out-masks", required=True, help="Name of the mask folder to write inside the scene.")
+@click.option("--severity", type=click.Choice(["low", "medium", "high"]), default="medium", show_default=True)
+@click.option("--coarse", is_flag=True, help="Low-resolution boundaries, like SAM against SAM-HQ.")
+@click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--masks", default="object_mask", show_default=True, help="Exact mask folder to corrupt.")
+@click.option("--force", is_flag=True, help="Replace --out-masks if it exists.")
+def corrupt(scene: Path, out_masks: str, severity: str, coarse: bool, seed: int, masks: str, force: bool) -> None:
+    """Write realistic imperfect copies of a scene's masks to SCENE/OUT_MASKS/."""
+    from dataset_tools.corrupt import corrupt_scene
+
+    report = corrupt_scene(scene, out_masks, severity, coarse=coarse, seed=seed, masks=masks, overwrite=force)
+    click.echo(f"wrote {scene / out_masks}: {len(report['error_per_view'])} masks, "
+               f"{100 * report['mean_error']:.2f}% of pixels wrong after ID matching")
+
+
+@cli.command()
+@click.argument("scene_dir", type=click.Path(path_type=Path))
+@click.option("--images", default="images", show_default=True, help="Image folder (images or images_N).")
+@click.option("--masks", default="object_mask", show_default=True, help="Mask folder to show.")
+@click.option("--sheet", type=click.Path(path_type=Path), default=None,
+              help="Contact sheet PNG to write [default: SCENE_DIR/contact_sheet.png].")
+def inspect(scene_dir: Path, images: str, masks: str, sheet: Path | None) -> None:
+    """Print a summary of a scene folder and write a contact sheet PNG."""
+    from dataset_tools.inspect_scene import contact_sheet, summarize
+    from dataset_tools.scene import load_scene
+
+    scene = load_scene(scene_dir, images=images, masks=masks)
+    click.echo(str(summarize(scene)))
+    path = contact_sheet(scene, sheet or scene_dir / "contact_sheet.png")
+    click.echo(f"contact sheet {path}")
+
+
+main = run_cli(cli, "python -m dataset_tools")

@@ -1,0 +1,98 @@
+"""Reading and writing RGB images and 8-bit object-ID maps."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+from PIL import Image
+
+from dataset_tools.atomic import write_bytes_atomic
+from dataset_tools.errors import InputError
+
+IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".JPG", ".JPEG", ".PNG")
+
+
+def image_size(path: Path) -> tuple[int, int]:
+    """(width, height) of an image file, read from its header only."""
+    try:
+        with Image.open(path) as im:
+            return im.size
+    except FileNotFoundError:
+        raise InputError(f"{path}: image file not found; restore it or remove the view from the COLMAP model.") from None
+    except OSError as e:
+        raise InputError(f"{path}: not a readable image ({e}); replace it with a JPEG or PNG.") from None
+
+
+def read_image(path: Path) -> np.ndarray:
+    """Read an RGB image. Returns (H, W, 3) uint8."""
+    img = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    if img is None:
+        raise InputError(f"{path}: cannot read this image; replace it with a JPEG or PNG.")
+    return cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
+
+
+def read_mask(path: Path) -> np.ndarray:
+    """Read an object-ID map. Returns (H, W) uint8, 0 = background, 1..255 = object IDs."""
+    ids = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if ids is None:
+        raise InputError(f"{path}: cannot read this mask; object masks must be 8-bit single-channel PNGs.")
+    if ids.ndim != 2:
+        raise InputError(
+            f"{path}: mask has {ids.shape[2]} channels; object masks must be 8-bit single-channel "
+            "PNGs of object IDs (convert colour masks to one ID per colour)."
+        )
+    if ids.dtype != np.uint8:
+        if np.issubdtype(ids.dtype, np.integer) and ids.max(initial=0) > 255:
+            raise InputError(
+                f"{path}: mask holds IDs up to {int(ids.max())}, more than the 255 an 8-bit map can "
+                "hold; merge or drop objects so that at most 255 IDs remain."
+            )
+        raise InputError(f"{path}: mask is {ids.dtype}; save it as an 8-bit single-channel PNG.")
+    return ids
+
+
+def as_label_map(ids: np.ndarray, what: str) -> np.ndarray:
+    """Check that an integer array fits an 8-bit ID map and return it as (H, W) uint8."""
+    ids = np.asarray(ids)
+    if ids.ndim != 2 or not np.issubdtype(ids.dtype, np.integer):
+        raise InputError(f"{what}: an ID map must be a 2-D integer array, got {ids.dtype} {ids.shape}.")
+    if ids.size and (ids.min() < 0 or ids.max() > 255):
+        raise InputError(
+            f"{what}: IDs range over [{int(ids.min())}, {int(ids.max())}] but must lie in 0..255; "
+            "merge or drop objects so that at most 255 IDs remain."
+        )
+    return ids.astype(np.uint8, copy=False)
+
+
+def encode_png(array: np.ndarray) -> bytes:
+    """PNG bytes of an (H, W) uint8 map or an (H, W, 3) uint8 RGB image."""
+    if array.ndim == 3:
+        array = cv2.cvtColor(array, cv2.COLOR_RGB2BGR)
+    ok, buf = cv2.imencode(".png", array)
+    if not ok:
+        raise RuntimeError("PNG encoding failed")
+    return buf.tobytes()
+
+
+def write_png(path: Path, array: np.ndarray) -> None:
+    """Atomically write an (H, W) uint8 ID map or (H, W, 3) uint8 RGB image as PNG."""
+    write_bytes_atomic(Path(path), encode_png(np.ascontiguousarray(array)))
+
+
+def label_palette() -> np.ndarray:
+    """A fixed colour for every ID: (256, 3) uint8, ID 0 black, neighbours well apart."""
+    ids = np.arange(256)
+    hue = (ids * 0.618033988749895) % 1.0
+    sat = 0.55 + 0.45 * ((ids * 7) % 3) / 2
+    val = 0.75 + 0.25 * ((ids * 5) % 2)
+    hsv = np.stack([hue * 180, sat * 255, val * 255], axis=-1).astype(np.uint8)[None]
+    rgb = cv2.cvtColor(hsv, cv2.COLOR_HSV2RGB)[0]
+    rgb[0] = 0
+    return rgb
+
+
+def colorize_labels(ids: np.ndarray) -> np.ndarray:
+    """Colour an ID map for viewing. (H, W) integer -> (H, W, 3) uint8."""
+    return label_palette()[np.asarray(ids, dtype=np.uint8)]

@@ -1,0 +1,293 @@
+"""The scene folder of DESIGN.md: loading, saving, splits and lazy image access.
+
+    scene/
+      images/ images_2/ ...   RGB images (jpg or png), optional downsampled copies
+      sparse/0/               COLMAP model, binary or text
+      object_mask/            one 8-bit PNG of object IDs a view, same stem as the image
+      scene.json              optional: object names, split, provenance
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from dataclasses import dataclass, field
+from functools import cached_property
+from pathlib import Path
+from typing import Literal
+
+import cv2
+import numpy as np
+
+from dataset_tools import colmap
+from dataset_tools.atomic import atomic_directory, write_bytes_atomic
+from dataset_tools.cameras import PinholeCamera, SourceCamera
+from dataset_tools.errors import InputError
+from dataset_tools.image_files import encode_png, image_size, read_image, read_mask
+
+Split = Literal["train", "test", "all"]
+
+
+@dataclass
+class SparsePoints:
+    """The SfM points of a scene: xyz (P, 3) float64, rgb (P, 3) uint8."""
+
+    xyz: np.ndarray
+    rgb: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.xyz)
+
+
+@dataclass
+class View:
+    """One posed view. Images and masks are read from disk only when asked for.
+
+    Attributes:
+        name: image file name inside the image folder, e.g. ``"0001.jpg"``.
+        camera: pinhole camera of the loaded (undistorted) image.
+        cam_from_world: (3, 4) float64 world-to-camera transform [R | t] (COLMAP convention:
+            x right, y down, z forward).
+        image_path: the image file. mask_path: its object-ID map, or None when there is none.
+        point_ids: (M,) int64 rows of ``Scene.points`` observed in this view.
+        uv: (M, 2) float64 pixel coordinates of those observations in the loaded image.
+        source_camera: the distorted camera of the file, or None for pinhole files.
+    """
+
+    name: str
+    camera: PinholeCamera
+    cam_from_world: np.ndarray
+    image_path: Path
+    mask_path: Path | None
+    point_ids: np.ndarray
+    uv: np.ndarray
+    source_camera: SourceCamera | None = None
+    mask_full_size: tuple[int, int] | None = None
+
+    @property
+    def stem(self) -> str:
+        """File name without suffix (may contain sub-folders); masks and renders use it."""
+        return str(Path(self.name).with_suffix(""))
+
+    @property
+    def R(self) -> np.ndarray:
+        return self.cam_from_world[:, :3]
+
+    @property
+    def t(self) -> np.ndarray:
+        return self.cam_from_world[:, 3]
+
+    @property
+    def center(self) -> np.ndarray:
+        """Camera centre in world coordinates, (3,)."""
+        return -self.R.T @ self.t
+
+    @cached_property
+    def _maps(self) -> tuple[np.ndarray, np.ndarray]:
+        return colmap.undistortion_maps(self.source_camera, self.camera)
+
+    @property
+    def file_size(self) -> tuple[int, int]:
+        """(width, height) of the file on disk (before undistortion)."""
+        src = self.source_camera
+        return (src.width, src.height) if src else (self.camera.width, self.camera.height)
+
+    def load_image(self) -> np.ndarray:
+        """The undistorted RGB image, (H, W, 3) uint8 with H, W = camera.height, camera.width."""
+        img = read_image(self.image_path)
+        if (img.shape[1], img.shape[0]) != self.file_size:
+            raise InputError(
+                f"{self.image_path}: image is {img.shape[1]}x{img.shape[0]} but its header said "
+                f"{self.file_size[0]}x{self.file_size[1]}; re-save the file."
+            )
+        return colmap.remap(img, self._maps, nearest=False) if self.source_camera else img
+
+    def load_mask(self) -> np.ndarray | None:
+        """The undistorted object-ID map, (H, W) uint8, or None if the view has no mask.
+
+        A mask must be the size of the image file; a mask at the size of the full-resolution
+        ``images/`` file is also accepted and resized (nearest) to the loaded image.
+        """
+        if self.mask_path is None:
+            return None
+        ids = read_mask(self.mask_path)
+        size = (ids.shape[1], ids.shape[0])
+        if size != self.file_size:
+            if size != self.mask_full_size:
+                raise InputError(
+                    f"{self.mask_path}: mask is {size[0]}x{size[1]} but its image is "
+                    f"{self.file_size[0]}x{self.file_size[1]}; masks must have the size of their image."
+                )
+            ids = cv2.resize(ids, self.file_size, interpolation=cv2.INTER_NEAREST_EXACT)
+        return colmap.remap(ids, self._maps, nearest=True) if self.source_camera else ids
+
+
+@dataclass
+class Scene:
+    """A loaded scene folder. Views are sorted by image name."""
+
+    root: Path
+    views: list[View]
+    points: SparsePoints
+    image_dir: str = "images"
+    mask_dir: str | None = "object_mask"
+    test_names: frozenset[str] = frozenset()
+    meta: dict = field(default_factory=dict)
+
+    def split(self, which: Split = "all") -> list[View]:
+        """The views of a split: ``train``, ``test`` or ``all``."""
+        if which == "all":
+            return list(self.views)
+        if which not in ("train", "test"):
+            raise InputError(f"unknown split {which!r}; use train, test or all.")
+        test = which == "test"
+        return [v for v in self.views if (v.name in self.test_names) == test]
+
+    def view(self, name_or_stem: str) -> View:
+        """The view with this image name or stem."""
+        for v in self.views:
+            if name_or_stem in (v.name, v.stem):
+                return v
+        raise InputError(f"{self.root}: no view named {name_or_stem!r}; see `python -m dataset_tools inspect`.")
+
+    @property
+    def has_masks(self) -> bool:
+        return any(v.mask_path is not None for v in self.views)
+
+
+def llff_test_names(names: list[str], every: int = 8) -> frozenset[str]:
+    """LLFF hold-out: every ``every``-th view of the name-sorted list (starting at 0) is a test view."""
+    if every <= 0:
+        return frozenset()
+    return frozenset(n for k, n in enumerate(sorted(names)) if k % every == 0)
+
+
+def read_scene_json(root: Path) -> dict:
+    path = Path(root) / "scene.json"
+    if not path.exists():
+        return {}
+    try:
+        meta = json.loads(path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        raise InputError(f"{path}: not valid JSON ({e}); fix or delete the file.") from None
+    if not isinstance(meta, dict):
+        raise InputError(f"{path}: must hold a JSON object; fix or delete the file.")
+    return meta
+
+
+def load_scene(
+    root: Path | str,
+    *,
+    images: str = "images",
+    masks: str | None = "object_mask",
+    test_every: int = 8,
+) -> Scene:
+    """Load a scene folder.
+
+    Args:
+        root: the scene folder.
+        images: image folder to read (``images`` or a downsampled ``images_N``).
+        masks: object-ID map folder, or None to ignore masks. A missing folder, or a view
+            without a mask file, means no supervision for that view, not an error.
+        test_every: LLFF hold-out period, used unless scene.json lists ``split.test``.
+
+    Non-pinhole COLMAP cameras are undistorted on load into pinhole cameras (COLMAP's
+    undistorted camera, OpenCV remapping); observations are moved accordingly.
+    """
+    root = Path(root)
+    if not root.is_dir():
+        raise InputError(f"{root}: scene folder not found; check the path.")
+    image_root = root / images
+    if not image_root.is_dir():
+        raise InputError(f"{image_root}: image folder not found; put the views in {images}/ or pick another with --images.")
+    model = colmap.read_model(root / "sparse" / "0")
+    mask_root = root / masks if masks else None
+    views = []
+    for im in model.images:
+        path = image_root / im.name
+        if not path.is_file():
+            raise InputError(
+                f"{path}: image listed in the COLMAP model is missing on disk; restore it or "
+                "remove the image from sparse/0."
+            )
+        width, height = image_size(path)
+        src = colmap.resize_source_camera(im.camera, width, height)
+        aspect_in, aspect_cam = width / height, im.camera.width / im.camera.height
+        if abs(aspect_in - aspect_cam) > 0.02 * aspect_cam:
+            raise InputError(
+                f"{path}: image is {width}x{height} but its COLMAP camera is "
+                f"{im.camera.width}x{im.camera.height}; the image folder does not match the model."
+            )
+        camera = colmap.pinhole_camera(src)
+        uv = im.uv * [width / im.camera.width, height / im.camera.height]
+        distorted = src.model not in ("PINHOLE", "SIMPLE_PINHOLE")
+        if distorted:
+            uv = colmap.undistort_points(uv, src, camera)
+        mask_path = (mask_root / f"{Path(im.name).with_suffix('')}.png") if mask_root else None
+        views.append(
+            View(
+                name=im.name,
+                camera=camera,
+                cam_from_world=im.cam_from_world,
+                image_path=path,
+                mask_path=mask_path if mask_path is not None and mask_path.is_file() else None,
+                point_ids=im.point_ids,
+                uv=uv,
+                source_camera=src if distorted else None,
+                mask_full_size=(im.camera.width, im.camera.height),
+            )
+        )
+    meta = read_scene_json(root)
+    names = [v.name for v in views]
+    listed = meta.get("split", {}).get("test")
+    test_names = frozenset(listed) if listed is not None else llff_test_names(names, test_every)
+    unknown = test_names - set(names)
+    if unknown:
+        raise InputError(f"{root / 'scene.json'}: split.test names views that do not exist ({sorted(unknown)[:3]}); fix the list.")
+    return Scene(
+        root=root,
+        views=views,
+        points=SparsePoints(model.xyz, model.rgb),
+        image_dir=images,
+        mask_dir=masks if mask_root is not None and mask_root.is_dir() else None,
+        test_names=test_names,
+        meta=meta,
+    )
+
+
+def save_scene(scene: Scene, out: Path | str, *, overwrite: bool = False, text: bool = False) -> Path:
+    """Write a scene as a complete scene folder of pinhole cameras at the loaded resolution.
+
+    Files already pinhole are copied byte for byte; undistorted views are re-encoded with
+    their own suffix. The folder appears whole or not at all.
+    """
+    out = Path(out)
+    if out.exists() and not overwrite:
+        raise InputError(f"{out}: already exists; choose another output folder or pass overwrite.")
+    with atomic_directory(out, overwrite=overwrite) as tmp:
+        for v in scene.views:
+            dst = tmp / "images" / v.name
+            dst.parent.mkdir(parents=True, exist_ok=True)
+            if v.source_camera is None:
+                shutil.copyfile(v.image_path, dst)
+            else:
+                img = cv2.cvtColor(v.load_image(), cv2.COLOR_RGB2BGR)
+                ok, buf = cv2.imencode(dst.suffix, img, [cv2.IMWRITE_JPEG_QUALITY, 95])
+                write_bytes_atomic(dst, buf.tobytes())
+            mask = v.load_mask()
+            if mask is not None:
+                write_bytes_atomic(tmp / "object_mask" / f"{v.stem}.png", encode_png(mask))
+        colmap.write_model(
+            tmp / "sparse" / "0",
+            [v.name for v in scene.views],
+            [v.camera for v in scene.views],
+            [v.cam_from_world for v in scene.views],
+            [(v.point_ids, v.uv) for v in scene.views],
+            scene.points.xyz,
+            scene.points.rgb,
+            text=text,
+        )
+        meta = dict(scene.meta)
+        meta["split"] = {"test": sorted(scene.test_names)}
+        write_bytes_atomic(tmp / "scene.json", json.dumps(meta, indent=2, sort_keys=True).encode())
+    return out

@@ -1,0 +1,1 @@
+"""Metrics, per-scene reports and benchmarks."""

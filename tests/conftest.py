@@ -1,0 +1,33 @@
+"""Shared fixtures: small synthetic scenes made once per test session."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import pytest
+
+from dataset_tools.synth import SynthConfig, SynthResult, generate_scene
+
+BEER = Path(__file__).resolve().parents[2] / "shared" / "data" / "beer"
+
+
+@pytest.fixture(scope="session")
+def small_scene(tmp_path_factory) -> SynthResult:
+    """An 8-view 96x96 orbit scene with 4 objects (read-only: copy it before changing it)."""
+    return generate_scene(SynthConfig(views=8, res=96, objects=4, seed=1), tmp_path_factory.mktemp("s") / "small", progress=False)
+
+
+@pytest.fixture
+def scene_copy(small_scene, tmp_path) -> Path:
+    """A private, writable copy of ``small_scene``."""
+    dst = tmp_path / "scene"
+    shutil.copytree(small_scene.root, dst)
+    return dst
+
+
+@pytest.fixture
+def beer() -> Path:
+    if not (BEER / "sparse" / "0").is_dir():
+        pytest.skip(f"the beer capture is not at {BEER}")
+    return BEER
