@@ -36,3 +36,17 @@ def matched_error(pred: np.ndarray, gt: np.ndarray) -> float:
     ``pred``'s IDs (so a consistent permutation of IDs costs nothing)."""
     mapping = match_ids(overlap(pred, gt))
     return float(np.mean(mapping[pred] != gt))
+
+
+def consistent_fraction(preds: list[np.ndarray], gts: list[np.ndarray]) -> float:
+    """Share of ground-truth object pixels (ID > 0) that carry their matched ID, with one
+    matching of predicted to ground-truth IDs for the whole scene (Hungarian on the pixel
+    overlap summed over all views)."""
+    counts = sum(overlap(p, g) for p, g in zip(preds, gts))
+    mapping = match_ids(counts)
+    hit = total = 0
+    for p, g in zip(preds, gts):
+        obj = g > 0
+        hit += int(np.count_nonzero(mapping[p[obj]] == g[obj]))
+        total += int(np.count_nonzero(obj))
+    return hit / max(total, 1)

@@ -1,0 +1,179 @@
+"""DEVA-style association for video-like sequences: propagate, match, remember, both ways.
+
+Views are ordered as a sequence (a nearest-neighbour path through the camera centres when
+poses exist, else file order). In each direction:
+
+1. the previous view's object masks are carried to the current view by dense optical flow
+   (OpenCV DIS, computed from the current view back to the previous one);
+2. the current view's segments are matched to the carried masks by IoU with the Hungarian
+   algorithm (IoU >= ``min_iou``); a segment lying mostly (>= ``contain``) inside an
+   already matched object joins it (fixing splits); other segments start new tracks;
+3. tracks without a match are carried on for ``memory`` views and can be re-identified.
+
+The forward and backward passes are merged by bidirectional consensus: a forward and a
+backward track are the same object when the pixels they share cover at least
+``consensus`` of the smaller one; pairs are joined largest overlap first, never joining
+groups that hold different segments of one view. Tracks seen in fewer than ``min_views``
+views are dropped.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+
+from hqmask.association.common import ViewExclusiveUnion, compact_ids
+
+
+def sequence_order(centers: np.ndarray | None, n: int) -> list[int]:
+    """Visit order: greedy nearest-neighbour path through camera centres (N, 3) from view 0."""
+    if centers is None:
+        return list(range(n))
+    order, left = [0], set(range(1, n))
+    while left:
+        last = centers[order[-1]]
+        nxt = min(left, key=lambda k: (float(np.sum((centers[k] - last) ** 2)), k))
+        order.append(nxt)
+        left.remove(nxt)
+    return order
+
+
+def _gray(img: np.ndarray) -> np.ndarray:
+    return cv2.cvtColor(img, cv2.COLOR_RGB2GRAY)
+
+
+def _warp(mask: np.ndarray, flow: np.ndarray) -> np.ndarray:
+    """Carry a mask of the previous view into the current one. flow: (H, W, 2) current -> previous."""
+    H, W = flow.shape[:2]
+    gx, gy = np.meshgrid(np.arange(W, dtype=np.float32), np.arange(H, dtype=np.float32))
+    return cv2.remap(mask, gx + flow[..., 0], gy + flow[..., 1], cv2.INTER_NEAREST, borderValue=0)
+
+
+@dataclass
+class _Track:
+    mask: np.ndarray  # (H, W) uint8, in the latest view
+    age: int = 0
+
+
+@dataclass
+class _Pass:
+    """One direction: the track of every local segment of every view."""
+
+    track_of: list[np.ndarray] = field(default_factory=list)
+    n_tracks: int = 0
+
+
+def _run_pass(
+    order: list[int],
+    images: list[np.ndarray],
+    segments: list[np.ndarray],
+    *,
+    min_iou: float,
+    contain: float,
+    memory: int,
+) -> list[np.ndarray]:
+    dis = cv2.DISOpticalFlow_create(cv2.DISOPTICAL_FLOW_PRESET_MEDIUM)
+    track_of: list[np.ndarray | None] = [None] * len(segments)
+    tracks: dict[int, _Track] = {}
+    next_id = 0
+    prev = None
+    for v in order:
+        seg = segments[v]
+        n_local = int(seg.max())
+        assign = np.full(n_local + 1, -1, np.int64)
+        if prev is not None and tracks:
+            flow = dis.calc(_gray(images[v]), _gray(images[prev]), None)
+            for t in tracks.values():
+                t.mask = _warp(t.mask, flow)
+        ids = list(tracks)
+        local = np.arange(1, n_local + 1)
+        if ids and n_local:
+            # intersection of every (segment, track) pair
+            inter = np.zeros((n_local + 1, len(ids)))
+            for j, t in enumerate(ids):
+                inter[:, j] = np.bincount(seg[tracks[t].mask > 0], minlength=n_local + 1)
+            seg_area = np.bincount(seg.ravel(), minlength=n_local + 1).astype(float)
+            trk_area = np.array([float(np.count_nonzero(tracks[t].mask)) for t in ids])
+            iou = inter[1:] / np.maximum(seg_area[1:, None] + trk_area[None] - inter[1:], 1)
+            rows, cols = linear_sum_assignment(-iou)
+            for r, c in zip(rows, cols):
+                if iou[r, c] >= min_iou:
+                    assign[local[r]] = ids[c]
+            matched = {int(assign[l]) for l in local if assign[l] >= 0}
+            for r, l in enumerate(local):
+                if assign[l] < 0 and seg_area[l] > 0:
+                    frac = inter[l] / seg_area[l]
+                    j = int(np.argmax(frac))
+                    if frac[j] >= contain and ids[j] in matched:
+                        assign[l] = ids[j]
+        for l in local:
+            if assign[l] < 0 and np.any(seg == l):
+                assign[l] = next_id
+                next_id += 1
+        for t in list(tracks):
+            tracks[t].age += 1
+        for t in set(int(a) for a in assign[1:] if a >= 0):
+            tracks[t] = _Track(np.isin(seg, np.flatnonzero(assign == t)).astype(np.uint8), 0)
+        for t in [t for t, tr in tracks.items() if tr.age > memory]:
+            del tracks[t]
+        track_of[v] = assign
+        prev = v
+    return track_of  # type: ignore[return-value]
+
+
+def associate_flow(
+    images: list[np.ndarray],
+    segments: list[np.ndarray],
+    centers: np.ndarray | None = None,
+    *,
+    min_iou: float = 0.3,
+    contain: float = 0.6,
+    memory: int = 5,
+    consensus: float = 0.3,
+    min_views: int = 2,
+) -> list[np.ndarray]:
+    """Associate segments along a sequence with optical flow, forwards and backwards.
+
+    Args:
+        images: per view, (H, W, 3) uint8 RGB (for the optical flow).
+        segments: per view, (H, W) int32 segment map (0 = background).
+        centers: (V, 3) camera centres, or None to use the given order.
+    Returns:
+        per view, (H, W) uint8 consistent ID map.
+    """
+    order = sequence_order(centers, len(images))
+    kw = dict(min_iou=min_iou, contain=contain, memory=memory)
+    fwd = _run_pass(order, images, segments, **kw)
+    bwd = _run_pass(order[::-1], images, segments, **kw)
+    n_f = 1 + max((int(a.max()) for a in fwd), default=0)
+    n_b = 1 + max((int(a.max()) for a in bwd), default=0)
+    overlap = np.zeros((n_f, n_b), np.int64)
+    for f, b, seg in zip(fwd, bwd, segments):
+        area = np.bincount(seg.ravel(), minlength=len(f))
+        ok = (f >= 0) & (b >= 0)
+        ok[0] = False
+        np.add.at(overlap, (f[ok], b[ok]), area[ok])
+    size_f, size_b = overlap.sum(1), overlap.sum(0)
+    # forward tracks carry views 0..V-1, backward tracks V..2V-1: two tracks of one pass that
+    # hold different segments of one view are never joined
+    views: list[set[int]] = [set() for _ in range(n_f + n_b)]
+    V = len(fwd)
+    for v, (f, b) in enumerate(zip(fwd, bwd)):
+        for t in np.unique(f[1:][f[1:] >= 0]):
+            views[t].add(v)
+        for t in np.unique(b[1:][b[1:] >= 0]):
+            views[n_f + t].add(V + v)
+    uf = ViewExclusiveUnion(views)
+    for i, j in sorted(zip(*np.nonzero(overlap)), key=lambda ij: (-overlap[ij], ij)):
+        if overlap[i, j] >= consensus * min(size_f[i], size_b[j]):
+            uf.union(int(i), n_f + int(j))
+    root = uf.roots()[:n_f]
+    global_of = [np.where(f >= 0, root[np.maximum(f, 0)], -1) for f in fwd]
+    for g in global_of:
+        g[0] = -1
+    views_of = np.bincount(np.concatenate([np.unique(g[g >= 0]) for g in global_of]), minlength=n_f + n_b)
+    global_of = [np.where((g >= 0) & (views_of[np.maximum(g, 0)] >= min_views), g, -1) for g in global_of]
+    return compact_ids(global_of, segments)

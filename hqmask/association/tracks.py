@@ -1,0 +1,107 @@
+"""Geometric association for photo collections: segments linked through shared SfM points.
+
+1. Every SfM observation falls in one segment of its view (or in background).
+2. Two segments of different views are linked when they agree on the points both views
+   observe: most points of each that the other view also sees lie in the other
+   (mutual containment >= ``link_ratio``, at least ``min_shared`` points). Links are taken
+   strongest first (most shared points) into a union-find that refuses to join two groups
+   holding different segments of one view: the core objects. A segment covering two
+   objects can join one of them but never chains the two together.
+3. Conflicts and leftovers: a segment outside every core object of two or more segments
+   (a split half, a merged blob, a speck) joins the object, or background, that holds most
+   of its points in the other views; a segment with no points stays background.
+"""
+
+from __future__ import annotations
+
+from collections import defaultdict
+
+import numpy as np
+
+from dataset_tools.scene import View
+from hqmask.association.common import ViewExclusiveUnion, compact_ids
+
+
+def _segment_of_points(view: View, seg: np.ndarray, n_points: int) -> np.ndarray:
+    """(P,) local segment under each SfM point in this view; -1 where the view does not see it."""
+    out = np.full(n_points, -1, np.int64)
+    px = np.clip(view.uv.astype(int), 0, [seg.shape[1] - 1, seg.shape[0] - 1])
+    out[view.point_ids] = seg[px[:, 1], px[:, 0]]
+    return out
+
+
+def associate_tracks(
+    views: list[View],
+    segments: list[np.ndarray],
+    n_points: int,
+    *,
+    link_ratio: float = 0.6,
+    min_shared: int = 3,
+) -> list[np.ndarray]:
+    """Associate segments across views through the SfM points they share.
+
+    Args:
+        views: the views (their ``point_ids`` and ``uv`` observations are used).
+        segments: per view, (H, W) int32 segment map (0 = background).
+        n_points: number of SfM points (rows of ``Scene.points``).
+    Returns:
+        per view, (H, W) uint8 consistent ID map.
+    """
+    V = len(views)
+    seg_at = np.stack([_segment_of_points(v, s, n_points) for v, s in zip(views, segments)])  # (V, P)
+    offsets = np.concatenate([[0], np.cumsum([int(s.max()) + 1 for s in segments])])
+    node = np.where(seg_at >= 0, seg_at + offsets[:V, None], -1)  # global node id, background nodes included
+    is_bg = np.zeros(offsets[-1], bool)
+    is_bg[offsets[:V]] = True
+    view_of_node = np.repeat(np.arange(V), np.diff(offsets))
+    links = []
+    for a in range(V):
+        for b in range(a + 1, V):
+            both = (seg_at[a] >= 0) & (seg_at[b] >= 0)
+            if not both.any():
+                continue
+            na, nb = node[a, both], node[b, both]
+            pairs, shared = np.unique(np.stack([na, nb]), axis=1, return_counts=True)
+            size_a = dict(zip(*np.unique(na, return_counts=True)))
+            size_b = dict(zip(*np.unique(nb, return_counts=True)))
+            for (x, y), s in zip(pairs.T, shared):
+                if is_bg[x] or is_bg[y] or s < min_shared:
+                    continue
+                if s >= link_ratio * size_a[x] and s >= link_ratio * size_b[y]:
+                    links.append((int(s), int(x), int(y)))
+    uf = ViewExclusiveUnion([{int(v)} for v in view_of_node])
+    for _, x, y in sorted(links, key=lambda l: (-l[0], l[1], l[2])):
+        uf.union(x, y)
+    root = uf.roots()
+    members = defaultdict(int)
+    for r in root[~is_bg]:
+        members[int(r)] += 1
+    core = np.array([not is_bg[i] and members[int(root[i])] >= 2 for i in range(len(root))])
+    # each point's object: majority over views of the core object it falls in (or background)
+    votes: dict[int, dict[int, int]] = defaultdict(lambda: defaultdict(int))
+    obj_of_node = np.where(core, root, -1)
+    obj_of_node[is_bg] = -2  # background
+    for v in range(V):
+        seen = np.flatnonzero(node[v] >= 0)
+        for p, o in zip(seen, obj_of_node[node[v, seen]]):
+            if o != -1:
+                votes[int(p)][int(o)] += 1
+    point_obj = {p: max(c.items(), key=lambda kv: (kv[1], -kv[0]))[0] for p, c in votes.items()}
+    global_of = []
+    for v, seg in enumerate(segments):
+        g = np.full(int(seg.max()) + 1, -1, np.int64)
+        for local in range(1, len(g)):
+            n = offsets[v] + local
+            if core[n]:
+                g[local] = root[n]
+                continue
+            pts = np.flatnonzero(seg_at[v] == local)
+            tally: dict[int, int] = defaultdict(int)
+            for p in pts:
+                if int(p) in point_obj:
+                    tally[point_obj[int(p)]] += 1
+            if tally:
+                best = max(tally.items(), key=lambda kv: (kv[1], -kv[0]))[0]
+                g[local] = best if best >= 0 else -1
+        global_of.append(g)
+    return compact_ids(global_of, segments)

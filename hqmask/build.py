@@ -1,0 +1,121 @@
+"""``hqmask build`` and ``hqmask clean``: proposals -> noise removal -> association -> ID maps.
+
+Proposals of the expensive proposers are cached per view under
+``SCENE/.hqmask_cache/<proposer>/`` so an interrupted run resumes where it stopped; the
+output mask folder appears whole, atomically, at the end.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from dataset_tools.atomic import atomic_directory, write_bytes_atomic
+from dataset_tools.errors import InputError
+from dataset_tools.image_files import encode_png, read_mask
+from dataset_tools.scene import Scene, load_scene
+from hqmask.association import associate_flow, associate_tracks
+from hqmask.cleanup import clean_mask
+from hqmask.proposers import make_proposer
+
+ASSOCIATIONS = ("flow", "tracks")
+
+
+@dataclass(frozen=True)
+class BuildConfig:
+    """Options of ``hqmask build`` (same names as the CLI)."""
+
+    proposer: str = "graph"
+    from_masks: str | None = None
+    model: str | None = None
+    associate: str = "flow"
+    min_area: int = 500
+    out_masks: str = "object_mask"
+    images: str = "images"
+    dataset: str | None = None
+    force: bool = False
+
+
+@dataclass
+class BuildResult:
+    out_dir: Path
+    n_objects: int
+    views: int
+
+
+def _segments(scene: Scene, cfg: BuildConfig, images: list[np.ndarray], progress: bool) -> list[np.ndarray]:
+    """Per view, the painted proposals as an (H, W) uint8 segment map, cleaned."""
+    proposer = make_proposer(cfg.proposer, cfg.model)
+    cache = None if cfg.proposer == "existing" else scene.root / ".hqmask_cache" / cfg.proposer
+    out = []
+    for view, image in zip(tqdm(scene.views, desc=f"proposing ({cfg.proposer})", disable=not progress), images):
+        cached = cache / f"{view.stem}.png" if cache else None
+        if cached is not None and cached.exists() and not cfg.force:
+            seg = read_mask(cached)
+        else:
+            seg = proposer.propose(image, view).paint()
+            if seg.max() > 255:
+                raise InputError(f"{view.image_path}: the proposer made {seg.max()} segments, more than 255; raise --min-area.")
+            seg = seg.astype(np.uint8)
+            if cached is not None:
+                write_bytes_atomic(cached, encode_png(seg))
+        out.append(clean_mask(seg, cfg.min_area))
+    return out
+
+
+def build_masks(scene_dir: Path | str, cfg: BuildConfig, *, progress: bool = True) -> BuildResult:
+    """Write consistent, cleaned object-ID maps of every view to ``scene_dir/cfg.out_masks``."""
+    scene_dir = Path(scene_dir)
+    if cfg.associate not in ASSOCIATIONS:
+        raise InputError(f"--associate {cfg.associate}: use flow or tracks.")
+    if cfg.proposer == "existing" and not cfg.from_masks:
+        raise InputError("--proposer existing needs --from-masks NAME, the mask folder to re-associate.")
+    if cfg.from_masks is not None and cfg.from_masks == cfg.out_masks:
+        raise InputError(f"--out-masks {cfg.out_masks}: would overwrite the input masks; choose another name.")
+    make_proposer(cfg.proposer, cfg.model)  # an unknown or unavailable proposer fails before any work
+    out_dir = scene_dir / cfg.out_masks
+    if out_dir.exists() and not cfg.force:
+        raise InputError(f"{out_dir}: already exists; pass --force to rebuild it.")
+    scene = load_scene(scene_dir, images=cfg.images, masks=cfg.from_masks if cfg.proposer == "existing" else None)
+    if cfg.proposer == "existing" and scene.mask_dir is None:
+        raise InputError(f"{scene_dir / cfg.from_masks}: mask folder not found; check --from-masks.")
+    images = [v.load_image() for v in tqdm(scene.views, desc="loading images", disable=not progress)]
+    segments = [s.astype(np.int32) for s in _segments(scene, cfg, images, progress)]
+    if cfg.associate == "flow":
+        ids = associate_flow(images, segments, np.stack([v.center for v in scene.views]))
+    else:
+        ids = associate_tracks(scene.views, segments, len(scene.points))
+    n_objects = 0
+    with atomic_directory(out_dir, overwrite=cfg.force) as tmp:
+        for view, m in zip(tqdm(scene.views, desc="writing masks", disable=not progress), ids):
+            m = clean_mask(m, cfg.min_area)
+            n_objects = max(n_objects, int(m.max()))
+            write_bytes_atomic(tmp / f"{view.stem}.png", encode_png(m))
+    if cfg.dataset:
+        from hqmask.dataset_export import export_dataset
+
+        export_dataset(load_scene(scene_dir, images=cfg.images, masks=cfg.out_masks), Path(cfg.dataset), overwrite=cfg.force)
+    return BuildResult(out_dir, n_objects, len(scene.views))
+
+
+def clean_scene_masks(
+    scene_dir: Path | str, masks: str, out_masks: str, *, min_area: int = 500, force: bool = False, progress: bool = True
+) -> Path:
+    """Noise removal alone: ``scene_dir/masks`` -> ``scene_dir/out_masks``."""
+    scene_dir = Path(scene_dir)
+    src, dst = scene_dir / masks, scene_dir / out_masks
+    if not src.is_dir():
+        raise InputError(f"{src}: mask folder not found; check --masks.")
+    if src == dst:
+        raise InputError(f"--out-masks {out_masks}: would overwrite the input masks; choose another name.")
+    if dst.exists() and not force:
+        raise InputError(f"{dst}: already exists; pass --force to replace it.")
+    files = sorted(src.rglob("*.png"))
+    with atomic_directory(dst, overwrite=force) as tmp:
+        for f in tqdm(files, desc="cleaning", disable=not progress):
+            target = tmp / f.relative_to(src)
+            write_bytes_atomic(target, encode_png(clean_mask(read_mask(f), min_area)))
+    return dst

@@ -1,0 +1,132 @@
+"""Mask proposers: one image in, candidate object masks with scores out.
+
+- ``graph``: weight-free default. Felzenszwalb's graph segmentation, regions merged by mean
+  colour on a region adjacency graph (scikit-image), and background removed: regions that
+  touch the image border, and regions whose colour is close to one of those (a tiled floor
+  whose inner tiles do not reach the border), are background.
+- ``existing``: masks already on disk (e.g. a corrupted folder), one proposal per ID.
+- ``sam-hq``: SAM-HQ's automatic mask generator through ONNX Runtime (``--model DIR``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+
+from dataset_tools.errors import InputError
+from dataset_tools.scene import View
+
+
+@dataclass
+class Proposals:
+    """Candidate masks of one image: masks (N, H, W) bool, scores (N,) float."""
+
+    masks: np.ndarray
+    scores: np.ndarray
+
+    def paint(self) -> np.ndarray:
+        """Segment map (H, W) int32: proposal k+1 where it wins, 0 elsewhere; a pixel covered by
+        several proposals takes the highest-scoring one."""
+        H, W = self.masks.shape[1:]
+        seg = np.zeros((H, W), np.int32)
+        for k in np.argsort(self.scores, kind="stable"):
+            seg[self.masks[k]] = k + 1
+        return seg
+
+
+class Proposer(Protocol):
+    def propose(self, image: np.ndarray, view: View) -> Proposals:
+        """Candidate masks for ``image`` (H, W, 3) uint8, the loaded image of ``view``."""
+        ...
+
+
+def _from_label_map(ids: np.ndarray) -> Proposals:
+    labels = np.unique(ids)
+    labels = labels[labels > 0]
+    return Proposals(ids[None] == labels[:, None, None], np.ones(len(labels)))
+
+
+class ExistingMasks:
+    """Proposals read from a mask folder of the scene: one proposal per ID of the view's map."""
+
+    def propose(self, image: np.ndarray, view: View) -> Proposals:
+        ids = view.load_mask()
+        if ids is None:
+            return Proposals(np.zeros((0, *image.shape[:2]), bool), np.zeros(0))
+        return _from_label_map(ids)
+
+
+def _adjacent_pairs(seg: np.ndarray) -> np.ndarray:
+    """Unique pairs (a < b) of region labels that touch (4-neighbourhood). Returns (M, 2)."""
+    pairs = [np.stack([seg[:, :-1].ravel(), seg[:, 1:].ravel()], 1), np.stack([seg[:-1].ravel(), seg[1:].ravel()], 1)]
+    p = np.concatenate(pairs)
+    p = np.sort(p[p[:, 0] != p[:, 1]], axis=1)
+    return np.unique(p, axis=0)
+
+
+@dataclass
+class GraphProposer:
+    """Graph segmentation with region merging; see the module docstring.
+
+    Regions: Felzenszwalb (``scale``, ``sigma``) merged on a region adjacency graph while their
+    mean CIELAB colours differ by less than ``merge_threshold``. Background: regions touching
+    the border, and regions within ``background_distance`` (CIELAB) of a border region covering
+    at least ``reference_fraction`` of the image. Objects: adjacent foreground regions whose hue
+    differs by less than ``hue_degrees`` are joined (two-tone textures stay one object); regions
+    under ``min_fraction`` of the image are dropped.
+    """
+
+    scale: float = 100.0
+    sigma: float = 0.8
+    merge_threshold: float = 8.0
+    background_distance: float = 8.0
+    reference_fraction: float = 0.02
+    hue_degrees: float = 30.0
+    min_fraction: float = 0.002
+
+    def propose(self, image: np.ndarray, view: View) -> Proposals:
+        from skimage import color, graph, segmentation
+
+        from hqmask.association.common import UnionFind
+
+        H, W = image.shape[:2]
+        lab = color.rgb2lab(image)
+        seg = segmentation.felzenszwalb(image, scale=self.scale, sigma=self.sigma, min_size=max(20, int(0.0005 * H * W)))
+        seg = graph.cut_threshold(seg, graph.rag_mean_color(lab, seg), self.merge_threshold)
+        n = int(seg.max()) + 1
+        counts = np.bincount(seg.ravel(), minlength=n).astype(float)
+        mean = np.stack([np.bincount(seg.ravel(), lab[..., c].ravel(), n) for c in range(3)], 1) / np.maximum(counts, 1)[:, None]
+        border = np.unique(np.concatenate([seg[0], seg[-1], seg[:, 0], seg[:, -1]]))
+        reference = border[counts[border] >= self.reference_fraction * H * W]
+        background = np.zeros(n, bool)
+        background[border] = True
+        if len(reference):
+            background |= np.linalg.norm(mean[:, None] - mean[None, reference], axis=2).min(1) < self.background_distance
+        hue = np.degrees(np.arctan2(mean[:, 2], mean[:, 1]))
+        uf = UnionFind(n)
+        for a, b in _adjacent_pairs(seg):
+            if not (background[a] or background[b]) and abs((hue[a] - hue[b] + 180) % 360 - 180) < self.hue_degrees:
+                uf.union(int(a), int(b))
+        obj = uf.roots()
+        obj[background] = -1
+        objects = obj[seg]
+        labels, areas = np.unique(objects[objects >= 0], return_counts=True)
+        labels = labels[areas >= self.min_fraction * H * W]
+        masks = objects[None] == labels[:, None, None]
+        return Proposals(masks, masks.sum((1, 2)) / (H * W))
+
+
+def make_proposer(name: str, model_dir: str | None = None) -> Proposer:
+    """The proposer called ``name``: ``graph``, ``existing`` or ``sam-hq``."""
+    if name == "graph":
+        return GraphProposer()
+    if name == "existing":
+        return ExistingMasks()
+    if name == "sam-hq":
+        raise InputError(
+            "--proposer sam-hq: the SAM-HQ ONNX runtime is not in this version yet; use --proposer graph "
+            "or existing."
+        )
+    raise InputError(f"--proposer {name}: unknown proposer; use graph, sam-hq or existing.")

@@ -1,0 +1,80 @@
+"""hqmask build/clean: association on masks whose IDs are permuted per view, outputs, errors."""
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from dataset_tools import InputError, load_scene
+from dataset_tools.corrupt import CorruptionModel, corrupt_mask
+from dataset_tools.image_files import write_png
+from dataset_tools.label_maps import consistent_fraction
+from dataset_tools.synth import SynthConfig, generate_scene
+from hqmask.build import BuildConfig, build_masks, clean_scene_masks
+
+
+def permuted_masks(scene_dir: Path, name: str) -> None:
+    scene = load_scene(scene_dir)
+    model = CorruptionModel(0.0, 6.0, 0, 0.0, 0.0, 0.0, 0.0, permute=True)
+    for k, v in enumerate(scene.views):
+        write_png(scene_dir / name / f"{v.stem}.png", corrupt_mask(v.load_mask(), model, np.random.default_rng(k)))
+
+
+@pytest.mark.parametrize("method, path", [("flow", "forward"), ("tracks", "forward"), ("tracks", "orbit")])
+def test_association_undoes_per_view_permutations(tmp_path, method, path):
+    """Flow is tested on a forward-facing capture (small motion between views), what it is for."""
+    scene = generate_scene(SynthConfig(views=12, res=128, path=path, seed=1), tmp_path / "s", progress=False).root
+    permuted_masks(scene, "perm")
+    build_masks(scene, BuildConfig(proposer="existing", from_masks="perm", associate=method, min_area=20,
+                                   out_masks="out"), progress=False)
+    gt = [v.load_mask() for v in load_scene(scene).views]
+    before = [v.load_mask() for v in load_scene(scene, masks="perm").views]
+    after = [v.load_mask() for v in load_scene(scene, masks="out").views]
+    assert consistent_fraction(before, gt) < 0.6
+    assert consistent_fraction(after, gt) >= 0.97
+
+
+def test_dataset_export_round_trips(scene_copy, tmp_path):
+    import datasets
+
+    permuted_masks(scene_copy, "perm")
+    build_masks(scene_copy, BuildConfig(proposer="existing", from_masks="perm", associate="tracks", min_area=20,
+                                        out_masks="out", dataset=str(tmp_path / "ds")), progress=False)
+    ds = datasets.load_from_disk(str(tmp_path / "ds"))
+    assert len(ds) == 8 and ds[0]["view"] == "0000" and ds[0]["split"] == "test"
+    assert np.array_equal(np.array(ds[3]["mask"]), load_scene(scene_copy, masks="out").views[3].load_mask())
+    assert list((tmp_path / "ds" / "parquet").glob("*.parquet"))
+
+
+def test_clean_writes_a_new_folder(scene_copy):
+    permuted_masks(scene_copy, "perm")
+    clean_scene_masks(scene_copy, "perm", "cleaned", min_area=20, progress=False)
+    assert len(list((scene_copy / "cleaned").glob("*.png"))) == 8
+
+
+@pytest.mark.parametrize(
+    "cfg, message",
+    [
+        (BuildConfig(proposer="nope"), "unknown proposer"),
+        (BuildConfig(proposer="sam-hq"), "sam-hq"),
+        (BuildConfig(proposer="existing"), "needs --from-masks"),
+        (BuildConfig(proposer="existing", from_masks="missing", out_masks="x"), "mask folder not found"),
+        (BuildConfig(associate="magic"), "use flow or tracks"),
+        (BuildConfig(out_masks="object_mask"), "already exists"),
+    ],
+)
+def test_bad_options_are_refused_before_writing(scene_copy, cfg, message):
+    with pytest.raises(InputError, match=message):
+        build_masks(scene_copy, cfg, progress=False)
+    assert not (scene_copy / "x").exists()
+
+
+def test_masks_of_the_wrong_size_exit_2(scene_copy):
+    write_png(scene_copy / "bad" / "0000.png", np.zeros((10, 10), np.uint8))
+    hq = str(Path(sys.executable).parent / "hqmask")
+    r = subprocess.run([hq, "build", str(scene_copy), "--proposer", "existing", "--from-masks", "bad", "--out-masks", "o"],
+                       capture_output=True, text=True)
+    assert r.returncode == 2 and "mask is 10x10" in r.stderr and "Traceback" not in r.stderr
+    assert not (scene_copy / "o").exists()
