@@ -19,7 +19,7 @@ from dataset_tools.image_files import encode_png, read_mask
 from dataset_tools.scene import Scene, load_scene
 from hqmask.association import associate_flow, associate_tracks
 from hqmask.cleanup import clean_mask
-from hqmask.proposers import make_proposer
+from hqmask.proposers import Proposer, make_proposer
 
 ASSOCIATIONS = ("flow", "tracks")
 
@@ -46,9 +46,10 @@ class BuildResult:
     views: int
 
 
-def _segments(scene: Scene, cfg: BuildConfig, images: list[np.ndarray], progress: bool) -> list[np.ndarray]:
+def _segments(
+    scene: Scene, proposer: Proposer, cfg: BuildConfig, images: list[np.ndarray], progress: bool
+) -> list[np.ndarray]:
     """Per view, the painted proposals as an (H, W) uint8 segment map, cleaned."""
-    proposer = make_proposer(cfg.proposer, cfg.model)
     cache = None if cfg.proposer == "existing" else scene.root / ".hqmask_cache" / cfg.proposer
     out = []
     for view, image in zip(tqdm(scene.views, desc=f"proposing ({cfg.proposer})", disable=not progress), images):
@@ -75,7 +76,7 @@ def build_masks(scene_dir: Path | str, cfg: BuildConfig, *, progress: bool = Tru
         raise InputError("--proposer existing needs --from-masks NAME, the mask folder to re-associate.")
     if cfg.from_masks is not None and cfg.from_masks == cfg.out_masks:
         raise InputError(f"--out-masks {cfg.out_masks}: would overwrite the input masks; choose another name.")
-    make_proposer(cfg.proposer, cfg.model)  # an unknown or unavailable proposer fails before any work
+    proposer = make_proposer(cfg.proposer, cfg.model)  # an unknown or unavailable one fails before any work
     out_dir = scene_dir / cfg.out_masks
     if out_dir.exists() and not cfg.force:
         raise InputError(f"{out_dir}: already exists; pass --force to rebuild it.")
@@ -83,7 +84,7 @@ def build_masks(scene_dir: Path | str, cfg: BuildConfig, *, progress: bool = Tru
     if cfg.proposer == "existing" and scene.mask_dir is None:
         raise InputError(f"{scene_dir / cfg.from_masks}: mask folder not found; check --from-masks.")
     images = [v.load_image() for v in tqdm(scene.views, desc="loading images", disable=not progress)]
-    segments = [s.astype(np.int32) for s in _segments(scene, cfg, images, progress)]
+    segments = [s.astype(np.int32) for s in _segments(scene, proposer, cfg, images, progress)]
     if cfg.associate == "flow":
         ids = associate_flow(images, segments, np.stack([v.center for v in scene.views]))
     else:

@@ -2,8 +2,9 @@
 
 - ``graph``: weight-free default. Felzenszwalb's graph segmentation, regions merged by mean
   colour on a region adjacency graph (scikit-image), and background removed: regions that
-  touch the image border, and regions whose colour is close to one of those (a tiled floor
-  whose inner tiles do not reach the border), are background.
+  touch the image border, and regions whose colour is close to a large border region (a
+  tiled floor whose inner tiles do not reach the border), are background. Adjacent
+  foreground regions of similar hue are joined into one object.
 - ``existing``: masks already on disk (e.g. a corrupted folder), one proposal per ID.
 - ``sam-hq``: SAM-HQ's automatic mask generator through ONNX Runtime (``--model DIR``).
 """

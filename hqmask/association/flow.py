@@ -19,7 +19,7 @@ views are dropped.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import cv2
 import numpy as np
@@ -58,14 +58,6 @@ class _Track:
     age: int = 0
 
 
-@dataclass
-class _Pass:
-    """One direction: the track of every local segment of every view."""
-
-    track_of: list[np.ndarray] = field(default_factory=list)
-    n_tracks: int = 0
-
-
 def _run_pass(
     order: list[int],
     images: list[np.ndarray],
@@ -90,12 +82,12 @@ def _run_pass(
                 t.mask = _warp(t.mask, flow)
         ids = list(tracks)
         local = np.arange(1, n_local + 1)
+        seg_area = np.bincount(seg.ravel(), minlength=n_local + 1).astype(float)
         if ids and n_local:
             # intersection of every (segment, track) pair
             inter = np.zeros((n_local + 1, len(ids)))
             for j, t in enumerate(ids):
                 inter[:, j] = np.bincount(seg[tracks[t].mask > 0], minlength=n_local + 1)
-            seg_area = np.bincount(seg.ravel(), minlength=n_local + 1).astype(float)
             trk_area = np.array([float(np.count_nonzero(tracks[t].mask)) for t in ids])
             iou = inter[1:] / np.maximum(seg_area[1:, None] + trk_area[None] - inter[1:], 1)
             rows, cols = linear_sum_assignment(-iou)
@@ -110,7 +102,7 @@ def _run_pass(
                     if frac[j] >= contain and ids[j] in matched:
                         assign[l] = ids[j]
         for l in local:
-            if assign[l] < 0 and np.any(seg == l):
+            if assign[l] < 0 and seg_area[l] > 0:
                 assign[l] = next_id
                 next_id += 1
         for t in list(tracks):
