@@ -1,0 +1,49 @@
+"""Small random Gaussian scenes for the renderer tests."""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from dataset_tools.cameras import PinholeCamera
+from gsseg.gaussians import Gaussians
+
+
+def random_gaussians(n: int, seed: int, dtype: torch.dtype = torch.float32) -> Gaussians:
+    """``n`` Gaussians in front of :func:`look_down_z`, with varied shapes, opacities,
+    SH colours and object features."""
+    gen = torch.Generator().manual_seed(seed)
+
+    def rand(*shape: int) -> torch.Tensor:
+        return torch.rand(*shape, generator=gen, dtype=torch.float64)
+
+    means = (rand(n, 3) - 0.5) * torch.tensor([2.4, 1.8, 2.0], dtype=torch.float64)
+    g = Gaussians(
+        means=means,
+        log_scales=torch.log(0.04 + 0.2 * rand(n, 3)),
+        quats=rand(n, 4) - 0.5,
+        opacity_logits=8 * rand(n) - 2,
+        sh_dc=rand(n, 3) * 2 - 1,
+        sh_rest=0.2 * (rand(n, 15, 3) - 0.5),
+        obj_feat=rand(n, 16) - 0.5,
+    )
+    return Gaussians(**{k: v.to(dtype) for k, v in g.tensors().items()})
+
+
+def look_down_z(width: int = 40, height: int = 32, distance: float = 3.5) -> tuple[PinholeCamera, torch.Tensor]:
+    """A camera ``distance`` in front of the origin looking along +z, and its (3, 4) pose."""
+    f = 0.9 * width
+    pose = torch.tensor([[1.0, 0, 0, 0.05], [0, 1, 0, -0.03], [0, 0, 1, distance]], dtype=torch.float64)
+    return PinholeCamera(width, height, f, f, width / 2 + 0.3, height / 2 - 0.2), pose
+
+
+def weighted_sum(out, weights: dict[str, torch.Tensor]) -> torch.Tensor:
+    """A scalar loss touching every output of a render: sum of each output times fixed weights."""
+    return sum((getattr(out, name) * w).sum() for name, w in weights.items())
+
+
+def output_weights(width: int, height: int, seed: int, dtype: torch.dtype) -> dict[str, torch.Tensor]:
+    rng = np.random.default_rng(seed)
+    shapes = {"rgb": (height, width, 3), "features": (height, width, 16), "alpha": (height, width),
+              "depth": (height, width)}
+    return {k: torch.as_tensor(rng.standard_normal(s), dtype=dtype) for k, s in shapes.items()}

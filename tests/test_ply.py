@@ -1,0 +1,56 @@
+"""3D-GS PLY files: exact round trip, files of other 3D-GS tools, malformed files."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+from plyfile import PlyData, PlyElement
+
+from dataset_tools.errors import InputError
+from gsseg.ply import read_ply, write_ply
+from tests.render_scenes import random_gaussians
+
+
+def test_round_trip_is_exact(tmp_path):
+    g = random_gaussians(50, 0)
+    back = read_ply(write_ply(g, tmp_path / "g.ply"))
+    for name, value in g.tensors().items():
+        assert torch.equal(getattr(back, name), value), name
+
+
+def _plain_3dgs_ply(path, n: int, degree: int, drop: str | None = None):
+    """A PLY laid out as 3D-GS writes it, without object features."""
+    n_rest = 3 * ((degree + 1) ** 2 - 1)
+    names = (["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"]
+             + [f"f_rest_{i}" for i in range(n_rest)]
+             + ["opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"])
+    names = [x for x in names if x != drop]
+    data = np.zeros(n, dtype=[(x, "f4") for x in names])
+    rng = np.random.default_rng(0)
+    for x in names:
+        data[x] = rng.standard_normal(n)
+    PlyData([PlyElement.describe(data, "vertex")]).write(str(path))
+    return data
+
+
+@pytest.mark.parametrize("degree", [0, 1, 3])
+def test_a_3dgs_ply_without_object_features_loads(tmp_path, degree):
+    data = _plain_3dgs_ply(tmp_path / "p.ply", 7, degree)
+    g = read_ply(tmp_path / "p.ply")
+    assert len(g) == 7 and torch.equal(g.obj_feat, torch.zeros(7, 16))
+    assert torch.equal(g.quats[:, 0], torch.from_numpy(data["rot_0"]))
+    if degree:
+        # f_rest is channel-major: coefficient k of green is f_rest_{K + k}, K per channel.
+        k = (degree + 1) ** 2 - 1
+        assert torch.equal(g.sh_rest[:, 0, 1], torch.from_numpy(data[f"f_rest_{k}"]))
+        assert torch.equal(g.sh_rest[:, k:], torch.zeros(7, 15 - k, 3))
+
+
+def test_ply_missing_required_fields_is_refused(tmp_path):
+    _plain_3dgs_ply(tmp_path / "p.ply", 3, 0, drop="opacity")
+    with pytest.raises(InputError, match=r"p\.ply lacks the 3D-GS vertex properties opacity"):
+        read_ply(tmp_path / "p.ply")
+    (tmp_path / "junk.ply").write_text("not a ply")
+    with pytest.raises(InputError, match="not a readable PLY"):
+        read_ply(tmp_path / "junk.ply")
