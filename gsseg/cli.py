@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import click
 
 from dataset_tools.cli_support import add_planned_command, run_cli
@@ -12,10 +14,87 @@ def cli() -> None:
     """Segment-aware 3D Gaussian Splatting: train, segment, edit, render."""
 
 
-add_planned_command(cli, "train", "Train 3D-GS jointly with 16-d object features on a scene")
-add_planned_command(cli, "render", "Render RGB, labels or segments of a run")
-add_planned_command(cli, "segment", "Prior-guided label reassignment of every Gaussian")
-add_planned_command(cli, "edit", "Select an object by a 3D point or click; remove, extract or recolour it")
+@cli.command()
+@click.argument("scene", type=click.Path(path_type=Path))
+@click.option("--out", "run", required=True, type=click.Path(path_type=Path), help="Run folder to write.")
+@click.option("--masks", default="object_mask", show_default=True, help="Object-ID map folder; views without one train RGB only.")
+@click.option("--images", default="images", show_default=True, help="Image folder (images or images_N).")
+@click.option("--iters", type=int, default=None, help="Iterations (default: 3000 on cpu, 30000 with gsplat); the schedule scales with it.")
+@click.option("--schedule", type=click.Choice(["auto", "cpu", "gpu"]), default="auto", show_default=True,
+              help="cpu: the short laptop schedule; gpu: the paper's 30k schedule; auto picks by backend.")
+@click.option("--backend", type=click.Choice(["auto", "cpu", "torch", "gsplat"]), default="auto", show_default=True)
+@click.option("--gamma-obj", type=float, default=1.0, show_default=True, help="Weight of the object cross-entropy.")
+@click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--resume", is_flag=True, help="Continue the run in --out from its latest checkpoint.")
+@click.option("--stop-after", type=int, default=None, help="Checkpoint and stop at this step; continue with --resume.")
+def train(scene: Path, run: Path, schedule: str, resume: bool, stop_after: int | None, **options) -> None:
+    """Train 3D-GS jointly with 16-d object features on SCENE."""
+    from gsseg.render import resolve_backend
+    from gsseg.train import TrainConfig, train as run_training
+
+    if schedule == "auto":
+        schedule = "gpu" if resolve_backend(options["backend"]) == "gsplat" else "cpu"
+    result = run_training(scene, run, TrainConfig(schedule=schedule, **options), resume=resume, stop_after=stop_after)
+    state = "finished" if result.finished else f"stopped at step {result.step}; continue with --resume"
+    click.echo(f"{result.run}: {state}, {result.num_gaussians} Gaussians, {result.seconds:.0f} s")
+
+
+@cli.command()
+@click.argument("run", type=click.Path(path_type=Path))
+@click.option("--scene", required=True, type=click.Path(path_type=Path), help="Scene folder whose views to render.")
+@click.option("--out", required=True, type=click.Path(path_type=Path), help="Folder to write.")
+@click.option("--split", type=click.Choice(["train", "test", "all"]), default="test", show_default=True)
+@click.option("--what", default="rgb,labels", show_default=True,
+              help="Comma-separated: rgb, labels (classifier argmax), segments (labels.npz, after `gsseg segment`).")
+@click.option("--colorize", is_flag=True, help="Also write colour versions of the label maps.")
+@click.option("--images", default=None, help="Image folder defining the cameras (default: the run's).")
+@click.option("--backend", type=click.Choice(["auto", "cpu", "torch", "gsplat"]), default="auto", show_default=True)
+@click.option("--force", is_flag=True, help="Replace --out if it exists.")
+def render(run: Path, scene: Path, out: Path, what: str, force: bool, **options) -> None:
+    """Render RGB, per-pixel classifier labels or Gaussian segments of RUN on SCENE's views."""
+    from gsseg.render_views import render_run
+
+    click.echo(f"wrote {render_run(run, scene, out, what=tuple(w.strip() for w in what.split(',') if w.strip()), overwrite=force, **options)}")
+
+
+@cli.command()
+@click.argument("run", type=click.Path(path_type=Path))
+@click.option("--scene", required=True, type=click.Path(path_type=Path), help="The scene the run was trained on.")
+@click.option("--method", type=click.Choice(["prior", "flashsplat", "classifier"]), default="prior", show_default=True)
+@click.option("--mode", type=click.Choice(["multi", "binary"]), default="multi", show_default=True)
+@click.option("--gamma-p", type=float, default=0.2, show_default=True, help="Weight of the learned prior (any real).")
+@click.option("--slack", type=float, default=0.0, show_default=True, help="Background bias of --method flashsplat.")
+@click.option("--masks", default="object_mask", show_default=True, help="Mask folder that votes.")
+@click.option("--backend", type=click.Choice(["auto", "cpu", "torch", "gsplat"]), default="auto", show_default=True)
+def segment(run: Path, scene: Path, **options) -> None:
+    """Prior-guided label reassignment of every Gaussian of RUN; writes RUN/labels.npz."""
+    from gsseg.segment.segment_run import segment_run
+
+    result = segment_run(run, scene, **options)
+    counts = {int(o): int(s.sum()) for o, s in zip(result.objects, result.selections)}
+    click.echo(f"wrote {run / 'labels.npz'}: {len(result.labels)} Gaussians; per object {counts}")
+
+
+@cli.command()
+@click.argument("run", type=click.Path(path_type=Path))
+@click.option("--point", type=float, nargs=3, default=None, help="X Y Z of a point on the object.")
+@click.option("--click", "click_", type=(str, float, float), default=None, help="VIEW U V: a pixel of a view.")
+@click.option("--object-id", type=int, default=None, help="The object's label.")
+@click.option("--op", type=click.Choice(["remove", "extract", "recolor"]), required=True)
+@click.option("--color", type=int, nargs=3, default=None, help="R G B (0..255) for --op recolor.")
+@click.option("--name", default=None, help="Edit folder name (default: <op>_<id>).")
+@click.option("--scene", default=None, type=click.Path(path_type=Path), help="Scene whose views to render (default: the run's).")
+@click.option("--split", type=click.Choice(["train", "test", "all"]), default="test", show_default=True)
+@click.option("--backend", type=click.Choice(["auto", "cpu", "torch", "gsplat"]), default="auto", show_default=True)
+@click.option("--force", is_flag=True, help="Replace the edit folder if it exists.")
+def edit(run: Path, point, click_, scene, force: bool, **options) -> None:
+    """Select an object by a 3D point, a click or its ID; remove, extract or recolour it."""
+    from gsseg.edits import edit_run
+
+    out = edit_run(run, point=point or None, click=click_, scene_dir=scene, overwrite=force, **options)
+    click.echo(f"wrote {out}")
+
+
 add_planned_command(cli, "demo", "The whole pipeline on a synthetic scene, with a report")
 
 main = run_cli(cli, "gsseg")

@@ -63,6 +63,9 @@ class Gaussians:
     def detach(self) -> Gaussians:
         return Gaussians(**{k: v.detach() for k, v in self.tensors().items()})
 
+    def to(self, device: torch.device | str) -> Gaussians:
+        return Gaussians(**{k: v.to(device) for k, v in self.tensors().items()})
+
     def select(self, keep: torch.Tensor) -> Gaussians:
         """The Gaussians where the boolean (N,) mask ``keep`` is true (or at integer indices)."""
         return Gaussians(**{k: v[keep] for k, v in self.tensors().items()})
@@ -118,3 +121,4 @@ def random_points(
     rng = np.random.default_rng(seed)
     xyz = center + rng.uniform(-radius, radius, size=(count, 3))
     return xyz, rng.integers(0, 256, size=(count, 3), dtype=np.uint8)
+

@@ -26,6 +26,16 @@ def scene_copy(small_scene, tmp_path) -> Path:
     return dst
 
 
+@pytest.fixture(scope="session")
+def trained(small_scene, tmp_path_factory) -> Path:
+    """The run folder of ``small_scene`` trained for 200 CPU iterations (read-only)."""
+    from gsseg.train import TrainConfig, train
+
+    run = tmp_path_factory.mktemp("runs") / "fit"
+    train(small_scene.root, run, TrainConfig(iters=200, backend="cpu"), progress=False)
+    return run
+
+
 @pytest.fixture
 def beer() -> Path:
     if not (BEER / "sparse" / "0").is_dir():

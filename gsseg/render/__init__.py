@@ -92,7 +92,7 @@ def render(
         image, alpha, means2d, radii = rasterize_gsplat(
             g.means, g.quats, g.scales, g.opacities, values, cam_from_world, camera)
     elif backend in _BLENDERS:
-        proj = project_gaussians(g.means, g.quats, g.scales, cam_from_world, camera)
+        proj = project_gaussians(g.means, g.quats, g.scales, cam_from_world, camera, g.opacities)
         means2d, radii = proj.means2d, proj.radii
         if means2d.requires_grad:
             means2d.retain_grad()

@@ -1,7 +1,8 @@
 """Numba kernels of the ``cpu`` backend: tile binning, front-to-back blending and its
 reverse-order backward pass. Compiled on first use and cached; no compiler at install.
 
-Scalars are computed in float64 and stored in float32. Work is split over tiles; the
+Per-pixel Gaussian values are computed in float32, as the CUDA rasterizers do; colour and
+transmittance accumulate in float64. Work is split over tiles; the
 backward pass gives every worker its own gradient buffer, summed afterwards, so results
 do not depend on thread timing.
 """
@@ -46,29 +47,35 @@ def bin_gaussians(rects: np.ndarray, order: np.ndarray, n_tiles_x: int, n_tiles_
     return offsets, ids
 
 
-@numba.njit(inline="always")
-def _alpha_at(means2d, conics, opacities, min_power, g, px, py):
-    """(alpha, gaussian value, power, dx, dy) of Gaussian g at pixel centre (px, py);
-    alpha is 0 where the 3D-GS rules skip the Gaussian. ``min_power[g]`` = log(ALPHA_MIN /
-    opacity) lets most skipped Gaussians be recognised before the exponential."""
-    dx = means2d[g, 0] - px
-    dy = means2d[g, 1] - py
-    power = -0.5 * (conics[g, 0] * dx * dx + conics[g, 2] * dy * dy) - conics[g, 1] * dx * dy
-    if power > 0.0 or power < min_power[g]:
-        return 0.0, 0.0, power, dx, dy
-    gauss = math.exp(power)
-    alpha = min(ALPHA_MAX, opacities[g] * gauss)
-    if alpha < ALPHA_MIN:
-        return 0.0, gauss, power, dx, dy
-    return alpha, gauss, power, dx, dy
-
-
 @numba.njit(cache=True)
-def _min_power(opacities):
-    out = np.empty(opacities.shape[0], np.float64)
-    for g in range(opacities.shape[0]):
-        out[g] = math.log(ALPHA_MIN / opacities[g]) if opacities[g] > 0 else np.inf
-    return out
+def _gather_tile(ids, start, end, means2d, conics, opacities):
+    """The tile's Gaussians as one contiguous (m, 7) float32 block: mean x, mean y, conic
+    a, b, c, opacity, and log(ALPHA_MIN / opacity), the power below which a Gaussian is skipped
+    (so most skips need no exponential)."""
+    loc = np.empty((end - start, 7), np.float32)
+    for j in range(end - start):
+        g = ids[start + j]
+        loc[j, 0], loc[j, 1] = means2d[g, 0], means2d[g, 1]
+        loc[j, 2], loc[j, 3], loc[j, 4] = conics[g, 0], conics[g, 1], conics[g, 2]
+        loc[j, 5] = opacities[g]
+        loc[j, 6] = math.log(ALPHA_MIN / opacities[g]) if opacities[g] > 0 else np.inf
+    return loc
+
+
+@numba.njit(inline="always")
+def _alpha_at(loc, j, px, py):
+    """(alpha, gaussian value, dx, dy) of the tile's j-th Gaussian at pixel centre (px, py);
+    alpha is 0 where the 3D-GS rules skip the Gaussian."""
+    dx = loc[j, 0] - px
+    dy = loc[j, 1] - py
+    power = np.float32(-0.5) * (loc[j, 2] * dx * dx + loc[j, 4] * dy * dy) - loc[j, 3] * dx * dy
+    if power > 0 or power < loc[j, 6]:
+        return np.float32(0), np.float32(0), dx, dy
+    gauss = np.float32(math.exp(power))
+    alpha = min(np.float32(ALPHA_MAX), loc[j, 5] * gauss)
+    if alpha < np.float32(ALPHA_MIN):
+        return np.float32(0), gauss, dx, dy
+    return alpha, gauss, dx, dy
 
 
 @numba.njit(parallel=True, cache=True)
@@ -82,11 +89,11 @@ def blend_forward(means2d, conics, opacities, features, offsets, ids, width, hei
     image = np.zeros((height, width, n_ch), np.float32)
     final_t = np.ones((height, width), np.float64)
     n_contrib = np.zeros((height, width), np.int32)
-    min_power = _min_power(opacities)
     for t in numba.prange(n_tiles):
         start, end = offsets[t], offsets[t + 1]
         if start == end:
             continue
+        loc = _gather_tile(ids, start, end, means2d, conics, opacities)
         y0, x0 = (t // n_tiles_x) * tile, (t % n_tiles_x) * tile
         acc = np.empty(n_ch, np.float64)
         for y in range(y0, min(y0 + tile, height)):
@@ -94,19 +101,20 @@ def blend_forward(means2d, conics, opacities, features, offsets, ids, width, hei
                 acc[:] = 0.0
                 trans = 1.0
                 last = 0
-                for k in range(start, end):
-                    g = ids[k]
-                    alpha = _alpha_at(means2d, conics, opacities, min_power, g, x + 0.5, y + 0.5)[0]
-                    if alpha == 0.0:
+                px, py = np.float32(x + 0.5), np.float32(y + 0.5)
+                for j in range(end - start):
+                    alpha = _alpha_at(loc, j, px, py)[0]
+                    if alpha == 0:
                         continue
                     next_t = trans * (1.0 - alpha)
                     if next_t < T_MIN:
                         break
                     w = alpha * trans
+                    g = ids[start + j]
                     for ch in range(n_ch):
                         acc[ch] += w * features[g, ch]
                     trans = next_t
-                    last = k - start + 1
+                    last = j + 1
                 for ch in range(n_ch):
                     image[y, x, ch] = acc[ch]
                 final_t[y, x] = trans
@@ -131,10 +139,14 @@ def blend_backward(means2d, conics, opacities, features, offsets, ids, width, he
     g_conics = np.zeros((n_workers, n, 3), np.float64)
     g_opac = np.zeros((n_workers, n), np.float64)
     g_feat = np.zeros((n_workers, n, n_ch), np.float64)
-    min_power = _min_power(opacities)
     for w_id in numba.prange(n_workers):
         for t in range(w_id, n_tiles, n_workers):
-            start = offsets[t]
+            start, end = offsets[t], offsets[t + 1]
+            if start == end:
+                continue
+            loc = _gather_tile(ids, start, end, means2d, conics, opacities)
+            # Tile-local gradients: mean x, y, conic a, b, c, opacity, then the features.
+            tg = np.zeros((end - start, 6 + n_ch), np.float64)
             y0, x0 = (t // n_tiles_x) * tile, (t % n_tiles_x) * tile
             for y in range(y0, min(y0 + tile, height)):
                 for x in range(x0, min(x0 + tile, width)):
@@ -142,10 +154,10 @@ def blend_backward(means2d, conics, opacities, features, offsets, ids, width, he
                     trans = t_final
                     behind = 0.0  # (contributions behind the current Gaussian) . grad_image
                     d_alpha_out = grad_alpha[y, x]
-                    for k in range(start + n_contrib[y, x] - 1, start - 1, -1):
-                        g = ids[k]
-                        alpha, gauss, power, dx, dy = _alpha_at(means2d, conics, opacities, min_power, g, x + 0.5, y + 0.5)
-                        if alpha == 0.0:
+                    px, py = np.float32(x + 0.5), np.float32(y + 0.5)
+                    for j in range(n_contrib[y, x] - 1, -1, -1):
+                        alpha, gauss, dx, dy = _alpha_at(loc, j, px, py)
+                        if alpha == 0:
                             continue
                         one_minus = 1.0 - alpha
                         trans = trans / one_minus
@@ -153,18 +165,73 @@ def blend_backward(means2d, conics, opacities, features, offsets, ids, width, he
                         f_dot = 0.0
                         for ch in range(n_ch):
                             d_pix = grad_image[y, x, ch]
-                            g_feat[w_id, g, ch] += weight * d_pix
-                            f_dot += features[g, ch] * d_pix
+                            tg[j, 6 + ch] += weight * d_pix
+                            f_dot += features[ids[start + j], ch] * d_pix
                         d_alpha = d_alpha_out * t_final / one_minus + f_dot * trans - behind / one_minus
                         behind += weight * f_dot
-                        if opacities[g] * gauss > ALPHA_MAX:
+                        if loc[j, 5] * gauss > ALPHA_MAX:
                             continue  # clamped: no gradient reaches opacity or shape
-                        g_opac[w_id, g] += gauss * d_alpha
-                        d_power = opacities[g] * gauss * d_alpha
-                        a, b, c = conics[g, 0], conics[g, 1], conics[g, 2]
-                        g_means[w_id, g, 0] += d_power * (-a * dx - b * dy)
-                        g_means[w_id, g, 1] += d_power * (-c * dy - b * dx)
-                        g_conics[w_id, g, 0] += -0.5 * dx * dx * d_power
-                        g_conics[w_id, g, 1] += -dx * dy * d_power
-                        g_conics[w_id, g, 2] += -0.5 * dy * dy * d_power
+                        d_power = loc[j, 5] * gauss * d_alpha
+                        a, b, c = loc[j, 2], loc[j, 3], loc[j, 4]
+                        tg[j, 0] += d_power * (-a * dx - b * dy)
+                        tg[j, 1] += d_power * (-c * dy - b * dx)
+                        tg[j, 2] += -0.5 * dx * dx * d_power
+                        tg[j, 3] += -dx * dy * d_power
+                        tg[j, 4] += -0.5 * dy * dy * d_power
+                        tg[j, 5] += gauss * d_alpha
+            for j in range(end - start):
+                g = ids[start + j]
+                g_means[w_id, g, 0] += tg[j, 0]
+                g_means[w_id, g, 1] += tg[j, 1]
+                for i in range(3):
+                    g_conics[w_id, g, i] += tg[j, 2 + i]
+                g_opac[w_id, g] += tg[j, 5]
+                for ch in range(n_ch):
+                    g_feat[w_id, g, ch] += tg[j, 6 + ch]
     return g_means.sum(0), g_conics.sum(0), g_opac.sum(0), g_feat.sum(0)
+
+
+@numba.njit(parallel=True, cache=True)
+def accumulate_weights(means2d, conics, opacities, offsets, ids, width, height, tile, rows, n_rows,
+                       n_workers):
+    """Blending weights summed per Gaussian and pixel class: out[r, g] = sum over the pixels
+    with rows[y, x] == r of alpha_g T_g (rows < 0 are ignored). One forward pass, no colour.
+
+    Returns (n_rows, N) float32. Each worker sums into its own (n_rows, N) buffer.
+    """
+    n = means2d.shape[0]
+    n_tiles_x = (width + tile - 1) // tile
+    n_tiles = offsets.shape[0] - 1
+    buffers = np.zeros((n_workers, n_rows, n), np.float32)
+    for w_id in numba.prange(n_workers):
+        for t in range(w_id, n_tiles, n_workers):
+            start, end = offsets[t], offsets[t + 1]
+            if start == end:
+                continue
+            loc = _gather_tile(ids, start, end, means2d, conics, opacities)
+            local = np.zeros((end - start, n_rows), np.float64)
+            y0, x0 = (t // n_tiles_x) * tile, (t % n_tiles_x) * tile
+            for y in range(y0, min(y0 + tile, height)):
+                for x in range(x0, min(x0 + tile, width)):
+                    r = rows[y, x]
+                    if r < 0:
+                        continue
+                    trans = 1.0
+                    px, py = np.float32(x + 0.5), np.float32(y + 0.5)
+                    for j in range(end - start):
+                        alpha = _alpha_at(loc, j, px, py)[0]
+                        if alpha == 0:
+                            continue
+                        next_t = trans * (1.0 - alpha)
+                        if next_t < T_MIN:
+                            break
+                        local[j, r] += alpha * trans
+                        trans = next_t
+            for j in range(end - start):
+                g = ids[start + j]
+                for r in range(n_rows):
+                    buffers[w_id, r, g] += local[j, r]
+    out = buffers[0].copy()
+    for w_id in range(1, n_workers):
+        out += buffers[w_id]
+    return out

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import torch
 
 from dataset_tools.cameras import PinholeCamera
+from gsseg.render.blend_rules import ALPHA_MIN
 
 NEAR_PLANE = 0.01
 EPS_2D = 0.3  # low-pass filter added to the 2D covariance, in pixels^2, as in 3D-GS
@@ -57,6 +58,7 @@ def project_gaussians(
     scales: torch.Tensor,
     cam_from_world: torch.Tensor,
     camera: PinholeCamera,
+    opacities: torch.Tensor | None = None,
 ) -> Projection:
     """Project 3D Gaussians with the local affine (EWA) approximation of the pinhole camera.
 
@@ -64,6 +66,8 @@ def project_gaussians(
         means: (N, 3) world centres. quats: (N, 4). scales: (N, 3) standard deviations.
         cam_from_world: (3, 4) or (4, 4) world-to-camera transform (x right, y down, z forward).
         camera: pinhole intrinsics and image size.
+        opacities: (N,) optional; when given, a footprint ends where the Gaussian's alpha
+            falls below 1/255 (blending skips it there anyway), never beyond 3 sigma.
 
     Returns:
         The :class:`Projection`. Gaussians behind the near plane, with a degenerate 2D
@@ -95,10 +99,14 @@ def project_gaussians(
     with torch.no_grad():
         mid = 0.5 * (a + c)
         lambda_max = mid + torch.sqrt(torch.clamp_min(mid * mid - det, 0.1))
-        radii = torch.ceil(3.0 * torch.sqrt(lambda_max))
+        extent = torch.full_like(lambda_max, 3.0)  # footprint in standard deviations
+        if opacities is not None:
+            # alpha = o exp(-d^2 / 2) >= ALPHA_MIN  <=>  d^2 <= 2 log(o / ALPHA_MIN)
+            extent = torch.sqrt(torch.clamp(2 * torch.log(opacities.detach() / ALPHA_MIN), 0.0, 9.0))
+        radii = torch.ceil(extent * torch.sqrt(lambda_max))
         on_screen = ((means2d[:, 0] + radii > 0) & (means2d[:, 0] - radii < camera.width)
                      & (means2d[:, 1] + radii > 0) & (means2d[:, 1] - radii < camera.height))
-        radii = torch.where(valid & on_screen, radii, torch.zeros_like(radii)).to(torch.int32)
+        radii = torch.where(valid & on_screen & (radii > 0), radii, torch.zeros_like(radii)).to(torch.int32)
     return Projection(means2d=means2d, conics=conics, depths=p[:, 2], radii=radii)
 
 

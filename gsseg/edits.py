@@ -1,0 +1,116 @@
+"""Edits of a selected object: remove, extract, recolour; rendering of the result."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import cv2
+import numpy as np
+import torch
+from tqdm import tqdm
+
+from dataset_tools.atomic import atomic_directory
+from dataset_tools.errors import InputError
+from dataset_tools.image_files import write_png
+from dataset_tools.scene import load_scene
+from gsseg.gaussians import Gaussians
+from gsseg.ply import write_ply
+from gsseg.render import render, resolve_backend
+from gsseg.run_folder import load_run
+from gsseg.segment.prompts import object_at_point, point_from_click
+from gsseg.segment.reassign import Segmentation
+from gsseg.segment.segment_run import LABELS
+from gsseg.sh import C0, rgb_to_sh_dc
+
+OPS = ("remove", "extract", "recolor")
+LUMA = torch.tensor([0.299, 0.587, 0.114])
+
+
+def recolor(g: Gaussians, selected: torch.Tensor, rgb: tuple[float, float, float]) -> Gaussians:
+    """Paint the selected Gaussians ``rgb`` (in [0, 1]) while keeping their shading: each one's
+    new base colour is the target scaled by its luminance relative to the selection's mean,
+    and its higher SH bands are scaled by the same luminance ratio as its DC."""
+    out = Gaussians(**{k: v.clone() for k, v in g.tensors().items()})
+    base = (g.sh_dc[selected] * C0 + 0.5).clamp(0, 1)
+    luma = base @ LUMA
+    target = torch.tensor(rgb, dtype=base.dtype)
+    shade = (luma / luma.mean().clamp_min(1e-6))[:, None]
+    new = (target[None] * shade).clamp(0, 1)
+    ratio = ((new @ LUMA) / luma.clamp_min(1e-6))[:, None, None]
+    out.sh_dc[selected] = rgb_to_sh_dc(new)
+    out.sh_rest[selected] = g.sh_rest[selected] * ratio
+    return out
+
+
+def apply_edit(g: Gaussians, selected: np.ndarray, op: str, rgb: tuple[float, float, float] | None = None) -> Gaussians:
+    """A copy of ``g`` with ``op`` applied to the (N,) bool ``selected`` Gaussians."""
+    sel = torch.as_tensor(selected, dtype=torch.bool)
+    if op == "remove":
+        return g.select(~sel)
+    if op == "extract":
+        return g.select(sel)
+    if op == "recolor":
+        if rgb is None:
+            raise InputError("--op recolor needs --color R G B (0..255).")
+        return recolor(g, sel, rgb)
+    raise InputError(f"unknown edit {op!r}; choose one of {', '.join(OPS)}.")
+
+
+def edit_run(run_dir: Path | str, op: str, *, point=None, click=None, object_id: int | None = None,
+             color: tuple[int, int, int] | None = None, name: str | None = None, scene_dir: Path | str | None = None,
+             split: str = "test", k: int = 20, fps: int = 8, backend: str = "auto", overwrite: bool = False,
+             progress: bool = True) -> Path:
+    """Select an object (a 3D ``point``, a ``click`` = (view, u, v) or an ``object_id``), apply
+    ``op`` and write ``RUN/edits/NAME/``: ``gaussians.ply``, ``renders/<view>.png`` of the
+    scene's ``split`` views, ``video.mp4`` of those renders, and ``edit.json``."""
+    run_dir = Path(run_dir)
+    segmentation = Segmentation.load(run_dir / LABELS)
+    run = load_run(run_dir)
+    backend = resolve_backend(backend)
+    scene = load_scene(scene_dir or run.config["scene"], images=run.config.get("images", "images"), masks=None)
+    if sum(x is not None for x in (point, click, object_id)) != 1:
+        raise InputError("give exactly one of --point, --click or --object-id.")
+    if click is not None:
+        view = scene.view(str(click[0]))
+        point = point_from_click(run.gaussians, view.camera, view.cam_from_world, float(click[1]), float(click[2]),
+                                 backend="cpu" if backend == "gsplat" else backend)
+    if point is not None:
+        object_id = object_at_point(run.gaussians.means.numpy(), segmentation.labels, np.asarray(point), k)
+        if object_id == 0:
+            raise InputError(f"the point {np.round(point, 3).tolist()} lies on the background (label 0); "
+                             "pick a point on an object.")
+    selected = segmentation.selection(int(object_id))
+    rgb = tuple(c / 255 for c in color) if color is not None else None
+    edited = apply_edit(run.gaussians, selected, op, rgb)
+    out = run_dir / "edits" / (name or f"{op}_{object_id}")
+    if out.exists() and not overwrite:
+        raise InputError(f"{out} exists; pass --force or choose another --name.")
+    device = "cuda" if backend == "gsplat" else "cpu"
+    with atomic_directory(out, overwrite=overwrite) as tmp:
+        write_ply(edited, tmp / "gaussians.ply")
+        frames = []
+        with torch.no_grad():
+            for view in tqdm(scene.split(split), desc="rendering edit", unit="view", disable=not progress):
+                pose = torch.as_tensor(view.cam_from_world, dtype=torch.float32, device=device)
+                rgb_img = render(edited.to(device), view.camera, pose, sh_degree=run.config.get("sh_degree", 3),
+                                 with_features=False, backend=backend).rgb
+                frame = (rgb_img.clamp(0, 1) * 255 + 0.5).to(torch.uint8).cpu().numpy()
+                write_png(tmp / "renders" / f"{view.stem}.png", frame)
+                frames.append(frame)
+        _write_video(tmp / "video.mp4", frames, fps)
+        (tmp / "edit.json").write_text(json.dumps({
+            "op": op, "object_id": int(object_id), "point": None if point is None else np.asarray(point).tolist(),
+            "click": None if click is None else list(map(str, click)), "color": color,
+            "selected_gaussians": int(selected.sum()), "method": segmentation.method}, indent=2) + "\n")
+    return out
+
+
+def _write_video(path: Path, frames: list[np.ndarray], fps: int) -> None:
+    if not frames:
+        return
+    h, w = frames[0].shape[:2]
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), fps, (w, h))
+    for f in frames:
+        writer.write(cv2.cvtColor(f, cv2.COLOR_RGB2BGR))
+    writer.release()

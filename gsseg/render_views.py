@@ -1,0 +1,90 @@
+"""``gsseg render``: a run's renders of a scene's views as PNG files any script can score."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import torch
+from tqdm import tqdm
+
+from dataset_tools.atomic import atomic_directory
+from dataset_tools.errors import InputError
+from dataset_tools.image_files import colorize_labels, write_png
+from dataset_tools.scene import load_scene
+from gsseg.gaussians import Gaussians
+from gsseg.render import render, resolve_backend
+from gsseg.run_folder import load_run
+from gsseg.segment.reassign import Segmentation
+from gsseg.segment.segment_run import LABELS
+
+PRODUCTS = ("rgb", "labels", "segments")
+
+
+def classify_pixels(features: torch.Tensor, classifier: torch.nn.Linear) -> torch.Tensor:
+    """(H, W) int64 argmax of the classifier on rendered object features (H, W, F)."""
+    return classifier(features).argmax(dim=-1)
+
+
+def segment_pixels(gaussians: Gaussians, labels: np.ndarray, camera, cam_from_world: torch.Tensor, *,
+                   backend: str, min_alpha: float = 0.5) -> np.ndarray:
+    """(H, W) uint8: each pixel takes the Gaussian label with the largest blended weight
+    (labels (N,) uint8), 0 where the accumulated alpha is below ``min_alpha``."""
+    present = np.unique(labels)
+    index = np.searchsorted(present, labels)
+    one_hot = torch.nn.functional.one_hot(torch.as_tensor(index), len(present)).to(gaussians.means)
+    out = render(Gaussians(**{**gaussians.tensors(), "obj_feat": one_hot}), camera, cam_from_world,
+                 sh_degree=0, backend=backend)
+    best = torch.as_tensor(present)[out.features.argmax(dim=-1).cpu()]
+    return np.where(out.alpha.cpu().numpy() >= min_alpha, best.numpy(), 0).astype(np.uint8)
+
+
+@torch.no_grad()
+def render_run(
+    run_dir: Path | str,
+    scene_dir: Path | str,
+    out: Path | str,
+    *,
+    split: str = "test",
+    what: tuple[str, ...] = ("rgb", "labels"),
+    colorize: bool = False,
+    images: str | None = None,
+    backend: str = "auto",
+    overwrite: bool = False,
+    progress: bool = True,
+) -> Path:
+    """Render the views of ``split`` and write ``out/rgb/<stem>.png``, ``out/labels/<stem>.png``
+    (raw 8-bit classifier argmax) and ``out/segments/<stem>.png`` (raw 8-bit labels of
+    ``RUN/labels.npz``, by largest blended weight); with ``colorize`` also
+    ``out/<kind>_color/<stem>.png``. The folder appears complete or not at all."""
+    unknown = set(what) - set(PRODUCTS)
+    if unknown:
+        raise InputError(f"unknown --what {', '.join(sorted(unknown))}; choose from {', '.join(PRODUCTS)}.")
+    out = Path(out)
+    if out.exists() and not overwrite:
+        raise InputError(f"{out} exists; pass --force to replace it or choose another --out.")
+    run = load_run(run_dir)
+    segmentation = Segmentation.load(Path(run_dir) / LABELS) if "segments" in what else None
+    backend = resolve_backend(backend)
+    device = "cuda" if backend == "gsplat" else "cpu"
+    scene = load_scene(scene_dir, images=images or run.config.get("images", "images"), masks=None)
+    gaussians, classifier = run.gaussians.to(device), run.classifier.to(device)
+    sh_degree = run.config.get("sh_degree", 3)
+    with atomic_directory(out, overwrite=overwrite) as tmp:
+        for view in tqdm(scene.split(split), desc="rendering", unit="view", disable=not progress):
+            pose = torch.as_tensor(view.cam_from_world, dtype=torch.float32, device=device)
+            result = render(gaussians, view.camera, pose, sh_degree=sh_degree,
+                            with_features="labels" in what, backend=backend)
+            if "rgb" in what:
+                rgb = (result.rgb.clamp(0, 1) * 255 + 0.5).to(torch.uint8).cpu().numpy()
+                write_png(tmp / "rgb" / f"{view.stem}.png", rgb)
+            maps = {}
+            if "labels" in what:
+                maps["labels"] = classify_pixels(result.features, classifier).cpu().numpy().astype(np.uint8)
+            if segmentation is not None:
+                maps["segments"] = segment_pixels(gaussians, segmentation.labels, view.camera, pose, backend=backend)
+            for kind, ids in maps.items():
+                write_png(tmp / kind / f"{view.stem}.png", ids)
+                if colorize:
+                    write_png(tmp / f"{kind}_color" / f"{view.stem}.png", colorize_labels(ids))
+    return out

@@ -1,0 +1,51 @@
+"""Prompts that pick one object: a 3D point, a click in a view, or an explicit ID."""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+from scipy.spatial import cKDTree
+
+from dataset_tools.cameras import PinholeCamera
+from dataset_tools.errors import InputError
+from gsseg.gaussians import Gaussians
+from gsseg.render import render
+
+
+def object_at_point(means: np.ndarray, labels: np.ndarray, point: np.ndarray, k: int = 20) -> int:
+    """The mode of the labels of the ``k`` Gaussians nearest to ``point``.
+
+    Args:
+        means: (N, 3) Gaussian centres. labels: (N,) their labels. point: (3,) the prompt.
+
+    Raises:
+        InputError: the point lies outside the Gaussians' bounding box (padded by 5% of its diagonal).
+    """
+    point = np.asarray(point, np.float64)
+    lo, hi = means.min(0), means.max(0)
+    pad = 0.05 * np.linalg.norm(hi - lo)
+    if np.any(point < lo - pad) or np.any(point > hi + pad):
+        raise InputError(f"point {point.tolist()} lies outside the scene bounds {np.round(lo, 3).tolist()} .. "
+                         f"{np.round(hi, 3).tolist()}; pick a point on an object.")
+    _, nearest = cKDTree(means).query(point, k=min(k, len(means)))
+    values, counts = np.unique(labels[np.atleast_1d(nearest)], return_counts=True)
+    return int(values[counts.argmax()])
+
+
+@torch.no_grad()
+def point_from_click(gaussians: Gaussians, camera: PinholeCamera, cam_from_world: np.ndarray,
+                     u: float, v: float, *, backend: str = "cpu") -> np.ndarray:
+    """The 3D point seen at pixel (u, v) of a view: its rendered depth (alpha-normalised) lifted
+    through the camera. (3,) float64 world coordinates."""
+    if not (0 <= u < camera.width and 0 <= v < camera.height):
+        raise InputError(f"click ({u}, {v}) is outside the {camera.width}x{camera.height} view; click inside it.")
+    out = render(gaussians, camera, torch.as_tensor(cam_from_world, dtype=torch.float32),
+                 with_features=False, backend=backend)
+    row, col = int(v), int(u)
+    alpha = float(out.alpha[row, col])
+    if alpha < 0.5:
+        raise InputError(f"nothing opaque is rendered at ({u}, {v}) (alpha {alpha:.2f}); click on an object.")
+    z = float(out.depth[row, col]) / alpha
+    cam_point = np.array([(u - camera.cx) / camera.fx * z, (v - camera.cy) / camera.fy * z, z])
+    R, t = np.asarray(cam_from_world)[:3, :3], np.asarray(cam_from_world)[:3, 3]
+    return R.T @ (cam_point - t)

@@ -1,0 +1,151 @@
+"""Label reassignment: one label per Gaussian from the contribution matrix and/or the
+learned classifier.
+
+Normalisation: each Gaussian's column of A is divided by its sum, so Â[:, i] is the share
+of Gaussian i's blended weight that fell on each label (a distribution over labels, in
+[0, 1]). The prior gamma_p * p(i, l_i) (p the classifier's softmax probability, also in
+[0, 1]) is added on that same scale, so gamma_p = 1 lets a fully confident prior outweigh
+the masks' vote for a Gaussian seen under two labels equally often, and gamma_p = 0.2 only
+breaks near-ties. Gaussians no view observed (column sum 0) keep their prior label under
+``prior`` and ``classifier`` and get label 0 under ``flashsplat``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from dataset_tools.atomic import write_bytes_atomic
+from dataset_tools.errors import InputError
+from gsseg.segment.contributions import Contributions
+
+METHODS = ("prior", "flashsplat", "classifier")
+MODES = ("multi", "binary")
+
+
+@dataclass
+class Segmentation:
+    """Per-Gaussian labels and per-object selections.
+
+    Attributes:
+        labels: (N,) uint8 label of every Gaussian.
+        objects: (M,) uint8 object IDs (mask labels other than 0).
+        selections: (M, N) bool, Gaussians selected for each object.
+    """
+
+    labels: np.ndarray
+    objects: np.ndarray
+    selections: np.ndarray
+    method: str
+    mode: str
+    gamma_p: float
+
+    def selection(self, obj: int) -> np.ndarray:
+        """(N,) bool Gaussians of object ``obj``."""
+        hit = np.flatnonzero(self.objects == obj)
+        if not len(hit):
+            raise InputError(f"object {obj} is not among the segmented objects {self.objects.tolist()}; "
+                             "pick one of them.")
+        return self.selections[hit[0]]
+
+    def save(self, path: Path) -> None:
+        import io
+
+        buf = io.BytesIO()
+        np.savez_compressed(buf, labels=self.labels, objects=self.objects, selections=self.selections,
+                            method=self.method, mode=self.mode, gamma_p=self.gamma_p)
+        write_bytes_atomic(Path(path), buf.getvalue())
+
+    @classmethod
+    def load(cls, path: Path) -> Segmentation:
+        if not Path(path).is_file():
+            raise InputError(f"{path} does not exist; run `gsseg segment` on the run first.")
+        with np.load(path) as f:
+            return cls(labels=f["labels"], objects=f["objects"], selections=f["selections"],
+                       method=str(f["method"]), mode=str(f["mode"]), gamma_p=float(f["gamma_p"]))
+
+
+def normalize(weights: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Columns of (K, N) ``weights`` divided by their sums, and the (N,) bool mask of observed Gaussians."""
+    total = weights.sum(0)
+    observed = total > 0
+    return weights / torch.where(observed, total, torch.ones_like(total)), observed
+
+
+def classifier_prior(obj_feat: torch.Tensor, classifier: torch.nn.Linear) -> tuple[torch.Tensor, torch.Tensor]:
+    """Each Gaussian's own prediction: l_i (N,) int64 argmax of the classifier's softmax on its
+    feature (N, F), and p_i (N,) its probability."""
+    with torch.no_grad():
+        probs = torch.softmax(classifier(obj_feat), dim=-1)
+    p, label = probs.max(dim=-1)
+    return label, p
+
+
+def reassign(
+    contributions: Contributions,
+    prior_labels: torch.Tensor,
+    prior_probs: torch.Tensor,
+    *,
+    method: str = "prior",
+    mode: str = "multi",
+    gamma_p: float = 0.2,
+    slack: float = 0.0,
+) -> Segmentation:
+    """Labels of every Gaussian.
+
+    Args:
+        contributions: A (K, N) over the mask labels.
+        prior_labels, prior_probs: (N,) l_i and p(i, l_i) from :func:`classifier_prior`.
+        method: ``prior`` (A + gamma_p p(i, l_i) [l = l_i], the default), ``flashsplat`` (A with
+            ``slack`` added to the background's share), ``classifier`` (l_i alone).
+        mode: ``multi``: argmax over labels (Eq. 9 of the paper); ``binary``: one object at a
+            time, object share against the rest (plus the prior on whichever side l_i is),
+            so selections may overlap; ``labels`` then give each Gaussian the last object
+            (in ID order) that selected it.
+        gamma_p: prior weight, any real number.
+        slack: FlashSplat's background bias.
+    """
+    if method not in METHODS:
+        raise InputError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}.")
+    if mode not in MODES:
+        raise InputError(f"unknown mode {mode!r}; choose multi or binary.")
+    labels_k = torch.as_tensor(contributions.labels.astype(np.int64))
+    share, observed = normalize(contributions.weights)
+    n = share.shape[1]
+    objects = contributions.labels[contributions.labels > 0]
+    prior_row = (labels_k[:, None] == prior_labels[None, :])  # (K, N): [l_k = l_i]
+
+    if method == "classifier":
+        labels = prior_labels.clamp(0, 255)
+        selections = labels[None, :] == torch.as_tensor(objects.astype(np.int64))[:, None]
+    elif mode == "multi":
+        score = share.clone()
+        if method == "prior":
+            score += gamma_p * prior_probs[None, :] * prior_row
+        elif len(labels_k) and labels_k[0] == 0:
+            score[0] += slack
+        best = labels_k[score.argmax(dim=0)] if len(labels_k) else torch.zeros(n, dtype=torch.int64)
+        fallback = prior_labels if method == "prior" else torch.zeros_like(prior_labels)
+        labels = torch.where(observed, best, fallback)
+        selections = labels[None, :] == torch.as_tensor(objects.astype(np.int64))[:, None]
+    else:
+        rows = torch.as_tensor(np.flatnonzero(contributions.labels > 0))
+        fg, rest = share[rows], 1.0 - share[rows]
+        if method == "prior":
+            mine = prior_row[rows]
+            fg = fg + gamma_p * prior_probs[None, :] * mine
+            rest = rest + gamma_p * prior_probs[None, :] * ~mine
+            fallback = mine
+        else:
+            rest = rest + slack
+            fallback = torch.zeros_like(fg, dtype=torch.bool)
+        selections = torch.where(observed[None, :], fg > rest, fallback)
+        obj_ids = torch.as_tensor(objects.astype(np.int64))
+        # the last selecting object in ID order: argmax over reversed rows of the selections
+        last = len(obj_ids) - 1 - torch.flip(selections, [0]).int().argmax(dim=0)
+        labels = torch.where(selections.any(dim=0), obj_ids[last] if len(obj_ids) else 0, 0)
+    return Segmentation(labels=labels.numpy().astype(np.uint8), objects=objects,
+                        selections=selections.numpy(), method=method, mode=mode, gamma_p=gamma_p)

@@ -1,0 +1,110 @@
+"""Training options and the two schedules: the paper's 30k-iteration GPU schedule and a
+shorter CPU default."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field, fields, replace
+
+from dataset_tools.errors import InputError
+
+
+@dataclass(frozen=True)
+class Schedule:
+    """When things happen, in iterations."""
+
+    iters: int
+    densify_from: int
+    densify_until: int
+    densify_every: int
+    opacity_reset_every: int
+    sh_increase_every: int
+    checkpoint_every: int
+    max_gaussians: int
+    object_loss_pixels: int  # pixels drawn per view for the cross-entropy; 0 = every pixel
+
+
+SCHEDULES = {
+    # 3D-GS and the paper: 30k iterations, densification 500..15k every 100, opacity reset every 3k.
+    "gpu": Schedule(iters=30_000, densify_from=500, densify_until=15_000, densify_every=100,
+                    opacity_reset_every=3_000, sh_increase_every=1_000, checkpoint_every=5_000,
+                    max_gaussians=6_000_000, object_loss_pixels=0),
+    # The same shape compressed ~10x for a laptop-class CPU; one opacity reset mid-densification;
+    # the cross-entropy on a random 16k pixels of each view (an unbiased estimate of the full one).
+    "cpu": Schedule(iters=3_000, densify_from=200, densify_until=2_000, densify_every=100,
+                    opacity_reset_every=1_000, sh_increase_every=500, checkpoint_every=500,
+                    max_gaussians=150_000, object_loss_pixels=16_384),
+}
+
+
+@dataclass(frozen=True)
+class LearningRates:
+    """Adam learning rates: the 3D-GS defaults, plus the paper's object-feature and classifier rates.
+    The position rate is multiplied by the scene extent and decays exponentially to ``means_final``."""
+
+    means: float = 1.6e-4
+    means_final: float = 1.6e-6
+    sh_dc: float = 2.5e-3
+    sh_rest: float = 2.5e-3 / 20
+    opacity_logits: float = 0.05
+    log_scales: float = 5e-3
+    quats: float = 1e-3
+    obj_feat: float = 5e-3
+    classifier: float = 5e-4
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Every option of a training run; written to ``RUN/config.json``.
+
+    ``schedule`` picks the defaults of the timing fields; ``iters`` overrides its length and
+    scales the other timings with it.
+    """
+
+    schedule: str = "cpu"
+    iters: int | None = None
+    images: str = "images"
+    masks: str | None = "object_mask"
+    backend: str = "auto"
+    gamma_obj: float = 1.0
+    lambda_dssim: float = 0.2
+    sh_degree: int = 3
+    num_classes: int = 256
+    densify_grad_threshold: float = 2e-4
+    percent_dense: float = 0.01
+    prune_opacity: float = 0.005
+    initial_opacity: float = 0.1
+    random_init_points: int = 20_000
+    lr: LearningRates = field(default_factory=LearningRates)
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if self.schedule not in SCHEDULES:
+            raise InputError(f"unknown schedule {self.schedule!r}; choose {' or '.join(SCHEDULES)}.")
+        if self.iters is not None and self.iters < 1:
+            raise InputError(f"--iters must be at least 1 (got {self.iters}).")
+        if not 0 <= self.sh_degree <= 3:
+            raise InputError(f"--sh-degree must be 0..3 (got {self.sh_degree}).")
+
+    @property
+    def timing(self) -> Schedule:
+        """The schedule, stretched or shrunk to ``iters`` when it is given."""
+        base = SCHEDULES[self.schedule]
+        if self.iters is None or self.iters == base.iters:
+            return base
+        k = self.iters / base.iters
+        scaled = {f.name: max(1, round(getattr(base, f.name) * k)) for f in fields(Schedule)
+                  if f.name not in ("iters", "max_gaussians", "object_loss_pixels")}
+        # Gradient statistics need a few views between densification steps.
+        scaled["densify_every"] = max(scaled["densify_every"], min(10, base.densify_every))
+        return replace(base, iters=self.iters, **scaled)
+
+    def to_json(self) -> dict:
+        return {**asdict(self), "timing": asdict(self.timing)}
+
+    @classmethod
+    def from_json(cls, data: dict) -> TrainConfig:
+        """The config saved in a run's config.json (which also records derived facts)."""
+        names = {f.name for f in fields(cls)}
+        data = {k: v for k, v in data.items() if k in names}
+        data["lr"] = LearningRates(**data.get("lr", {}))
+        return cls(**data)

@@ -1,0 +1,30 @@
+"""The training loss: 3D-GS photometric loss plus cross-entropy on the object features."""
+
+from __future__ import annotations
+
+import kornia
+import torch
+
+
+def photometric_loss(rendered: torch.Tensor, target: torch.Tensor, lambda_dssim: float = 0.2) -> torch.Tensor:
+    """(1 - lambda) L1 + lambda (1 - SSIM) of two (H, W, 3) images, SSIM with an 11x11 Gaussian window."""
+    a, b = rendered.permute(2, 0, 1)[None], target.permute(2, 0, 1)[None]
+    ssim = kornia.metrics.ssim(a, b, window_size=11).mean()
+    return (1 - lambda_dssim) * (rendered - target).abs().mean() + lambda_dssim * (1 - ssim)
+
+
+def object_loss(features: torch.Tensor, mask: torch.Tensor, classifier: torch.nn.Linear,
+                pixels: int = 0, generator: torch.Generator | None = None) -> torch.Tensor:
+    """Mean cross-entropy of the classifier on rendered features (H, W, F) against IDs (H, W),
+    over every pixel, or over ``pixels`` pixels drawn without replacement when 0 < pixels < H W."""
+    features, mask = features.reshape(-1, features.shape[-1]), mask.reshape(-1)
+    if 0 < pixels < len(mask):
+        pick = torch.randperm(len(mask), generator=generator, device=mask.device)[:pixels]
+        features, mask = features[pick], mask[pick]
+    return torch.nn.functional.cross_entropy(classifier(features), mask)
+
+
+def psnr(rendered: torch.Tensor, target: torch.Tensor) -> float:
+    """PSNR in dB of images in [0, 1], for progress display."""
+    mse = torch.mean((rendered.detach().clamp(0, 1) - target) ** 2).item()
+    return float("inf") if mse == 0 else -10.0 * torch.log10(torch.tensor(mse)).item()

@@ -1,0 +1,85 @@
+"""The trainer: it fits a scene, resumes exactly, stops cleanly on divergence and refuses bad input."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import cv2
+import numpy as np
+import pytest
+import torch
+
+from dataset_tools.errors import InputError
+from dataset_tools.image_files import read_mask
+from gsseg.ply import read_ply
+from gsseg.render_views import render_run
+from gsseg.train import TrainConfig, TrainingDiverged, train
+from gsseg.train import trainer as trainer_module
+
+
+def _history(run):
+    return json.loads((run / "metrics.json").read_text())["train"]["history"]
+
+
+def test_training_fits_colour_and_objects(trained, small_scene, tmp_path):
+    history = _history(trained)
+    assert history[-1]["psnr"] > history[0]["psnr"] + 5
+    assert history[-1]["obj"] < 0.5 * history[0]["obj"]
+    g = read_ply(trained / "gaussians.ply")
+    assert len(g) == history[-1]["gaussians"] and torch.isfinite(g.means).all()
+    out = render_run(trained, small_scene.root, tmp_path / "r", split="train", colorize=True, progress=False)
+    names = sorted(p.name for p in (out / "labels").glob("*.png"))
+    assert names and names == sorted(p.name for p in (out / "rgb").glob("*.png"))
+    assert len(list((out / "labels_color").glob("*.png"))) == len(names)
+    agree = [np.mean(read_mask(out / "labels" / n) == read_mask(small_scene.root / "object_mask" / n)) for n in names]
+    assert np.mean(agree) > 0.8
+
+
+def test_resume_continues_the_same_loss_curve(small_scene, tmp_path):
+    cfg = TrainConfig(iters=40, backend="cpu")
+    train(small_scene.root, tmp_path / "straight", cfg, progress=False)
+    first = train(small_scene.root, tmp_path / "split", cfg, stop_after=23, progress=False)
+    assert not first.finished and not (tmp_path / "split" / "gaussians.ply").exists()
+    train(small_scene.root, tmp_path / "split", cfg, resume=True, progress=False)
+    assert _history(tmp_path / "split") == _history(tmp_path / "straight")
+    a, b = read_ply(tmp_path / "straight" / "gaussians.ply"), read_ply(tmp_path / "split" / "gaussians.ply")
+    assert all(torch.equal(x, y) for x, y in zip(a.tensors().values(), b.tensors().values()))
+
+
+def test_a_loss_that_turns_nan_stops_and_keeps_the_last_checkpoint(small_scene, tmp_path, monkeypatch):
+    """Divergence is simulated by a photometric loss that returns NaN from step 12 on."""
+    real = trainer_module.photometric_loss
+    calls = {"n": 0}
+
+    def loss_going_nan(*args):
+        calls["n"] += 1
+        value = real(*args)
+        return value * float("nan") if calls["n"] >= 12 else value
+
+    monkeypatch.setattr(trainer_module, "photometric_loss", loss_going_nan)
+    with pytest.raises(TrainingDiverged, match="diverged at step 12.*step_0000010.pt"):
+        train(small_scene.root, tmp_path / "run", TrainConfig(iters=60, backend="cpu"), progress=False)
+    kept = sorted(p.name for p in (tmp_path / "run" / "checkpoints").glob("*.pt"))
+    assert kept == ["step_0000010.pt"]
+    state = torch.load(tmp_path / "run" / "checkpoints" / kept[0], weights_only=False)
+    assert all(torch.isfinite(v).all() for v in state["gaussians"]["params"].values())
+
+
+def test_bad_input_is_refused(small_scene, tmp_path):
+    no_model = tmp_path / "no_model"
+    shutil.copytree(small_scene.root, no_model)
+    shutil.rmtree(no_model / "sparse")
+    with pytest.raises(InputError, match="sparse"):
+        train(no_model, tmp_path / "a", TrainConfig(iters=2, backend="cpu"), progress=False)
+
+    wrong_masks = tmp_path / "wrong_masks"
+    shutil.copytree(small_scene.root, wrong_masks)
+    mask = next((wrong_masks / "object_mask").glob("*.png"))
+    cv2.imwrite(str(mask), np.zeros((10, 10), np.uint8))
+    with pytest.raises(InputError, match="masks must have the size of their image"):
+        train(wrong_masks, tmp_path / "b", TrainConfig(iters=2, backend="cpu"), progress=False)
+
+    train(small_scene.root, tmp_path / "c", TrainConfig(iters=2, backend="cpu"), progress=False)
+    with pytest.raises(InputError, match="already holds a run"):
+        train(small_scene.root, tmp_path / "c", TrainConfig(iters=2, backend="cpu"), progress=False)
