@@ -62,6 +62,15 @@ def _gather_tile(ids, start, end, means2d, conics, opacities):
     return loc
 
 
+@numba.njit(cache=True)
+def _gather_rows(ids, start, end, values):
+    """values[ids[start:end]] as a contiguous block."""
+    out = np.empty((end - start, values.shape[1]), values.dtype)
+    for j in range(end - start):
+        out[j] = values[ids[start + j]]
+    return out
+
+
 @numba.njit(inline="always")
 def _alpha_at(loc, j, px, py):
     """(alpha, gaussian value, dx, dy) of the tile's j-th Gaussian at pixel centre (px, py);
@@ -94,6 +103,7 @@ def blend_forward(means2d, conics, opacities, features, offsets, ids, width, hei
         if start == end:
             continue
         loc = _gather_tile(ids, start, end, means2d, conics, opacities)
+        feat = _gather_rows(ids, start, end, features)
         y0, x0 = (t // n_tiles_x) * tile, (t % n_tiles_x) * tile
         acc = np.empty(n_ch, np.float64)
         for y in range(y0, min(y0 + tile, height)):
@@ -110,9 +120,8 @@ def blend_forward(means2d, conics, opacities, features, offsets, ids, width, hei
                     if next_t < T_MIN:
                         break
                     w = alpha * trans
-                    g = ids[start + j]
                     for ch in range(n_ch):
-                        acc[ch] += w * features[g, ch]
+                        acc[ch] += w * feat[j, ch]
                     trans = next_t
                     last = j + 1
                 for ch in range(n_ch):
@@ -140,11 +149,13 @@ def blend_backward(means2d, conics, opacities, features, offsets, ids, width, he
     g_opac = np.zeros((n_workers, n), np.float64)
     g_feat = np.zeros((n_workers, n, n_ch), np.float64)
     for w_id in numba.prange(n_workers):
+        d_pix = np.empty(n_ch, np.float64)
         for t in range(w_id, n_tiles, n_workers):
             start, end = offsets[t], offsets[t + 1]
             if start == end:
                 continue
             loc = _gather_tile(ids, start, end, means2d, conics, opacities)
+            feat = _gather_rows(ids, start, end, features)
             # Tile-local gradients: mean x, y, conic a, b, c, opacity, then the features.
             tg = np.zeros((end - start, 6 + n_ch), np.float64)
             y0, x0 = (t // n_tiles_x) * tile, (t % n_tiles_x) * tile
@@ -155,6 +166,8 @@ def blend_backward(means2d, conics, opacities, features, offsets, ids, width, he
                     behind = 0.0  # (contributions behind the current Gaussian) . grad_image
                     d_alpha_out = grad_alpha[y, x]
                     px, py = np.float32(x + 0.5), np.float32(y + 0.5)
+                    for ch in range(n_ch):
+                        d_pix[ch] = grad_image[y, x, ch]
                     for j in range(n_contrib[y, x] - 1, -1, -1):
                         alpha, gauss, dx, dy = _alpha_at(loc, j, px, py)
                         if alpha == 0:
@@ -164,9 +177,8 @@ def blend_backward(means2d, conics, opacities, features, offsets, ids, width, he
                         weight = alpha * trans
                         f_dot = 0.0
                         for ch in range(n_ch):
-                            d_pix = grad_image[y, x, ch]
-                            tg[j, 6 + ch] += weight * d_pix
-                            f_dot += features[ids[start + j], ch] * d_pix
+                            tg[j, 6 + ch] += weight * d_pix[ch]
+                            f_dot += feat[j, ch] * d_pix[ch]
                         d_alpha = d_alpha_out * t_final / one_minus + f_dot * trans - behind / one_minus
                         behind += weight * f_dot
                         if loc[j, 5] * gauss > ALPHA_MAX:

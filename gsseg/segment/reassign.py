@@ -112,40 +112,48 @@ def reassign(
         raise InputError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}.")
     if mode not in MODES:
         raise InputError(f"unknown mode {mode!r}; choose multi or binary.")
-    labels_k = torch.as_tensor(contributions.labels.astype(np.int64))
+    labels_k = contributions.labels.astype(np.int64)
     share, observed = normalize(contributions.weights)
     n = share.shape[1]
     objects = contributions.labels[contributions.labels > 0]
-    prior_row = (labels_k[:, None] == prior_labels[None, :])  # (K, N): [l_k = l_i]
+    obj_ids = torch.as_tensor(objects.astype(np.int64))
+    # The row of each Gaussian's prior label l_i in A (-1 where no mask shows that label):
+    # the prior touches one entry per Gaussian, so it is added there, not as a (K, N) matrix.
+    row_of = torch.full((256,), -1, dtype=torch.int64)
+    row_of[torch.as_tensor(labels_k)] = torch.arange(len(labels_k))
+    prior_row = row_of[prior_labels.clamp(0, 255)]
+    has_row = torch.nonzero(prior_row >= 0).squeeze(1)
+    bonus = gamma_p * prior_probs
 
     if method == "classifier":
         labels = prior_labels.clamp(0, 255)
-        selections = labels[None, :] == torch.as_tensor(objects.astype(np.int64))[:, None]
+        selections = labels[None, :] == obj_ids[:, None]
     elif mode == "multi":
-        score = share.clone()
+        score = share
         if method == "prior":
-            score += gamma_p * prior_probs[None, :] * prior_row
+            score[prior_row[has_row], has_row] += bonus[has_row]
         elif len(labels_k) and labels_k[0] == 0:
             score[0] += slack
-        best = labels_k[score.argmax(dim=0)] if len(labels_k) else torch.zeros(n, dtype=torch.int64)
+        best = torch.as_tensor(labels_k)[score.argmax(dim=0)] if len(labels_k) else torch.zeros(n, dtype=torch.int64)
         fallback = prior_labels if method == "prior" else torch.zeros_like(prior_labels)
         labels = torch.where(observed, best, fallback)
-        selections = labels[None, :] == torch.as_tensor(objects.astype(np.int64))[:, None]
+        selections = labels[None, :] == obj_ids[:, None]
     else:
-        rows = torch.as_tensor(np.flatnonzero(contributions.labels > 0))
-        fg, rest = share[rows], 1.0 - share[rows]
+        first = int(labels_k[0] == 0) if len(labels_k) else 0  # object rows start after label 0
+        fg = share[first:]
+        rest = torch.sub(1.0, fg)
+        rest += (bonus if method == "prior" else torch.full_like(bonus, slack))[None, :]
+        selections = fg > rest
+        mine = torch.zeros_like(selections)
         if method == "prior":
-            mine = prior_row[rows]
-            fg = fg + gamma_p * prior_probs[None, :] * mine
-            rest = rest + gamma_p * prior_probs[None, :] * ~mine
-            fallback = mine
-        else:
-            rest = rest + slack
-            fallback = torch.zeros_like(fg, dtype=torch.bool)
-        selections = torch.where(observed[None, :], fg > rest, fallback)
-        obj_ids = torch.as_tensor(objects.astype(np.int64))
+            # the l_i row: the prior sides with the object instead of the rest
+            on_obj = has_row[prior_row[has_row] >= first]
+            r = prior_row[on_obj] - first
+            selections[r, on_obj] = fg[r, on_obj] + bonus[on_obj] > 1.0 - fg[r, on_obj]
+            mine[r, on_obj] = True
+        selections = torch.where(observed[None, :], selections, mine)
         # the last selecting object in ID order: argmax over reversed rows of the selections
-        last = len(obj_ids) - 1 - torch.flip(selections, [0]).int().argmax(dim=0)
-        labels = torch.where(selections.any(dim=0), obj_ids[last] if len(obj_ids) else 0, 0)
+        last = len(obj_ids) - 1 - torch.flip(selections, [0]).to(torch.uint8).argmax(dim=0)
+        labels = torch.where(selections.any(dim=0), obj_ids[last], 0) if len(obj_ids) else torch.zeros(n, dtype=torch.int64)
     return Segmentation(labels=labels.numpy().astype(np.uint8), objects=objects,
                         selections=selections.numpy(), method=method, mode=mode, gamma_p=gamma_p)
