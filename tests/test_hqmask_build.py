@@ -78,3 +78,13 @@ def test_masks_of_the_wrong_size_exit_2(scene_copy):
                        capture_output=True, text=True)
     assert r.returncode == 2 and "mask is 10x10" in r.stderr and "Traceback" not in r.stderr
     assert not (scene_copy / "o").exists()
+
+
+def test_more_than_255_tracks_is_refused_with_the_fix():
+    from hqmask.association.common import compact_ids
+
+    segments = [np.arange(300, dtype=np.int32).reshape(15, 20) + 1]  # 300 one-pixel segments
+    with pytest.raises(InputError, match="found 300 objects, more than the 255.*raise --min-area"):
+        compact_ids([np.arange(-1, 300)], segments)
+    ids = compact_ids([np.arange(-1, 255)], [np.minimum(segments[0], 255)])[0]
+    assert ids.max() == 255 and len(np.unique(ids)) == 255
