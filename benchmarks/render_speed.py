@@ -18,7 +18,7 @@ import torch
 
 from dataset_tools.cameras import PinholeCamera
 from gsseg.gaussians import Gaussians
-from gsseg.render import render
+from gsseg.render import backend_device, render
 from gsseg.render.gsplat_blend import gsplat_available
 
 
@@ -39,7 +39,7 @@ def scene(n: int, seed: int = 0) -> tuple[Gaussians, PinholeCamera, torch.Tensor
 def time_step(g: Gaussians, cam: PinholeCamera, pose: torch.Tensor, backend: str, features: bool,
               repeats: int) -> float:
     """Median seconds of render + backward of a loss on every output."""
-    device = "cuda" if backend == "gsplat" else "cpu"
+    device = backend_device(backend)
     times = []
     for _ in range(repeats + 1):  # the first call compiles / warms up
         params = Gaussians(**{k: v.to(device).requires_grad_(True) for k, v in g.tensors().items()})

@@ -16,7 +16,7 @@ from dataset_tools.image_files import write_png
 from dataset_tools.scene import load_scene
 from gsseg.gaussians import Gaussians
 from gsseg.ply import write_ply
-from gsseg.render import render, resolve_backend
+from gsseg.render import backend_device, render, resolve_backend, to_uint8
 from gsseg.run_folder import load_run
 from gsseg.segment.prompts import object_at_point, point_from_click
 from gsseg.segment.reassign import Segmentation
@@ -86,7 +86,7 @@ def edit_run(run_dir: Path | str, op: str, *, point=None, click=None, object_id:
     out = run_dir / "edits" / (name or f"{op}_{object_id}")
     if out.exists() and not overwrite:
         raise InputError(f"{out} exists; pass --force or choose another --name.")
-    device = "cuda" if backend == "gsplat" else "cpu"
+    device = backend_device(backend)
     with atomic_directory(out, overwrite=overwrite) as tmp:
         write_ply(edited, tmp / "gaussians.ply")
         frames = []
@@ -95,7 +95,7 @@ def edit_run(run_dir: Path | str, op: str, *, point=None, click=None, object_id:
                 pose = torch.as_tensor(view.cam_from_world, dtype=torch.float32, device=device)
                 rgb_img = render(edited.to(device), view.camera, pose, sh_degree=run.config.get("sh_degree", 3),
                                  with_features=False, backend=backend).rgb
-                frame = (rgb_img.clamp(0, 1) * 255 + 0.5).to(torch.uint8).cpu().numpy()
+                frame = to_uint8(rgb_img)
                 write_png(tmp / "renders" / f"{view.stem}.png", frame)
                 frames.append(frame)
         _write_video(tmp / "video.mp4", frames, fps)

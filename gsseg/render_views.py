@@ -13,7 +13,7 @@ from dataset_tools.errors import InputError
 from dataset_tools.image_files import colorize_labels, write_png
 from dataset_tools.scene import load_scene
 from gsseg.gaussians import Gaussians
-from gsseg.render import render, resolve_backend
+from gsseg.render import backend_device, render, resolve_backend, to_uint8
 from gsseg.run_folder import load_run
 from gsseg.segment.reassign import Segmentation
 from gsseg.segment.segment_run import LABELS
@@ -66,7 +66,7 @@ def render_run(
     run = load_run(run_dir)
     segmentation = Segmentation.load(Path(run_dir) / LABELS) if "segments" in what else None
     backend = resolve_backend(backend)
-    device = "cuda" if backend == "gsplat" else "cpu"
+    device = backend_device(backend)
     scene = load_scene(scene_dir, images=images or run.config.get("images", "images"), masks=None)
     gaussians, classifier = run.gaussians.to(device), run.classifier.to(device)
     sh_degree = run.config.get("sh_degree", 3)
@@ -76,8 +76,7 @@ def render_run(
             result = render(gaussians, view.camera, pose, sh_degree=sh_degree,
                             with_features="labels" in what, backend=backend)
             if "rgb" in what:
-                rgb = (result.rgb.clamp(0, 1) * 255 + 0.5).to(torch.uint8).cpu().numpy()
-                write_png(tmp / "rgb" / f"{view.stem}.png", rgb)
+                write_png(tmp / "rgb" / f"{view.stem}.png", to_uint8(result.rgb))
             maps = {}
             if "labels" in what:
                 maps["labels"] = classify_pixels(result.features, classifier).cpu().numpy().astype(np.uint8)

@@ -2,7 +2,6 @@
 
 import json
 
-import cv2
 import numpy as np
 import pytest
 from scipy import ndimage
@@ -16,7 +15,7 @@ QUIET = CorruptionModel(0.0, 6.0, 0, 0.0, 0.0, 0.0, 0.0, permute=False)
 
 def test_same_seed_same_masks_other_seed_other_masks(scene_copy):
     a = corrupt_scene(scene_copy, "a", "medium", seed=3, progress=False)
-    b = corrupt_scene(scene_copy, "b", "medium", seed=3, progress=False)
+    corrupt_scene(scene_copy, "b", "medium", seed=3, progress=False)
     c = corrupt_scene(scene_copy, "c", "medium", seed=4, progress=False)
     for stem in a["error_per_view"]:
         assert np.array_equal(read_mask(scene_copy / "a" / f"{stem}.png"), read_mask(scene_copy / "b" / f"{stem}.png"))

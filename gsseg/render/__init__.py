@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
 import torch
 
 from dataset_tools.cameras import PinholeCamera
@@ -55,6 +56,16 @@ def resolve_backend(name: str = "auto") -> str:
     if name == "gsplat" and not gsplat_available():
         raise InputError("the gsplat backend needs a CUDA GPU and `pip install gsplat`; use --backend cpu.")
     return name
+
+
+def backend_device(backend: str) -> str:
+    """The torch device a resolved backend renders on."""
+    return "cuda" if backend == "gsplat" else "cpu"
+
+
+def to_uint8(rgb: torch.Tensor) -> np.ndarray:
+    """(H, W, 3) colour in [0, 1] -> (H, W, 3) uint8 array, rounded."""
+    return (rgb.detach().clamp(0, 1) * 255 + 0.5).to(torch.uint8).cpu().numpy()
 
 
 def render(

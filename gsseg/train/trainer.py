@@ -16,7 +16,7 @@ from dataset_tools.errors import InputError
 from dataset_tools.scene import Scene, load_scene
 from gsseg.gaussians import gaussians_from_points, random_points
 from gsseg.ply import write_ply
-from gsseg.render import RenderOutput, render, resolve_backend
+from gsseg.render import RenderOutput, backend_device, render, resolve_backend
 from gsseg.run_folder import (CHECKPOINTS, CLASSIFIER, CONFIG, GAUSSIANS, METRICS, make_classifier,
                               write_json, write_torch)
 from gsseg.train.config import TrainConfig
@@ -104,7 +104,7 @@ def train(scene_dir: Path | str, run: Path | str, cfg: TrainConfig, *, resume: b
     cfg = _prepare_run_folder(run, cfg, resume)
     timing = cfg.timing
     backend = resolve_backend(cfg.backend)
-    device = "cuda" if backend == "gsplat" else "cpu"
+    device = backend_device(backend)
     scene = load_scene(scene_dir, images=cfg.images, masks=cfg.masks)
     train_views = scene.split("train") or scene.views
     extent = camera_extent(scene.views)
