@@ -194,6 +194,19 @@ def undistortion_maps(source: SourceCamera, target: PinholeCamera) -> tuple[np.n
     return src[..., 0], src[..., 1]
 
 
+def distortion_maps(source: SourceCamera, target: PinholeCamera) -> tuple[np.ndarray, np.ndarray]:
+    """cv2.remap maps that resample a pinhole image back into the distorted image's frame
+    (the inverse of :func:`undistortion_maps`).
+
+    Returns (map_x, map_y), each (source.height, source.width) float32, in OpenCV's
+    integer-centred pixel coordinates of the pinhole image.
+    """
+    u, v = np.meshgrid(np.arange(source.width) + 0.5, np.arange(source.height) + 0.5)
+    dst = undistort_points(np.stack([u.ravel(), v.ravel()], 1), source, target) - 0.5
+    dst = dst.reshape(source.height, source.width, 2).astype(np.float32)
+    return dst[..., 0], dst[..., 1]
+
+
 def remap(image: np.ndarray, maps: tuple[np.ndarray, np.ndarray], *, nearest: bool) -> np.ndarray:
     """Resample an image (bilinear) or an ID map (nearest) through undistortion maps."""
     interp = cv2.INTER_NEAREST if nearest else cv2.INTER_LINEAR

@@ -86,6 +86,13 @@ class View:
     def _maps(self) -> tuple[np.ndarray, np.ndarray]:
         return colmap.undistortion_maps(self.source_camera, self.camera)
 
+    def to_file_frame(self, ids: np.ndarray) -> np.ndarray:
+        """An (H, W) ID map of the loaded (undistorted) view resampled (nearest) into the frame
+        of the image file, where masks are stored; unchanged for pinhole files."""
+        if self.source_camera is None:
+            return ids
+        return colmap.remap(ids, colmap.distortion_maps(self.source_camera, self.camera), nearest=True)
+
     @property
     def file_size(self) -> tuple[int, int]:
         """(width, height) of the file on disk (before undistortion)."""

@@ -94,7 +94,7 @@ def build_masks(scene_dir: Path | str, cfg: BuildConfig, *, progress: bool = Tru
         for view, m in zip(tqdm(scene.views, desc="writing masks", disable=not progress), ids):
             m = clean_mask(m, cfg.min_area)
             n_objects = max(n_objects, int(m.max()))
-            write_bytes_atomic(tmp / f"{view.stem}.png", encode_png(m))
+            write_bytes_atomic(tmp / f"{view.stem}.png", encode_png(view.to_file_frame(m)))
     if cfg.dataset:
         from hqmask.dataset_export import export_dataset
 

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from dataset_tools import InputError, load_scene, save_scene
+from dataset_tools.image_files import write_png
 from dataset_tools.scene import llff_test_names
 
 
@@ -152,3 +153,16 @@ def test_save_refuses_existing_folder_and_leaves_it(small_scene, tmp_path):
     with pytest.raises(InputError, match="already exists"):
         save_scene(load_scene(small_scene.root), tmp_path / "taken")
     assert [p.name for p in (tmp_path / "taken").iterdir()] == ["keep.txt"]
+
+
+def test_masks_of_undistorted_views_go_back_to_the_file_frame(beer, tmp_path):
+    """An ID map made on an undistorted view is stored at the file's size, and loading it
+    undistorts it back to (nearly) the same map."""
+    view = load_scene(beer, images="images_4", masks=None).views[0]
+    h, w = view.camera.height, view.camera.width
+    ids = (np.arange(w)[None, :] // 40 + 8 * (np.arange(h)[:, None] // 40)).astype(np.uint8)
+    stored = view.to_file_frame(ids)
+    assert (stored.shape[1], stored.shape[0]) == view.file_size != (w, h)
+    write_png(tmp_path / "m.png", stored)
+    view.mask_path = tmp_path / "m.png"
+    assert np.mean(view.load_mask() == ids) > 0.98
