@@ -18,10 +18,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from hqmask.components import label_components
-
-NEIGHBOURS = ((-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1))
-
+from hqmask.components import component_stats, label_components, ring_votes
 
 def close_labels(ids: np.ndarray, size: int = 3) -> np.ndarray:
     """Per-label morphological closing that only fills background. (H, W) uint8 -> (H, W) uint8."""
@@ -38,26 +35,6 @@ def close_labels(ids: np.ndarray, size: int = 3) -> np.ndarray:
     return np.where(fill, dilated, ids).astype(np.uint8)
 
 
-def _ring_votes(comp: np.ndarray, ids: np.ndarray, small: np.ndarray) -> np.ndarray:
-    """Dominant ring label of each small component. Returns (n_components,) int, -1 if not small."""
-    H, W = ids.shape
-    ys, xs = np.nonzero(small[comp])
-    own = comp[ys, xs]
-    keys = []
-    for dy, dx in NEIGHBOURS:
-        ny, nx = ys + dy, xs + dx
-        ok = (ny >= 0) & (ny < H) & (nx >= 0) & (nx < W)
-        ny, nx, c = ny[ok], nx[ok], own[ok]
-        outside = comp[ny, nx] != c
-        keys.append(c[outside].astype(np.int64) * (H * W) + ny[outside] * W + nx[outside])
-    pairs = np.unique(np.concatenate(keys))  # each ring pixel once per component
-    c, pix = pairs // (H * W), pairs % (H * W)
-    votes = np.bincount(c * 256 + ids.ravel()[pix], minlength=len(small) * 256).reshape(len(small), 256)
-    winner = np.where(votes.any(1), votes.argmax(1), -1)
-    winner[~small] = -1
-    return winner
-
-
 def remove_small_components(ids: np.ndarray, min_area: int = 500, max_rounds: int = 8) -> np.ndarray:
     """Reassign every equal-ID component under ``min_area`` pixels to its dominant ring label.
 
@@ -66,18 +43,16 @@ def remove_small_components(ids: np.ndarray, min_area: int = 500, max_rounds: in
     out = ids.copy()
     for _ in range(max_rounds):
         comp, n = label_components(out)
-        area = np.bincount(comp.ravel(), minlength=n)
+        area, current = component_stats(comp, out, n)
         small = area < min_area
         if not small.any():
             break
-        winner = _ring_votes(comp, out, small)
-        current = np.zeros(n, np.int64)
-        current[comp.ravel()] = out.ravel()
+        winner = ring_votes(comp, out, small)
         change = (winner >= 0) & (winner != current)
         if not change.any():
             break
-        lut = np.where(change, winner, current)
-        out = lut[comp].astype(np.uint8)
+        lut = np.where(change, winner, current).astype(np.uint8)
+        out = lut[comp]
     return out
 
 

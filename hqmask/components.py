@@ -63,3 +63,72 @@ def label_components(ids: np.ndarray) -> tuple[np.ndarray, int]:
         (components (H, W) int32 numbered 0..n-1 in raster order of their first pixel, n).
     """
     return _label(np.ascontiguousarray(ids, dtype=np.uint8))
+
+
+@numba.njit(cache=True)
+def ring_votes(comp: np.ndarray, ids: np.ndarray, small: np.ndarray) -> np.ndarray:
+    """The ID covering most of the boundary ring of each small component.
+
+    Args:
+        comp: (H, W) int32 component labels. ids: (H, W) uint8 IDs. small: (n,) bool, the
+            components to vote for.
+
+    Returns:
+        (n,) int64: the winning ID (ties to the smaller ID), -1 for components that are not
+        small or have no ring. Each ring pixel (8-connected, outside the component) counts once.
+    """
+    H, W = ids.shape
+    n = small.shape[0]
+    offsets = np.zeros(n + 1, np.int64)
+    for i in range(H):
+        for j in range(W):
+            if small[comp[i, j]]:
+                offsets[comp[i, j] + 1] += 1
+    for c in range(n):
+        offsets[c + 1] += offsets[c]
+    cursor = offsets[:-1].copy()
+    pixels = np.empty(offsets[n], np.int64)
+    for i in range(H):
+        for j in range(W):
+            c = comp[i, j]
+            if small[c]:
+                pixels[cursor[c]] = i * W + j
+                cursor[c] += 1
+    winner = np.full(n, -1, np.int64)
+    stamp = np.full(H * W, -1, np.int64)  # the last component that counted this ring pixel
+    votes = np.zeros(256, np.int64)
+    for c in range(n):
+        if offsets[c] == offsets[c + 1]:
+            continue
+        votes[:] = 0
+        for k in range(offsets[c], offsets[c + 1]):
+            i, j = pixels[k] // W, pixels[k] % W
+            for di in range(-1, 2):
+                for dj in range(-1, 2):
+                    ni, nj = i + di, j + dj
+                    if ni < 0 or nj < 0 or ni >= H or nj >= W:
+                        continue
+                    q = ni * W + nj
+                    if comp[ni, nj] != c and stamp[q] != c:
+                        stamp[q] = c
+                        votes[ids[ni, nj]] += 1
+        best = -1
+        for v in range(256):
+            if votes[v] > 0 and (best < 0 or votes[v] > votes[best]):
+                best = v
+        winner[c] = best
+    return winner
+
+
+@numba.njit(cache=True)
+def component_stats(comp: np.ndarray, ids: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Area (n,) int64 and ID (n,) int64 of every component, in one pass."""
+    area = np.zeros(n, np.int64)
+    value = np.zeros(n, np.int64)
+    H, W = ids.shape
+    for i in range(H):
+        for j in range(W):
+            c = comp[i, j]
+            area[c] += 1
+            value[c] = ids[i, j]
+    return area, value
