@@ -10,7 +10,7 @@ import pytest
 from dataset_tools import InputError, load_scene
 from dataset_tools.corrupt import CorruptionModel, corrupt_mask
 from dataset_tools.image_files import write_png
-from dataset_tools.label_maps import consistent_fraction
+from dataset_tools.label_maps import consistent_fraction, match_ids, overlap
 from dataset_tools.synth import SynthConfig, generate_scene
 from hqmask.build import BuildConfig, build_masks, clean_scene_masks
 
@@ -88,3 +88,24 @@ def test_more_than_255_tracks_is_refused_with_the_fix():
         compact_ids([np.arange(-1, 300)], segments)
     ids = compact_ids([np.arange(-1, 255)], [np.minimum(segments[0], 255)])[0]
     assert ids.max() == 255 and len(np.unique(ids)) == 255
+
+
+def test_tracks_splits_a_mask_that_merges_two_objects(tmp_path):
+    """View 3 labels two touching objects with one ID; the other views tell them apart, and
+    the SfM points inside the merged segment split it between them."""
+    scene = generate_scene(SynthConfig(views=12, res=128, path="orbit", seed=1), tmp_path / "s", progress=False).root
+    views = load_scene(scene).views
+    gt = [v.load_mask() for v in views]
+    counts = np.bincount(gt[3].ravel(), minlength=256)
+    a, b = np.argsort(counts[1:])[-2:] + 1  # the two largest objects of view 3
+    for k, v in enumerate(views):
+        m = gt[k].copy()
+        if k == 3:
+            m[m == b] = a
+        write_png(scene / "merged" / f"{v.stem}.png", m)
+    build_masks(scene, BuildConfig(proposer="existing", from_masks="merged", associate="tracks", min_area=20,
+                                   out_masks="out"), progress=False)
+    out = load_scene(scene, masks="out").views[3].load_mask()
+    mapping = match_ids(sum(overlap(o.load_mask(), g) for o, g in zip(load_scene(scene, masks="out").views, gt)))
+    for obj in (a, b):
+        assert np.mean(mapping[out[gt[3] == obj]] == obj) > 0.8, obj

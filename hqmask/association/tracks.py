@@ -7,7 +7,9 @@
    strongest first (most shared points) into a union-find that refuses to join two groups
    holding different segments of one view: the core objects. A segment covering two
    objects can join one of them but never chains the two together.
-3. Conflicts and leftovers: a segment outside every core object of two or more segments
+3. Merges repaired: a segment whose points belong to two or more objects (each with a fair
+   share of them) is split between them by nearest point.
+4. Conflicts and leftovers: a segment outside every core object of two or more segments
    (a split half, a merged blob, a speck) joins the object, or background, that holds most
    of its points in the other views; a segment with no points stays background.
 """
@@ -17,6 +19,7 @@ from __future__ import annotations
 from collections import defaultdict
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from dataset_tools.scene import View
 from hqmask.association.common import ViewExclusiveUnion, compact_ids
@@ -30,6 +33,30 @@ def _segment_of_points(view: View, seg: np.ndarray, n_points: int) -> np.ndarray
     return out
 
 
+def _split_by_points(view: View, region: np.ndarray, pts: np.ndarray, objs: np.ndarray,
+                     ratio: float, min_points: int) -> list[tuple[int, np.ndarray]]:
+    """[(object, pixel mask)] partitioning ``region`` by the object of the nearest SfM point
+    when two or more objects each hold ``ratio`` of its points (and ``min_points``); else []."""
+    known = objs != -1
+    if ratio <= 0 or known.sum() < 2 * min_points:
+        return []
+    values, counts = np.unique(objs[known], return_counts=True)
+    strong = values[(counts >= ratio * known.sum()) & (counts >= min_points)]
+    if len(strong) < 2:
+        return []
+    keep = np.isin(objs, strong)
+    row_of = dict(zip(view.point_ids.tolist(), range(len(view.point_ids))))
+    rows = [row_of[int(p)] for p in pts[keep]]
+    _, nearest = cKDTree(view.uv[rows]).query(np.argwhere(region)[:, ::-1] + 0.5)
+    owner = objs[keep][nearest]
+    parts = []
+    for obj in strong:
+        pixels = np.zeros_like(region)
+        pixels[region] = owner == obj
+        parts.append((int(obj), pixels))
+    return parts
+
+
 def associate_tracks(
     views: list[View],
     segments: list[np.ndarray],
@@ -37,6 +64,7 @@ def associate_tracks(
     *,
     link_ratio: float = 0.6,
     min_shared: int = 3,
+    split_ratio: float = 0.3,
 ) -> list[np.ndarray]:
     """Associate segments across views through the SfM points they share.
 
@@ -44,6 +72,10 @@ def associate_tracks(
         views: the views (their ``point_ids`` and ``uv`` observations are used).
         segments: per view, (H, W) int32 segment map (0 = background).
         n_points: number of SfM points (rows of ``Scene.points``).
+        split_ratio: a segment whose points belong to two or more objects, each holding at
+            least this share of them (and ``min_shared`` points), is split between them:
+            every pixel goes to the object of its nearest point (a merged mask repaired).
+            0 disables splitting.
     Returns:
         per view, (H, W) uint8 consistent ID map.
     """
@@ -89,19 +121,27 @@ def associate_tracks(
     point_obj = {p: max(c.items(), key=lambda kv: (kv[1], -kv[0]))[0] for p, c in votes.items()}
     global_of = []
     for v, seg in enumerate(segments):
+        seg = segments[v] = seg.copy()
         g = np.full(int(seg.max()) + 1, -1, np.int64)
         for local in range(1, len(g)):
             n = offsets[v] + local
+            pts = np.flatnonzero(seg_at[v] == local)
+            objs = np.array([point_obj.get(int(p), -1) for p in pts], np.int64)
+            parts = _split_by_points(views[v], seg == local, pts, objs, split_ratio, min_shared)
+            if parts:
+                for k, (obj, pixels) in enumerate(parts):
+                    if k:  # every further part becomes a new local segment
+                        seg[pixels] = len(g)
+                        g = np.append(g, -1)
+                    g[local if k == 0 else len(g) - 1] = obj if obj >= 0 else -1
+                continue
             if core[n]:
                 g[local] = root[n]
                 continue
-            pts = np.flatnonzero(seg_at[v] == local)
-            tally: dict[int, int] = defaultdict(int)
-            for p in pts:
-                if int(p) in point_obj:
-                    tally[point_obj[int(p)]] += 1
-            if tally:
-                best = max(tally.items(), key=lambda kv: (kv[1], -kv[0]))[0]
+            known = objs[objs != -1]
+            if len(known):
+                values, counts = np.unique(known, return_counts=True)
+                best = values[np.lexsort((-values, counts))[-1]]  # most points, ties to the smaller
                 g[local] = best if best >= 0 else -1
         global_of.append(g)
     return compact_ids(global_of, segments)
