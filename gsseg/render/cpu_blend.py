@@ -10,7 +10,8 @@ from gsseg.render import cpu_kernels
 from gsseg.render.projection import TILE_SIZE, tile_rects
 
 
-def _np32(x: torch.Tensor) -> np.ndarray:
+def as_float32_array(x: torch.Tensor) -> np.ndarray:
+    """A contiguous float32 numpy copy (or view) of a tensor, as the kernels take it."""
     return np.ascontiguousarray(x.detach().cpu().numpy(), dtype=np.float32)
 
 
@@ -25,7 +26,7 @@ def bin_tiles(means2d: torch.Tensor, radii: torch.Tensor, depths: torch.Tensor,
 class _BlendCPU(torch.autograd.Function):
     @staticmethod
     def forward(ctx, means2d, conics, opacities, features, depths, radii, width, height):
-        arrays = [_np32(x) for x in (means2d, conics, opacities, features)]
+        arrays = [as_float32_array(x) for x in (means2d, conics, opacities, features)]
         offsets, ids = bin_tiles(means2d, radii, depths, width, height)
         image, final_t, n_contrib = cpu_kernels.blend_forward(*arrays, offsets, ids, width, height, TILE_SIZE)
         ctx.arrays, ctx.tiles, ctx.size = arrays, (offsets, ids), (width, height)
@@ -38,7 +39,7 @@ class _BlendCPU(torch.autograd.Function):
     def backward(ctx, grad_image, grad_alpha):
         grads = cpu_kernels.blend_backward(
             *ctx.arrays, *ctx.tiles, *ctx.size, TILE_SIZE, *ctx.state,
-            _np32(grad_image), _np32(grad_alpha), numba.get_num_threads())
+            as_float32_array(grad_image), as_float32_array(grad_alpha), numba.get_num_threads())
         g_means, g_conics, g_opac, g_feat = (torch.from_numpy(g).to(ctx.dtype) for g in grads)
         return g_means, g_conics, g_opac, g_feat, None, None, None, None
 

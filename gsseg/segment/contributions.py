@@ -17,8 +17,8 @@ from tqdm import tqdm
 from dataset_tools.cameras import PinholeCamera
 from gsseg.gaussians import Gaussians
 from gsseg.render import cpu_kernels, render
-from gsseg.render.cpu_blend import bin_tiles
-from gsseg.render.projection import project_gaussians
+from gsseg.render.cpu_blend import as_float32_array, bin_tiles
+from gsseg.render.projection import TILE_SIZE, project_gaussians
 
 
 @dataclass
@@ -45,8 +45,8 @@ def _weights_cpu(g: Gaussians, view: MaskedView, rows: np.ndarray, n_rows: int) 
     proj = project_gaussians(g.means, g.quats, g.scales, pose, view.camera, opacities)
     width, height = view.camera.width, view.camera.height
     offsets, ids = bin_tiles(proj.means2d, proj.radii, proj.depths, width, height)
-    arrays = [np.ascontiguousarray(x.numpy(), np.float32) for x in (proj.means2d, proj.conics, opacities)]
-    out = cpu_kernels.accumulate_weights(*arrays, offsets, ids, width, height, 16,
+    arrays = [as_float32_array(x) for x in (proj.means2d, proj.conics, opacities)]
+    out = cpu_kernels.accumulate_weights(*arrays, offsets, ids, width, height, TILE_SIZE,
                                          rows[view.mask].astype(np.int32), n_rows, numba.get_num_threads())
     return torch.from_numpy(out)
 
