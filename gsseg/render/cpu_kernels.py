@@ -87,6 +87,27 @@ def _alpha_at(loc, j, px, py):
     return alpha, gauss, dx, dy
 
 
+@numba.njit(inline="always")
+def _pixel_weights(loc, px, py, weights):
+    """Front-to-back blending weights alpha_j T_j of the tile's Gaussians at one pixel, with
+    the 3D-GS rules. Fills weights[:last] (0 where a Gaussian is skipped) and returns
+    (final transmittance, last), ``last`` being one past the last blended entry."""
+    trans = 1.0
+    last = 0
+    for j in range(loc.shape[0]):
+        alpha = _alpha_at(loc, j, px, py)[0]
+        weights[j] = 0.0
+        if alpha == 0:
+            continue
+        next_t = trans * (1.0 - alpha)
+        if next_t < T_MIN:
+            break
+        weights[j] = alpha * trans
+        trans = next_t
+        last = j + 1
+    return trans, last
+
+
 @numba.njit(parallel=True, cache=True)
 def blend_forward(means2d, conics, opacities, features, offsets, ids, width, height, tile):
     """Blend every tile. Returns image (H, W, C) float32, final transmittance (H, W) float64
@@ -106,24 +127,16 @@ def blend_forward(means2d, conics, opacities, features, offsets, ids, width, hei
         feat = _gather_rows(ids, start, end, features)
         y0, x0 = (t // n_tiles_x) * tile, (t % n_tiles_x) * tile
         acc = np.empty(n_ch, np.float64)
+        weights = np.empty(end - start, np.float64)
         for y in range(y0, min(y0 + tile, height)):
             for x in range(x0, min(x0 + tile, width)):
+                trans, last = _pixel_weights(loc, np.float32(x + 0.5), np.float32(y + 0.5), weights)
                 acc[:] = 0.0
-                trans = 1.0
-                last = 0
-                px, py = np.float32(x + 0.5), np.float32(y + 0.5)
-                for j in range(end - start):
-                    alpha = _alpha_at(loc, j, px, py)[0]
-                    if alpha == 0:
-                        continue
-                    next_t = trans * (1.0 - alpha)
-                    if next_t < T_MIN:
-                        break
-                    w = alpha * trans
-                    for ch in range(n_ch):
-                        acc[ch] += w * feat[j, ch]
-                    trans = next_t
-                    last = j + 1
+                for j in range(last):
+                    w = weights[j]
+                    if w != 0.0:
+                        for ch in range(n_ch):
+                            acc[ch] += w * feat[j, ch]
                 for ch in range(n_ch):
                     image[y, x, ch] = acc[ch]
                 final_t[y, x] = trans
@@ -222,23 +235,16 @@ def accumulate_weights(means2d, conics, opacities, offsets, ids, width, height, 
                 continue
             loc = _gather_tile(ids, start, end, means2d, conics, opacities)
             local = np.zeros((end - start, n_rows), np.float64)
+            weights = np.empty(end - start, np.float64)
             y0, x0 = (t // n_tiles_x) * tile, (t % n_tiles_x) * tile
             for y in range(y0, min(y0 + tile, height)):
                 for x in range(x0, min(x0 + tile, width)):
                     r = rows[y, x]
                     if r < 0:
                         continue
-                    trans = 1.0
-                    px, py = np.float32(x + 0.5), np.float32(y + 0.5)
-                    for j in range(end - start):
-                        alpha = _alpha_at(loc, j, px, py)[0]
-                        if alpha == 0:
-                            continue
-                        next_t = trans * (1.0 - alpha)
-                        if next_t < T_MIN:
-                            break
-                        local[j, r] += alpha * trans
-                        trans = next_t
+                    last = _pixel_weights(loc, np.float32(x + 0.5), np.float32(y + 0.5), weights)[1]
+                    for j in range(last):
+                        local[j, r] += weights[j]
             for j in range(end - start):
                 g = ids[start + j]
                 for r in range(n_rows):
