@@ -14,10 +14,9 @@ import tempfile
 import time
 from pathlib import Path
 
-from dataset_tools.corrupt import corrupt_scene
+from benchmarks.scenes import corrupted_scene
 from dataset_tools.label_maps import consistent_fraction
 from dataset_tools.scene import load_scene
-from dataset_tools.synth import SynthConfig, generate_scene
 from hqmask.build import BuildConfig, build_masks
 
 
@@ -36,9 +35,8 @@ def main() -> None:
     results = {}
     with tempfile.TemporaryDirectory() as tmp:
         for path in ("orbit", "forward"):
-            scene = generate_scene(SynthConfig(views=args.views, res=args.res, path=path, seed=args.seed),
-                                   Path(tmp) / path, progress=False).root
-            corrupt_scene(scene, "noisy", args.severity, seed=args.seed, progress=False)
+            scene = corrupted_scene(Path(tmp), path, res=args.res, severity=args.severity, seed=args.seed,
+                                    views=args.views)
             truth = _masks(scene, "object_mask")
             row = {"input": consistent_fraction(_masks(scene, "noisy"), truth)}
             for method in ("flow", "tracks"):

@@ -18,10 +18,9 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from dataset_tools.corrupt import corrupt_scene
+from benchmarks.scenes import corrupted_scene
 from dataset_tools.label_maps import match_ids, overlap
 from dataset_tools.scene import load_scene
-from dataset_tools.synth import SynthConfig, generate_scene
 from eval.metrics import mean_iou
 from gsseg.render_views import segment_pixels
 from gsseg.run_folder import load_run
@@ -56,9 +55,7 @@ def main() -> None:
     table = {}
     with tempfile.TemporaryDirectory() as tmp:
         for path in ("orbit", "forward"):
-            scene = generate_scene(SynthConfig(res=args.res, path=path, seed=args.seed), Path(tmp) / path,
-                                   progress=False).root
-            corrupt_scene(scene, "noisy", args.severity, seed=args.seed, progress=False)
+            scene = corrupted_scene(Path(tmp), path, res=args.res, severity=args.severity, seed=args.seed)
             build_masks(scene, BuildConfig(proposer="existing", from_masks="noisy", associate="tracks",
                                            out_masks="assoc"), progress=False)
             run = Path(tmp) / f"run_{path}"
