@@ -22,6 +22,7 @@ from hqmask.cleanup import clean_mask
 from hqmask.proposers import Proposer, make_proposer
 
 ASSOCIATIONS = ("flow", "tracks")
+CACHE = ".hqmask_cache"
 
 
 @dataclass(frozen=True)
@@ -37,6 +38,10 @@ class BuildConfig:
     images: str = "images"
     dataset: str | None = None
     force: bool = False
+    device: str = "auto"
+    threads: int = 0
+    points_per_side: int = 32
+    cache_embeddings: bool = False
 
 
 @dataclass
@@ -50,7 +55,7 @@ def _segments(
     scene: Scene, proposer: Proposer, cfg: BuildConfig, images: list[np.ndarray], progress: bool
 ) -> list[np.ndarray]:
     """Per view, the painted proposals as an (H, W) uint8 segment map, cleaned."""
-    cache = None if cfg.proposer == "existing" else scene.root / ".hqmask_cache" / cfg.proposer
+    cache = None if proposer.cache_name is None else scene.root / CACHE / proposer.cache_name
     out = []
     for view, image in zip(tqdm(scene.views, desc=f"proposing ({cfg.proposer})", disable=not progress), images):
         cached = cache / f"{view.stem}.png" if cache else None
@@ -76,7 +81,14 @@ def build_masks(scene_dir: Path | str, cfg: BuildConfig, *, progress: bool = Tru
         raise InputError("--proposer existing needs --from-masks NAME, the mask folder to re-associate.")
     if cfg.from_masks is not None and cfg.from_masks == cfg.out_masks:
         raise InputError(f"--out-masks {cfg.out_masks}: would overwrite the input masks; choose another name.")
-    proposer = make_proposer(cfg.proposer, cfg.model)  # an unknown or unavailable one fails before any work
+    proposer = make_proposer(  # an unknown or unavailable one fails before any work
+        cfg.proposer,
+        cfg.model,
+        device=cfg.device,
+        threads=cfg.threads,
+        points_per_side=cfg.points_per_side,
+        embedding_cache=scene_dir / CACHE / "sam-hq-embeddings" if cfg.cache_embeddings else None,
+    )
     out_dir = scene_dir / cfg.out_masks
     if out_dir.exists() and not cfg.force:
         raise InputError(f"{out_dir}: already exists; pass --force to rebuild it.")

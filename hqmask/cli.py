@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from dataset_tools.cli_support import add_planned_command, run_cli
+from dataset_tools.cli_support import run_cli
 
 
 @click.group(name="hqmask", context_settings={"help_option_names": ["-h", "--help"]})
@@ -25,6 +25,11 @@ def cli() -> None:
 @click.option("--images", default="images", show_default=True, help="Image folder (images or images_N).")
 @click.option("--dataset", default=None, help="Also write a Hugging Face dataset (with parquet shards) here.")
 @click.option("--force", is_flag=True, help="Recompute cached proposals and replace existing outputs.")
+@click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto", show_default=True,
+              help="ONNX Runtime device for sam-hq (auto: CUDA when onnxruntime-gpu sees a GPU).")
+@click.option("--threads", type=int, default=0, show_default=True, help="ONNX Runtime threads for sam-hq (0: its choice).")
+@click.option("--points-per-side", type=int, default=32, show_default=True, help="Point grid of the sam-hq generator.")
+@click.option("--cache-embeddings", is_flag=True, help="Keep sam-hq image embeddings under SCENE/.hqmask_cache.")
 def build(scene: Path, **options) -> None:
     """Propose, clean and associate consistent object masks for every view of SCENE."""
     from hqmask.build import BuildConfig, build_masks
@@ -46,6 +51,23 @@ def clean(scene: Path, masks: str, out_masks: str, min_area: int, force: bool) -
     click.echo(f"wrote {clean_scene_masks(scene, masks, out_masks, min_area=min_area, force=force)}")
 
 
-add_planned_command(cli, "export-onnx", "Export an official SAM-HQ checkpoint to ONNX")
+@cli.command(name="export-onnx")
+@click.option("--checkpoint", required=True, type=click.Path(path_type=Path), help="Official SAM-HQ .pth file.")
+@click.option("--model-type", required=True, type=click.Choice(["vit_tiny", "vit_b", "vit_l", "vit_h"]))
+@click.option("--out", required=True, type=click.Path(path_type=Path), help="Model folder to write.")
+@click.option("--opset", type=int, default=17, show_default=True)
+@click.option("--hq-token-only", is_flag=True, help="Use the HQ mask alone instead of adding it to SAM's.")
+@click.option("--single-mask", is_flag=True, help="SAM's single-mask output instead of the best of its three.")
+@click.option("--force", is_flag=True, help="Replace --out if it exists.")
+def export_onnx(checkpoint: Path, model_type: str, out: Path, opset: int, hq_token_only: bool, single_mask: bool,
+                force: bool) -> None:
+    """Export an official SAM-HQ checkpoint to encoder.onnx, decoder.onnx and model.json
+    (needs `pip install .[export]`)."""
+    from hqmask.sam_hq.export import export_checkpoint
+
+    export_checkpoint(checkpoint, model_type, out, opset=opset, hq_token_only=hq_token_only,
+                      multimask_output=not single_mask, overwrite=force)
+    click.echo(f"wrote {out}")
+
 
 main = run_cli(cli, "hqmask")

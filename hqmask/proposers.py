@@ -12,12 +12,16 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Protocol
+from pathlib import Path
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
 from dataset_tools.errors import InputError
 from dataset_tools.scene import View
+
+if TYPE_CHECKING:
+    from hqmask.sam_hq import AutomaticMaskGenerator
 
 
 @dataclass
@@ -38,6 +42,10 @@ class Proposals:
 
 
 class Proposer(Protocol):
+    #: Folder name of the per-view proposal cache (it names everything the proposals depend
+    #: on), or None for proposers not worth caching.
+    cache_name: str | None
+
     def propose(self, image: np.ndarray, view: View) -> Proposals:
         """Candidate masks for ``image`` (H, W, 3) uint8, the loaded image of ``view``."""
         ...
@@ -51,6 +59,8 @@ def _from_label_map(ids: np.ndarray) -> Proposals:
 
 class ExistingMasks:
     """Proposals read from a mask folder of the scene: one proposal per ID of the view's map."""
+
+    cache_name = None
 
     def propose(self, image: np.ndarray, view: View) -> Proposals:
         ids = view.load_mask()
@@ -86,6 +96,7 @@ class GraphProposer:
     reference_fraction: float = 0.02
     hue_degrees: float = 30.0
     min_fraction: float = 0.002
+    cache_name = "graph"
 
     def propose(self, image: np.ndarray, view: View) -> Proposals:
         from skimage import color, graph, segmentation
@@ -119,15 +130,41 @@ class GraphProposer:
         return Proposals(masks, masks.sum((1, 2)) / (H * W))
 
 
-def make_proposer(name: str, model_dir: str | None = None) -> Proposer:
-    """The proposer called ``name``: ``graph``, ``existing`` or ``sam-hq``."""
+class SamHQProposer:
+    """SAM-HQ's automatic mask generator (ONNX Runtime); proposals scored by predicted IoU."""
+
+    def __init__(self, generator: AutomaticMaskGenerator):
+        self.generator = generator
+        points = generator.config.points_per_side
+        self.cache_name = f"sam-hq-{generator.model.fingerprint()}-p{points}"
+
+    def propose(self, image: np.ndarray, view: View) -> Proposals:
+        return self.generator.generate(image).proposals()
+
+
+def make_proposer(
+    name: str,
+    model_dir: str | None = None,
+    *,
+    device: str = "auto",
+    threads: int = 0,
+    points_per_side: int = 32,
+    embedding_cache: Path | None = None,
+) -> Proposer:
+    """The proposer called ``name``: ``graph``, ``existing`` or ``sam-hq``.
+
+    The keyword options configure ``sam-hq``: ONNX Runtime device and threads, the point grid
+    of the automatic generator, and a folder to cache image embeddings in.
+    """
     if name == "graph":
         return GraphProposer()
     if name == "existing":
         return ExistingMasks()
     if name == "sam-hq":
-        raise InputError(
-            "--proposer sam-hq: the SAM-HQ ONNX runtime is not in this version yet; use --proposer graph "
-            "or existing."
-        )
+        from hqmask.sam_hq import EXPORT_HINT, AutomaticMaskGenerator, GeneratorConfig, SamHQ
+
+        if not model_dir:
+            raise InputError(f"--proposer sam-hq needs --model DIR, a SAM-HQ ONNX model folder; {EXPORT_HINT}.")
+        model = SamHQ(model_dir, device=device, threads=threads, cache_dir=embedding_cache)
+        return SamHQProposer(AutomaticMaskGenerator(model, GeneratorConfig(points_per_side=points_per_side)))
     raise InputError(f"--proposer {name}: unknown proposer; use graph, sam-hq or existing.")
