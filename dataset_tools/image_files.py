@@ -96,3 +96,18 @@ def label_palette() -> np.ndarray:
 def colorize_labels(ids: np.ndarray) -> np.ndarray:
     """Colour an ID map for viewing. (H, W) integer -> (H, W, 3) uint8."""
     return label_palette()[np.asarray(ids, dtype=np.uint8)]
+
+
+def write_downsampled(src: Path, dst: Path, factor: int) -> None:
+    """Write every PNG of ``src`` to ``dst`` at 1/``factor`` size (area filter), with the same
+    names: the ``images_N`` copies a scene folder may hold. ``dst`` appears whole or not at all."""
+    from dataset_tools.atomic import atomic_directory
+
+    files = sorted(Path(src).rglob("*.png"))
+    if not files:
+        raise InputError(f"{src}: no PNG images to downsample.")
+    with atomic_directory(Path(dst)) as tmp:
+        for f in files:
+            image = read_image(f)
+            size = (max(1, image.shape[1] // factor), max(1, image.shape[0] // factor))
+            write_png(tmp / f.relative_to(src), cv2.resize(image, size, interpolation=cv2.INTER_AREA))

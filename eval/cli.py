@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import click
 
 from dataset_tools.cli_support import add_planned_command, run_cli
@@ -12,8 +14,43 @@ def cli() -> None:
     """Metrics, reports and paper-table benchmarks."""
 
 
-add_planned_command(cli, "report", "Metrics and an HTML/markdown report of a run")
-add_planned_command(cli, "compare", "Put several runs side by side")
+@cli.command()
+@click.argument("run", type=click.Path(path_type=Path))
+@click.option("--scene", required=True, type=click.Path(path_type=Path), help="The scene the run was trained on.")
+@click.option("--out", required=True, type=click.Path(path_type=Path), help="Report folder to write.")
+@click.option("--gt-masks", default="object_mask", show_default=True, help="Ground-truth mask folder of SCENE.")
+@click.option("--split", default="test", show_default=True, help="Views to evaluate: test, train or all.")
+@click.option("--object-id", type=int, default=None, help="Label to edit in the image rows (default: the largest).")
+@click.option("--color", nargs=3, type=int, default=(255, 40, 200), show_default=True, help="Recolour target, 0..255.")
+@click.option("--backend", default="auto", show_default=True, help="auto, cpu, torch or gsplat.")
+@click.option("--force", is_flag=True, help="Replace --out if it exists.")
+def report(run: Path, scene: Path, out: Path, gt_masks: str, split: str, object_id: int | None,
+           color: tuple[int, int, int], backend: str, force: bool) -> None:
+    """Metrics (visible and extracted mIoU/mAcc, PSNR, SSIM) and a markdown/HTML report of RUN."""
+    from eval.report import report_run
+
+    ev = report_run(run, scene, out, gt_masks=gt_masks, split=split, object_id=object_id, color=color,
+                    backend=backend, overwrite=force)
+    s = ev.summary()
+    click.echo(f"mIoU visible {s['visible']['miou']:.3f}, extracted {s['extracted']['miou']:.3f}; "
+               f"PSNR {s['psnr']:.2f} dB")
+    click.echo(f"wrote {out / 'report.html'}")
+
+
+@cli.command()
+@click.argument("runs", nargs=-1, required=True, type=click.Path(path_type=Path))
+@click.option("--out", default=None, type=click.Path(path_type=Path), help="Also write the table to this .md file.")
+def compare(runs: tuple[Path, ...], out: Path | None) -> None:
+    """Put the evaluations of several reported runs side by side (markdown)."""
+    from dataset_tools.atomic import write_bytes_atomic
+    from eval.report import compare_runs
+
+    table = compare_runs(list(runs))
+    click.echo(table)
+    if out is not None:
+        write_bytes_atomic(out, (table + "\n").encode())
+
+
 add_planned_command(cli, "paper-tables", "The analogs of the paper's tables on synthetic scenes")
 
 main = run_cli(cli, "gseval")

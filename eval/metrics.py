@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import torch
 
 
 def psnr(pred: np.ndarray, target: np.ndarray) -> float:
@@ -11,16 +12,29 @@ def psnr(pred: np.ndarray, target: np.ndarray) -> float:
     return float("inf") if mse == 0 else float(10 * np.log10(255.0**2 / mse))
 
 
+def ssim(pred: np.ndarray, target: np.ndarray) -> float:
+    """SSIM (kornia, 11x11 Gaussian window) of two (H, W, 3) uint8 images."""
+    from kornia.metrics import ssim as kornia_ssim
+
+    def to_tensor(x: np.ndarray) -> torch.Tensor:
+        return torch.from_numpy(x).permute(2, 0, 1)[None].double() / 255
+
+    return float(kornia_ssim(to_tensor(pred), to_tensor(target), 11).mean())
+
+
+def binary_scores(pred: np.ndarray, target: np.ndarray) -> tuple[float, float]:
+    """IoU and pixel accuracy of a binary mask ``pred`` against ``target``, both (H, W) bool.
+
+    An object absent from both has IoU 1."""
+    union = np.count_nonzero(pred | target)
+    iou = np.count_nonzero(pred & target) / union if union else 1.0
+    return float(iou), float(np.mean(pred == target))
+
+
 def object_ious(pred: np.ndarray, target: np.ndarray) -> dict[int, float]:
     """Binary IoU of every object (ID >= 1) of the (H, W) ground truth ``target`` against the
     same ID in the prediction ``pred``."""
-    ious = {}
-    for obj in np.unique(target):
-        if obj == 0:
-            continue
-        p, t = pred == obj, target == obj
-        ious[int(obj)] = float((p & t).sum() / (p | t).sum())
-    return ious
+    return {int(obj): binary_scores(pred == obj, target == obj)[0] for obj in np.unique(target) if obj != 0}
 
 
 def mean_iou(preds: list[np.ndarray], targets: list[np.ndarray]) -> float:

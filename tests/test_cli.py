@@ -64,5 +64,5 @@ def test_user_errors_are_one_line_and_exit_2(tmp_path, args, message):
 
 
 def test_planned_commands_say_so(tmp_path):
-    r = run(script("gsseg"), "demo", str(tmp_path))
+    r = run(script("gseval"), "paper-tables", "--out", str(tmp_path))
     assert r.returncode == 2 and "not available in this version" in r.stderr

@@ -1,0 +1,209 @@
+"""``gseval report``: metrics.json, report.md and a self-contained report.html for one run.
+
+The report holds the per-scene summary, tables per object and per view, one image row per
+test view (photo | ground truth | predicted labels | removal | extraction | recolour of
+one object) and the training curves.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import json
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from dataset_tools.atomic import atomic_directory, write_bytes_atomic
+from dataset_tools.errors import InputError
+from dataset_tools.image_files import colorize_labels, encode_png
+from dataset_tools.scene import load_scene
+from eval.evaluate import PROTOCOLS, Evaluation, evaluate_run
+from eval.renders import ViewRenders
+from gsseg.edits import apply_edit
+from gsseg.render import backend_device, render, resolve_backend, to_uint8
+from gsseg.run_folder import METRICS, load_run
+from gsseg.segment.reassign import Segmentation
+from gsseg.segment.segment_run import LABELS
+
+PANELS = ("photo", "ground truth", "predicted (visible)", "removal", "extraction", "recolour")
+EVALUATION = "evaluation.json"  # written into the run folder too, for `gseval compare`
+
+
+def _fmt(x: float | None, digits: int = 3) -> str:
+    return "n/a" if x is None else f"{x:.{digits}f}"
+
+
+def default_object(segmentation: Segmentation) -> int:
+    """The segmented object with the most Gaussians."""
+    if not len(segmentation.objects):
+        raise InputError("the run's labels.npz holds no object; segment it with masks that contain objects.")
+    return int(segmentation.objects[np.argmax(segmentation.selections.sum(axis=1))])
+
+
+@torch.no_grad()
+def edit_panels(run_dir: Path, scene_dir: Path, split: str, label: int, color: tuple[int, int, int],
+                backend: str) -> dict[str, list[np.ndarray]]:
+    """Renders of the test views after removing, extracting (on white) and recolouring ``label``."""
+    run = load_run(run_dir)
+    segmentation = Segmentation.load(run_dir / LABELS)
+    selected = segmentation.selection(label)
+    device = backend_device(backend)
+    views = load_scene(scene_dir, images=run.config.get("images", "images"), masks=None).split(split)
+    out: dict[str, list[np.ndarray]] = {}
+    for op in ("remove", "extract", "recolor"):
+        edited = apply_edit(run.gaussians, selected, op, tuple(c / 255 for c in color)).to(device)
+        background = torch.ones(3, device=device) if op == "extract" else None
+        out[op] = [
+            to_uint8(render(edited, v.camera, torch.as_tensor(v.cam_from_world, dtype=torch.float32, device=device),
+                            sh_degree=run.config.get("sh_degree", 3), background=background, with_features=False,
+                            backend=backend).rgb)
+            for v in views
+        ]
+    return out
+
+
+def image_row(r: ViewRenders, id_map: dict[int, int], edits: dict[str, list[np.ndarray]], index: int) -> np.ndarray:
+    """The panels of one view side by side, 4 px apart: (H, 6W + 20, 3) uint8."""
+    mapping = np.full(256, 255, np.uint8)
+    mapping[0] = 0
+    for label, gt in id_map.items():
+        mapping[label] = gt
+    truth = colorize_labels(r.truth) if r.truth is not None else np.full_like(r.image, 255)
+    panels = [r.image, truth, colorize_labels(mapping[r.visible])] + [edits[op][index] for op in ("remove", "extract", "recolor")]
+    gap = np.full((r.image.shape[0], 4, 3), 255, np.uint8)
+    return np.concatenate([x for p in panels for x in (p, gap)][:-1], axis=1)
+
+
+def training_plot(history: list[dict]) -> bytes | None:
+    """PNG of the training loss and PSNR against the step (None without a history)."""
+    if not history:
+        return None
+    import io
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    steps = [h["step"] for h in history]
+    fig, (a, b) = plt.subplots(1, 2, figsize=(9, 3), dpi=100)
+    a.plot(steps, [h["loss"] for h in history], label="total")
+    a.plot(steps, [h["rgb"] for h in history], label="colour")
+    a.plot(steps, [h["obj"] for h in history], label="object CE")
+    a.set(xlabel="step", ylabel="loss", yscale="log", title="training loss")
+    a.legend()
+    b.plot(steps, [h["psnr"] for h in history])
+    b.set(xlabel="step", ylabel="dB", title="training-view PSNR")
+    fig.tight_layout()
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png")
+    plt.close(fig)
+    return buf.getvalue()
+
+
+def _tables(ev: Evaluation) -> tuple[list[str], list[list[str]], list[str], list[list[str]], list[str], list[list[str]]]:
+    s = ev.summary()
+    summary_head = ["views", "mIoU visible", "mAcc visible", "mIoU extracted", "mAcc extracted", "PSNR", "SSIM", "LPIPS"]
+    summary = [[str(s["views"]), _fmt(s["visible"]["miou"]), _fmt(s["visible"]["macc"]), _fmt(s["extracted"]["miou"]),
+                _fmt(s["extracted"]["macc"]), _fmt(s["psnr"], 2), _fmt(s["ssim"]), s["lpips"]]]
+    object_head = ["object", "predicted label", "IoU visible", "acc visible", "IoU extracted", "acc extracted"]
+    label_of = {g: p for p, g in ev.id_map.items()}
+    objects = [[str(o), str(label_of.get(o, "none")), *(_fmt(v[f"{p}_{m}"]) for p in PROTOCOLS for m in ("iou", "acc"))]
+               for o, v in ev.per_object().items()]
+    view_head = ["view", "PSNR", "SSIM", "mIoU visible", "mIoU extracted"]
+    views = []
+    for v in ev.views:
+        rows = {p: [r["iou"] for r in ev.objects if r["view"] == v["view"] and r["protocol"] == p] for p in PROTOCOLS}
+        views.append([v["view"], _fmt(v["psnr"], 2), _fmt(v["ssim"]),
+                      *(_fmt(float(np.mean(rows[p])) if rows[p] else None) for p in PROTOCOLS)])
+    return summary_head, summary, object_head, objects, view_head, views
+
+
+def _md_table(head: list[str], rows: list[list[str]]) -> str:
+    lines = ["| " + " | ".join(head) + " |", "|" + " --- |" * len(head)]
+    return "\n".join(lines + ["| " + " | ".join(r) + " |" for r in rows])
+
+
+def _html_table(head: list[str], rows: list[list[str]]) -> str:
+    th = "".join(f"<th>{html.escape(h)}</th>" for h in head)
+    trs = "".join("<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in r) + "</tr>" for r in rows)
+    return f"<table><tr>{th}</tr>{trs}</table>"
+
+
+def _data_uri(png: bytes) -> str:
+    return "data:image/png;base64," + base64.b64encode(png).decode()
+
+
+def write_report(ev: Evaluation, renders: list[ViewRenders], edits: dict[str, list[np.ndarray]], history: list[dict],
+                 out_dir: Path, *, selected: int, title: str, overwrite: bool = False) -> Path:
+    """Write ``out_dir`` (atomically) with metrics.json, report.md, report.html and images/."""
+    summary_head, summary, object_head, objects, view_head, views = _tables(ev)
+    rows = {r.stem: encode_png(image_row(r, ev.id_map, edits, i)) for i, r in enumerate(renders)}
+    curve = training_plot(history)
+    gt = ev.id_map.get(selected)
+    edit_note = f"edits of predicted label {selected}" + (f" (ground-truth object {gt})" if gt is not None else "")
+    panels = " | ".join(PANELS)
+    with atomic_directory(out_dir, overwrite=overwrite) as tmp:
+        ev.save(tmp / "metrics.json")
+        for stem, png in rows.items():
+            write_bytes_atomic(tmp / "images" / f"{stem}.png", png)
+        if curve is not None:
+            write_bytes_atomic(tmp / "images" / "training.png", curve)
+        md = [f"# {title}", "", f"Run `{ev.run}` on scene `{ev.scene}`, {ev.split} views.", "",
+              _md_table(summary_head, summary), "", "## Objects", "", _md_table(object_head, objects), "",
+              "## Views", "", _md_table(view_head, views), "", f"## Images: {panels}", "", f"{edit_note}.", ""]
+        md += [f"![{stem}](images/{stem}.png)" for stem in rows]
+        if curve is not None:
+            md += ["", "## Training", "", "![training](images/training.png)"]
+        write_bytes_atomic(tmp / "report.md", ("\n".join(md) + "\n").encode())
+        images = "".join(f"<figure><img src='{_data_uri(png)}' alt='{html.escape(stem)}'><figcaption>{html.escape(stem)}"
+                         "</figcaption></figure>" for stem, png in rows.items())
+        training = f"<h2>Training</h2><img src='{_data_uri(curve)}' alt='training curves'>" if curve is not None else ""
+        page = f"""<!doctype html><html><head><meta charset="utf-8"><title>{html.escape(title)}</title><style>
+body{{font-family:sans-serif;margin:24px;color:#222}} table{{border-collapse:collapse;margin:8px 0 20px}}
+td,th{{border:1px solid #ccc;padding:4px 10px;text-align:right}} th{{background:#f0f0f0}}
+figure{{margin:0 0 12px}} img{{max-width:100%;image-rendering:pixelated}} figcaption{{font-size:12px;color:#666}}
+</style></head><body><h1>{html.escape(title)}</h1>
+<p>Run <code>{html.escape(ev.run)}</code> on scene <code>{html.escape(ev.scene)}</code>, {html.escape(ev.split)} views.</p>
+{_html_table(summary_head, summary)}<h2>Objects</h2>{_html_table(object_head, objects)}
+<h2>Views</h2>{_html_table(view_head, views)}<h2>Images</h2><p>{html.escape(panels)}; {html.escape(edit_note)}.</p>
+{images}{training}</body></html>
+"""
+        write_bytes_atomic(tmp / "report.html", page.encode())
+    return out_dir
+
+
+def report_run(run_dir: Path | str, scene_dir: Path | str, out_dir: Path | str, *, gt_masks: str | None = "object_mask",
+               split: str = "test", object_id: int | None = None, color: tuple[int, int, int] = (255, 40, 200),
+               backend: str = "auto", overwrite: bool = False, progress: bool = True) -> Evaluation:
+    """Evaluate a segmented run and write its report to ``out_dir`` and ``RUN/evaluation.json``."""
+    run_dir, scene_dir, out_dir = Path(run_dir), Path(scene_dir), Path(out_dir)
+    if out_dir.exists() and not overwrite:
+        raise InputError(f"{out_dir}: already exists; pass --force to replace it.")
+    backend = resolve_backend(backend)
+    ev, renders = evaluate_run(run_dir, scene_dir, gt_masks=gt_masks, split=split, backend=backend, progress=progress)
+    selected = default_object(Segmentation.load(run_dir / LABELS)) if object_id is None else int(object_id)
+    edits = edit_panels(run_dir, scene_dir, split, selected, color, backend)
+    metrics = run_dir / METRICS
+    history = json.loads(metrics.read_text()).get("train", {}).get("history", []) if metrics.is_file() else []
+    write_report(ev, renders, edits, history, out_dir, selected=selected, title=f"gsseg report: {run_dir.name}",
+                 overwrite=overwrite)
+    ev.save(run_dir / EVALUATION)
+    return ev
+
+
+def compare_runs(run_dirs: list[Path]) -> str:
+    """A markdown table of the evaluation summaries of several runs, side by side."""
+    head = ["run", "scene", "mIoU visible", "mAcc visible", "mIoU extracted", "mAcc extracted", "PSNR", "SSIM"]
+    rows = []
+    for run in run_dirs:
+        path = Path(run) / EVALUATION
+        if not path.is_file():
+            raise InputError(f"{path}: missing; run `gseval report {run} --scene SCENE --out DIR` first.")
+        s = Evaluation.from_json(json.loads(path.read_text())).summary()
+        rows.append([str(run), Path(json.loads(path.read_text())["scene"]).name, _fmt(s["visible"]["miou"]),
+                     _fmt(s["visible"]["macc"]), _fmt(s["extracted"]["miou"]), _fmt(s["extracted"]["macc"]),
+                     _fmt(s["psnr"], 2), _fmt(s["ssim"])])
+    return _md_table(head, rows)
