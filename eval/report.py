@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import base64
 import html
+import io
 import json
 from pathlib import Path
 
@@ -80,8 +81,6 @@ def training_plot(history: list[dict]) -> bytes | None:
     """PNG of the training loss and PSNR against the step (None without a history)."""
     if not history:
         return None
-    import io
-
     import matplotlib
 
     matplotlib.use("Agg")

@@ -55,8 +55,9 @@ class DemoResult:
 def _prompt_point(scene_dir: Path, run_dir: Path, synth_point: np.ndarray | None, backend: str) -> np.ndarray:
     if synth_point is not None:
         return synth_point
-    view = load_scene(scene_dir, images=load_run(run_dir).config.get("images", "images"), masks=None).split("test")[0]
-    return point_from_click(load_run(run_dir).gaussians, view.camera, view.cam_from_world, view.camera.width / 2,
+    run = load_run(run_dir)
+    view = load_scene(scene_dir, images=run.config.get("images", "images"), masks=None).split("test")[0]
+    return point_from_click(run.gaussians, view.camera, view.cam_from_world, view.camera.width / 2,
                             view.camera.height / 2, backend="cpu" if backend == "gsplat" else backend)
 
 

@@ -1,7 +1,8 @@
 """``hqmask build`` and ``hqmask clean``: proposals -> noise removal -> association -> ID maps.
 
 Proposals of the expensive proposers are cached per view under
-``SCENE/.hqmask_cache/<proposer>/`` so an interrupted run resumes where it stopped; the
+``SCENE/.hqmask_cache/<cache name>/`` (the proposer and, for ``sam-hq``, the model and
+grid) so an interrupted run resumes where it stopped; the
 output mask folder appears whole, atomically, at the end.
 """
 
