@@ -136,7 +136,7 @@ class SamHQProposer:
     def __init__(self, generator: AutomaticMaskGenerator):
         self.generator = generator
         points = generator.config.points_per_side
-        self.cache_name = f"sam-hq-{generator.model.fingerprint()}-p{points}"
+        self.cache_name = f"sam-hq-{generator.model.fingerprint}-p{points}"
 
     def propose(self, image: np.ndarray, view: View) -> Proposals:
         return self.generator.generate(image).proposals()

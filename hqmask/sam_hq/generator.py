@@ -105,6 +105,7 @@ class AutomaticMaskGenerator:
         n_side = cfg.points_per_side // cfg.crop_n_points_downscale_factor**layer
         points = point_grid(n_side) * np.array([x1 - x0, y1 - y0])
         offset = np.array([x0, y0, x0, y0], np.float32)
+        crop = crop_box.astype(np.float32)
         image_box = np.array([0, 0, W, H], np.float32)
         kept = []
         for start in range(0, len(points), cfg.points_per_batch):
@@ -120,14 +121,13 @@ class AutomaticMaskGenerator:
                 logits, iou, batch, stability = logits[keep], iou[keep], batch[keep], stability[keep]
             masks = logits > self.model.info.mask_threshold
             boxes = masks_to_boxes(masks) + offset
-            keep = ~near_crop_edge(boxes, crop_box.astype(np.float32), image_box)
+            keep = ~near_crop_edge(boxes, crop, image_box)
             n = int(keep.sum())
             if n == 0:
                 continue
             full = np.zeros((n, H, W), bool)
             full[:, y0:y1, x0:x1] = masks[keep]
-            crops = np.tile(crop_box.astype(np.float32), (n, 1))
-            kept.append(GeneratedMasks(full, iou[keep], stability[keep], boxes[keep], batch[keep] + offset[:2], crops))
+            kept.append(GeneratedMasks(full, iou[keep], stability[keep], boxes[keep], batch[keep] + offset[:2], np.tile(crop, (n, 1))))
         out = GeneratedMasks.concat(kept, H, W)
         return out.take(box_nms(out.boxes, out.predicted_iou, cfg.box_nms_thresh)) if len(out) else out
 

@@ -12,6 +12,7 @@ import hashlib
 import io
 import json
 from dataclasses import asdict, dataclass
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -147,6 +148,7 @@ class SamHQ:
         self._mean = np.array(self.info.pixel_mean, np.float32)
         self._std = np.array(self.info.pixel_std, np.float32)
 
+    @cached_property
     def fingerprint(self) -> str:
         """A short hash of model.json and the encoder graph: what the embeddings depend on."""
         h = hashlib.sha1((self.model_dir / MODEL_JSON).read_bytes())
@@ -161,7 +163,7 @@ class SamHQ:
         cached = None
         if self.cache_dir is not None:
             key = hashlib.sha1(np.ascontiguousarray(image).tobytes() + str(image.shape).encode()).hexdigest()
-            cached = self.cache_dir / self.fingerprint() / f"{key}.npz"
+            cached = self.cache_dir / self.fingerprint / f"{key}.npz"
             if cached.exists():
                 with np.load(cached) as z:
                     return ImageEmbedding(z["image_embeddings"], z["interm_embeddings"], image.shape[:2])
