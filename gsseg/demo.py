@@ -28,8 +28,8 @@ from dataset_tools.scene import load_scene
 from dataset_tools.synth import SynthConfig, generate_scene
 from gsseg.edits import edit_run
 from gsseg.render import resolve_backend
-from gsseg.run_folder import load_run
-from gsseg.segment.prompts import object_at_point, point_from_click
+from gsseg.run_folder import Run, load_run
+from gsseg.segment.prompts import pick_object, point_from_click
 from gsseg.segment.segment_run import segment_run
 from gsseg.train import TrainConfig, train
 from hqmask.build import BuildConfig, build_masks
@@ -52,10 +52,9 @@ class DemoResult:
     seconds: float
 
 
-def _prompt_point(scene_dir: Path, run_dir: Path, synth_point: np.ndarray | None, backend: str) -> np.ndarray:
+def _prompt_point(scene_dir: Path, run: Run, synth_point: np.ndarray | None, backend: str) -> np.ndarray:
     if synth_point is not None:
         return synth_point
-    run = load_run(run_dir)
     view = load_scene(scene_dir, images=run.config.get("images", "images"), masks=None).split("test")[0]
     return point_from_click(run.gaussians, view.camera, view.cam_from_world, view.camera.width / 2,
                             view.camera.height / 2, backend="cpu" if backend == "gsplat" else backend)
@@ -86,11 +85,9 @@ def run_demo(out: Path | str, *, scene: Path | str | None = None, images: str = 
     run_dir = out / "run"
     train(scene_dir, run_dir, TrainConfig(iters=iters, masks=MASKS, images=images, backend=backend), progress=progress)
     segmentation = segment_run(run_dir, scene_dir, masks=MASKS, backend=backend, progress=progress)
-    point = np.asarray(_prompt_point(scene_dir, run_dir, synth_point, backend), np.float64)
-    object_id = object_at_point(load_run(run_dir).gaussians.means.numpy(), segmentation.labels, point, 20)
-    if object_id == 0:
-        raise InputError(f"the prompt point {np.round(point, 3).tolist()} lies on the background; "
-                         "the demo found no object there.")
+    run = load_run(run_dir)
+    point = np.asarray(_prompt_point(scene_dir, run, synth_point, backend), np.float64)
+    object_id = pick_object(run.gaussians.means.numpy(), segmentation.labels, point)
     for op, color in (("remove", None), ("extract", None), ("recolor", (255, 40, 200))):
         edit_run(run_dir, op, object_id=object_id, color=color, scene_dir=scene_dir, backend=backend,
                  overwrite=overwrite, progress=progress)

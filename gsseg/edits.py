@@ -18,7 +18,7 @@ from gsseg.gaussians import Gaussians
 from gsseg.ply import write_ply
 from gsseg.render import backend_device, render, resolve_backend, to_uint8
 from gsseg.run_folder import load_run
-from gsseg.segment.prompts import object_at_point, point_from_click
+from gsseg.segment.prompts import pick_object, point_from_click
 from gsseg.segment.reassign import Segmentation
 from gsseg.segment.segment_run import LABELS
 from gsseg.sh import C0, rgb_to_sh_dc
@@ -76,10 +76,7 @@ def edit_run(run_dir: Path | str, op: str, *, point=None, click=None, object_id:
         point = point_from_click(run.gaussians, view.camera, view.cam_from_world, float(click[1]), float(click[2]),
                                  backend="cpu" if backend == "gsplat" else backend)
     if point is not None:
-        object_id = object_at_point(run.gaussians.means.numpy(), segmentation.labels, np.asarray(point), k)
-        if object_id == 0:
-            raise InputError(f"the point {np.round(point, 3).tolist()} lies on the background (label 0); "
-                             "pick a point on an object.")
+        object_id = pick_object(run.gaussians.means.numpy(), segmentation.labels, np.asarray(point), k)
     selected = segmentation.selection(int(object_id))
     rgb = tuple(c / 255 for c in color) if color is not None else None
     edited = apply_edit(run.gaussians, selected, op, rgb)

@@ -32,6 +32,15 @@ def object_at_point(means: np.ndarray, labels: np.ndarray, point: np.ndarray, k:
     return int(values[counts.argmax()])
 
 
+def pick_object(means: np.ndarray, labels: np.ndarray, point: np.ndarray, k: int = 20) -> int:
+    """The object ``object_at_point`` finds, refusing a point on the background (label 0)."""
+    object_id = object_at_point(means, labels, point, k)
+    if object_id == 0:
+        raise InputError(f"the point {np.round(point, 3).tolist()} lies on the background (label 0); "
+                         "pick a point on an object.")
+    return object_id
+
+
 @torch.no_grad()
 def point_from_click(gaussians: Gaussians, camera: PinholeCamera, cam_from_world: np.ndarray,
                      u: float, v: float, *, backend: str = "cpu") -> np.ndarray:
