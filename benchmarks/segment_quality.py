@@ -22,6 +22,7 @@ from benchmarks.scenes import corrupted_scene
 from dataset_tools.label_maps import match_ids, overlap
 from dataset_tools.scene import load_scene
 from eval.metrics import mean_iou
+from eval.report import markdown_table
 from gsseg.render_views import segment_pixels
 from gsseg.run_folder import load_run
 from gsseg.segment.segment_run import segment_run
@@ -63,9 +64,7 @@ def main() -> None:
             table[path] = {f"{m} {g:g}" if m == "prior" else m: score(run, scene, "assoc", m, g) for m, g in SETTINGS}
             print(path, json.dumps(table[path]))
     columns = list(next(iter(table.values())))
-    print("| scene | " + " | ".join(columns) + " |\n|" + " --- |" * (len(columns) + 1))
-    for path, row in table.items():
-        print(f"| {path} | " + " | ".join(f"{row[c]:.3f}" for c in columns) + " |")
+    print(markdown_table(["scene", *columns], [[path, *(f"{row[c]:.3f}" for c in columns)] for path, row in table.items()]))
     Path(args.out).write_text(json.dumps({"mIoU": table, "setup": vars(args)}, indent=2) + "\n")
 
 

@@ -23,11 +23,11 @@ from tqdm import tqdm
 from dataset_tools.atomic import write_bytes_atomic
 from dataset_tools.errors import InputError
 from dataset_tools.label_maps import match_ids, overlap
-from dataset_tools.scene import load_scene
+from dataset_tools.scene import View, load_scene
 from eval.metrics import binary_scores, psnr, ssim
 from eval.renders import ViewRenders, render_view
 from gsseg.render import backend_device, resolve_backend
-from gsseg.run_folder import load_run
+from gsseg.run_folder import Run, load_run
 from gsseg.segment.reassign import Segmentation
 from gsseg.segment.segment_run import LABELS
 
@@ -109,23 +109,34 @@ def score_views(renders: list[ViewRenders], *, run: str, scene: str, split: str)
     return result
 
 
-def evaluate_run(run_dir: Path | str, scene_dir: Path | str, *, gt_masks: str | None = "object_mask",
-                 split: str = "test", backend: str = "auto", progress: bool = True) -> tuple[Evaluation, list[ViewRenders]]:
-    """Render the ``split`` views of a segmented run and score them against ``gt_masks``
-    (``None``: image metrics only). Returns the scores and the renders."""
-    run_dir, scene_dir = Path(run_dir), Path(scene_dir)
+def load_inputs(run_dir: Path, scene_dir: Path, gt_masks: str | None, split: str) -> tuple[Run, Segmentation, list[View]]:
+    """The run, its labels and the scene's ``split`` views, refusing what cannot be evaluated."""
     run = load_run(run_dir)
     segmentation = Segmentation.load(run_dir / LABELS)
     if gt_masks is not None and not (scene_dir / gt_masks).is_dir():
         raise InputError(f"{scene_dir / gt_masks}: no ground-truth masks for the metrics; "
                          "pass --gt-masks NAME, the scene's ground-truth mask folder.")
-    scene = load_scene(scene_dir, images=run.config.get("images", "images"), masks=gt_masks)
-    views = scene.split(split)
+    views = load_scene(scene_dir, images=run.config.get("images", "images"), masks=gt_masks).split(split)
     if not views:
         raise InputError(f"{scene_dir}: the scene has no {split} views to evaluate.")
-    backend = resolve_backend(backend)
+    return run, segmentation, views
+
+
+def evaluate(run: Run, segmentation: Segmentation, views: list[View], *, with_truth: bool, scene: str, split: str,
+             backend: str, progress: bool = True) -> tuple[Evaluation, list[ViewRenders]]:
+    """Render ``views`` with the segmented run and score them (against their masks when
+    ``with_truth``). ``backend`` must be resolved. Returns the scores and the renders."""
     gaussians = run.gaussians.to(backend_device(backend))
     renders = [render_view(gaussians, segmentation, v, sh_degree=run.config.get("sh_degree", 3), backend=backend,
-                           truth=v.load_mask() if gt_masks is not None else None)
+                           truth=v.load_mask() if with_truth else None)
                for v in tqdm(views, desc="evaluating", unit="view", disable=not progress)]
-    return score_views(renders, run=str(run_dir), scene=str(scene_dir), split=split), renders
+    return score_views(renders, run=str(run.root), scene=scene, split=split), renders
+
+
+def evaluate_run(run_dir: Path | str, scene_dir: Path | str, *, gt_masks: str | None = "object_mask",
+                 split: str = "test", backend: str = "auto", progress: bool = True) -> tuple[Evaluation, list[ViewRenders]]:
+    """Render the ``split`` views of a segmented run and score them against ``gt_masks``
+    (``None``: image metrics only). Returns the scores and the renders."""
+    run, segmentation, views = load_inputs(Path(run_dir), Path(scene_dir), gt_masks, split)
+    return evaluate(run, segmentation, views, with_truth=gt_masks is not None, scene=str(scene_dir), split=split,
+                    backend=resolve_backend(backend), progress=progress)

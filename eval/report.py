@@ -19,14 +19,13 @@ import torch
 from dataset_tools.atomic import atomic_directory, write_bytes_atomic
 from dataset_tools.errors import InputError
 from dataset_tools.image_files import colorize_labels, encode_png
-from dataset_tools.scene import load_scene
-from eval.evaluate import PROTOCOLS, Evaluation, evaluate_run
+from dataset_tools.scene import View
+from eval.evaluate import PROTOCOLS, Evaluation, evaluate, load_inputs
 from eval.renders import ViewRenders
 from gsseg.edits import apply_edit
 from gsseg.render import backend_device, render, resolve_backend, to_uint8
-from gsseg.run_folder import METRICS, load_run
+from gsseg.run_folder import METRICS, Run
 from gsseg.segment.reassign import Segmentation
-from gsseg.segment.segment_run import LABELS
 
 PANELS = ("photo", "ground truth", "predicted (visible)", "removal", "extraction", "recolour")
 EVALUATION = "evaluation.json"  # written into the run folder too, for `gseval compare`
@@ -44,14 +43,11 @@ def default_object(segmentation: Segmentation) -> int:
 
 
 @torch.no_grad()
-def edit_panels(run_dir: Path, scene_dir: Path, split: str, label: int, color: tuple[int, int, int],
+def edit_panels(run: Run, segmentation: Segmentation, views: list[View], label: int, color: tuple[int, int, int],
                 backend: str) -> dict[str, list[np.ndarray]]:
-    """Renders of the test views after removing, extracting (on white) and recolouring ``label``."""
-    run = load_run(run_dir)
-    segmentation = Segmentation.load(run_dir / LABELS)
+    """Renders of ``views`` after removing, extracting (on white) and recolouring ``label``."""
     selected = segmentation.selection(label)
     device = backend_device(backend)
-    views = load_scene(scene_dir, images=run.config.get("images", "images"), masks=None).split(split)
     out: dict[str, list[np.ndarray]] = {}
     for op in ("remove", "extract", "recolor"):
         edited = apply_edit(run.gaussians, selected, op, tuple(c / 255 for c in color)).to(device)
@@ -120,7 +116,7 @@ def _tables(ev: Evaluation) -> tuple[list[str], list[list[str]], list[str], list
     return summary_head, summary, object_head, objects, view_head, views
 
 
-def _md_table(head: list[str], rows: list[list[str]]) -> str:
+def markdown_table(head: list[str], rows: list[list[str]]) -> str:
     lines = ["| " + " | ".join(head) + " |", "|" + " --- |" * len(head)]
     return "\n".join(lines + ["| " + " | ".join(r) + " |" for r in rows])
 
@@ -151,8 +147,8 @@ def write_report(ev: Evaluation, renders: list[ViewRenders], edits: dict[str, li
         if curve is not None:
             write_bytes_atomic(tmp / "images" / "training.png", curve)
         md = [f"# {title}", "", f"Run `{ev.run}` on scene `{ev.scene}`, {ev.split} views.", "",
-              _md_table(summary_head, summary), "", "## Objects", "", _md_table(object_head, objects), "",
-              "## Views", "", _md_table(view_head, views), "", f"## Images: {panels}", "", f"{edit_note}.", ""]
+              markdown_table(summary_head, summary), "", "## Objects", "", markdown_table(object_head, objects), "",
+              "## Views", "", markdown_table(view_head, views), "", f"## Images: {panels}", "", f"{edit_note}.", ""]
         md += [f"![{stem}](images/{stem}.png)" for stem in rows]
         if curve is not None:
             md += ["", "## Training", "", "![training](images/training.png)"]
@@ -182,9 +178,11 @@ def report_run(run_dir: Path | str, scene_dir: Path | str, out_dir: Path | str, 
     if out_dir.exists() and not overwrite:
         raise InputError(f"{out_dir}: already exists; pass --force to replace it.")
     backend = resolve_backend(backend)
-    ev, renders = evaluate_run(run_dir, scene_dir, gt_masks=gt_masks, split=split, backend=backend, progress=progress)
-    selected = default_object(Segmentation.load(run_dir / LABELS)) if object_id is None else int(object_id)
-    edits = edit_panels(run_dir, scene_dir, split, selected, color, backend)
+    run, segmentation, views = load_inputs(run_dir, scene_dir, gt_masks, split)
+    ev, renders = evaluate(run, segmentation, views, with_truth=gt_masks is not None, scene=str(scene_dir), split=split,
+                           backend=backend, progress=progress)
+    selected = default_object(segmentation) if object_id is None else int(object_id)
+    edits = edit_panels(run, segmentation, views, selected, color, backend)
     metrics = run_dir / METRICS
     history = json.loads(metrics.read_text()).get("train", {}).get("history", []) if metrics.is_file() else []
     write_report(ev, renders, edits, history, out_dir, selected=selected, title=f"gsseg report: {run_dir.name}",
@@ -201,8 +199,9 @@ def compare_runs(run_dirs: list[Path]) -> str:
         path = Path(run) / EVALUATION
         if not path.is_file():
             raise InputError(f"{path}: missing; run `gseval report {run} --scene SCENE --out DIR` first.")
-        s = Evaluation.from_json(json.loads(path.read_text())).summary()
-        rows.append([str(run), Path(json.loads(path.read_text())["scene"]).name, _fmt(s["visible"]["miou"]),
+        ev = Evaluation.from_json(json.loads(path.read_text()))
+        s = ev.summary()
+        rows.append([str(run), Path(ev.scene).name, _fmt(s["visible"]["miou"]),
                      _fmt(s["visible"]["macc"]), _fmt(s["extracted"]["miou"]), _fmt(s["extracted"]["macc"]),
                      _fmt(s["psnr"], 2), _fmt(s["ssim"])])
-    return _md_table(head, rows)
+    return markdown_table(head, rows)
