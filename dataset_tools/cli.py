@@ -1,4 +1,4 @@
-"""``python -m dataset_tools``: synthetic scenes, mask corruption and scene inspection."""
+"""``python -m dataset_tools``: synthetic scenes, mask corruption, scene inspection and the HQ dataset."""
 
 from __future__ import annotations
 
@@ -65,6 +65,24 @@ def inspect(scene_dir: Path, images: str, masks: str, sheet: Path | None) -> Non
     click.echo(str(summarize(scene)))
     path = contact_sheet(scene, sheet or scene_dir / "contact_sheet.png")
     click.echo(f"contact sheet {path}")
+
+
+@cli.command()
+@click.option("--out", type=click.Path(path_type=Path), required=True, help="Folder for the scene folders.")
+@click.option("--local", type=click.Path(path_type=Path), default=None,
+              help="A local copy (folder or archive) instead of downloading from the Hub.")
+@click.option("--scene", "scenes", multiple=True, help="Convert only this scene (repeatable).")
+@click.option("--masks", default="object_mask", show_default=True, help="Object-mask folder of the scenes.")
+@click.option("--revision", default=None, help="Hub revision (branch, tag or commit) to download.")
+@click.option("--force", is_flag=True, help="Replace scene folders that exist in --out.")
+def hq(out: Path, local: Path | None, scenes: tuple[str, ...], masks: str, revision: str | None, force: bool) -> None:
+    """Fetch the 3D-Scene-Segmentation-HQ dataset and write its scenes as scene folders."""
+    from dataset_tools.hq_dataset import fetch_hq
+
+    written = fetch_hq(out, local=local, scenes=list(scenes) or None, masks=masks, revision=revision,
+                       overwrite=force)
+    for path in written:
+        click.echo(f"wrote {path}")
 
 
 main = run_cli(cli, "python -m dataset_tools")

@@ -109,7 +109,7 @@ def build_masks(scene_dir: Path | str, cfg: BuildConfig, *, progress: bool = Tru
             n_objects = max(n_objects, int(m.max()))
             write_bytes_atomic(tmp / f"{view.stem}.png", encode_png(view.to_file_frame(m)))
     if cfg.dataset:
-        from hqmask.dataset_export import export_dataset
+        from dataset_tools.hf_dataset import export_dataset
 
         export_dataset(load_scene(scene_dir, images=cfg.images, masks=cfg.out_masks), Path(cfg.dataset), overwrite=cfg.force)
     return BuildResult(out_dir, n_objects, len(scene.views))
