@@ -8,6 +8,7 @@ import numpy as np
 import torch
 
 from dataset_tools.scene import View
+from gsseg.environment import Environment, background_image
 from gsseg.gaussians import Gaussians
 from gsseg.render import backend_device, render, to_uint8
 from gsseg.render_views import segment_pixels
@@ -36,10 +37,12 @@ class ViewRenders:
 
 @torch.no_grad()
 def render_view(gaussians: Gaussians, segmentation: Segmentation, view: View, *, sh_degree: int, backend: str,
-                truth: np.ndarray | None) -> ViewRenders:
-    """The renders of one view (``gaussians`` on ``backend``'s device)."""
+                truth: np.ndarray | None, environment: Environment | None = None) -> ViewRenders:
+    """The renders of one view (``gaussians`` on ``backend``'s device, the colour over ``environment``)."""
     pose = torch.as_tensor(view.cam_from_world, dtype=torch.float32, device=backend_device(backend))
-    rgb = to_uint8(render(gaussians, view.camera, pose, sh_degree=sh_degree, with_features=False, backend=backend).rgb)
+    rgb = to_uint8(render(gaussians, view.camera, pose, sh_degree=sh_degree,
+                          background=background_image(environment, view.camera, pose),
+                          with_features=False, backend=backend).rgb)
     visible = segment_pixels(gaussians, segmentation.labels, view.camera, pose, backend=backend, min_alpha=MIN_ALPHA)
     extracted = {}
     for label in segmentation.objects:

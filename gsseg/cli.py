@@ -25,6 +25,9 @@ def cli() -> None:
               help="cpu: the short laptop schedule; gpu: the paper's 30k schedule; auto picks by backend.")
 @click.option("--backend", type=click.Choice(["auto", "cpu", "torch", "gsplat"]), default="auto", show_default=True)
 @click.option("--gamma-obj", type=float, default=1.0, show_default=True, help="Weight of the object cross-entropy.")
+@click.option("--environment", "environment_degree", type=click.Choice(["none", "0", "1", "2", "3"]), default="3",
+              show_default=True, callback=lambda ctx, param, v: None if v == "none" else int(v),
+              help="SH degree of the learned background behind the Gaussians (sky, far ground); none: black.")
 @click.option("--seed", type=int, default=0, show_default=True)
 @click.option("--resume", is_flag=True, help="Continue the run in --out from its latest checkpoint.")
 @click.option("--stop-after", type=int, default=None, help="Checkpoint and stop at this step; continue with --resume.")

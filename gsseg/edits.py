@@ -14,6 +14,7 @@ from dataset_tools.atomic import atomic_directory
 from dataset_tools.errors import InputError
 from dataset_tools.image_files import write_png
 from dataset_tools.scene import load_scene
+from gsseg.environment import background_image
 from gsseg.gaussians import Gaussians
 from gsseg.ply import write_ply
 from gsseg.render import backend_device, render, resolve_backend, to_uint8
@@ -91,6 +92,7 @@ def edit_run(run_dir: Path | str, op: str, *, point=None, click=None, object_id:
             for view in tqdm(scene.split(split), desc="rendering edit", unit="view", disable=not progress):
                 pose = torch.as_tensor(view.cam_from_world, dtype=torch.float32, device=device)
                 rgb_img = render(edited.to(device), view.camera, pose, sh_degree=run.config.get("sh_degree", 3),
+                                 background=background_image(run.environment, view.camera, pose),
                                  with_features=False, backend=backend).rgb
                 frame = to_uint8(rgb_img)
                 write_png(tmp / "renders" / f"{view.stem}.png", frame)

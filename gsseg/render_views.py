@@ -12,6 +12,7 @@ from dataset_tools.atomic import atomic_directory
 from dataset_tools.errors import InputError
 from dataset_tools.image_files import colorize_labels, write_png
 from dataset_tools.scene import load_scene
+from gsseg.environment import background_image
 from gsseg.gaussians import Gaussians
 from gsseg.render import backend_device, render, resolve_backend, to_uint8
 from gsseg.run_folder import load_run
@@ -74,6 +75,7 @@ def render_run(
         for view in tqdm(scene.split(split), desc="rendering", unit="view", disable=not progress):
             pose = torch.as_tensor(view.cam_from_world, dtype=torch.float32, device=device)
             result = render(gaussians, view.camera, pose, sh_degree=sh_degree,
+                            background=background_image(run.environment, view.camera, pose),
                             with_features="labels" in what, backend=backend)
             if "rgb" in what:
                 write_png(tmp / "rgb" / f"{view.stem}.png", to_uint8(result.rgb))

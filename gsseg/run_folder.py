@@ -5,6 +5,7 @@ rendering read.
       config.json      every option of the run
       gaussians.ply    3D-GS PLY + obj_feat_0..15
       classifier.pt    the 16 -> num_classes linear layer
+      environment.pt   the learned background (SH of the ray direction), when the run has one
       checkpoints/     resumable state
       metrics.json     the training curve
 """
@@ -20,12 +21,14 @@ import torch
 
 from dataset_tools.atomic import write_bytes_atomic
 from dataset_tools.errors import InputError
+from gsseg.environment import Environment
 from gsseg.gaussians import OBJ_FEAT_DIM, Gaussians
 from gsseg.ply import read_ply
 
 CONFIG = "config.json"
 GAUSSIANS = "gaussians.ply"
 CLASSIFIER = "classifier.pt"
+ENVIRONMENT = "environment.pt"
 CHECKPOINTS = "checkpoints"
 METRICS = "metrics.json"
 
@@ -53,6 +56,7 @@ class Run:
     config: dict
     gaussians: Gaussians
     classifier: torch.nn.Linear
+    environment: Environment | None = None  # None: the run renders on black
 
 
 def load_run(root: Path | str) -> Run:
@@ -65,4 +69,8 @@ def load_run(root: Path | str) -> Run:
     state = torch.load(root / CLASSIFIER, map_location="cpu", weights_only=True)
     classifier = make_classifier(state["weight"].shape[0])
     classifier.load_state_dict(state)
-    return Run(root=root, config=config, gaussians=read_ply(root / GAUSSIANS), classifier=classifier)
+    environment = None
+    if (root / ENVIRONMENT).is_file():
+        environment = Environment.from_state(torch.load(root / ENVIRONMENT, map_location="cpu", weights_only=True))
+    return Run(root=root, config=config, gaussians=read_ply(root / GAUSSIANS), classifier=classifier,
+               environment=environment)

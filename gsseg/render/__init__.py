@@ -85,7 +85,8 @@ def render(
         camera: pinhole intrinsics and image size.
         cam_from_world: (3, 4) or (4, 4) world-to-camera transform.
         sh_degree: SH bands used for colour, 0..3.
-        background: (3,) colour behind the Gaussians; black when None.
+        background: what lies behind the Gaussians, a (3,) colour or an (H, W, 3) image (e.g.
+            a learned :class:`gsseg.environment.Environment`); black when None.
         with_features: also blend the 16-d object features.
         backend: ``cpu``, ``torch`` or ``gsplat`` (see :func:`resolve_backend`).
 

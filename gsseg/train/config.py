@@ -50,6 +50,7 @@ class LearningRates:
     quats: float = 1e-3
     obj_feat: float = 5e-3
     classifier: float = 5e-4
+    environment: float = 1e-2
 
 
 @dataclass(frozen=True)
@@ -68,6 +69,7 @@ class TrainConfig:
     gamma_obj: float = 1.0
     lambda_dssim: float = 0.2
     sh_degree: int = 3
+    environment_degree: int | None = 3  # SH degree of the learned background; None: black
     num_classes: int = 256
     densify_grad_threshold: float = 2e-4
     percent_dense: float = 0.01
@@ -84,6 +86,8 @@ class TrainConfig:
             raise InputError(f"--iters must be at least 1 (got {self.iters}).")
         if not 0 <= self.sh_degree <= 3:
             raise InputError(f"--sh-degree must be 0..3 (got {self.sh_degree}).")
+        if self.environment_degree is not None and not 0 <= self.environment_degree <= 3:
+            raise InputError(f"--environment-degree must be 0..3 (got {self.environment_degree}).")
 
     @property
     def timing(self) -> Schedule:

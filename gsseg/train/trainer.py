@@ -14,10 +14,11 @@ from tqdm import tqdm
 
 from dataset_tools.errors import InputError
 from dataset_tools.scene import Scene, load_scene
+from gsseg.environment import Environment, background_image
 from gsseg.gaussians import gaussians_from_points, random_points
 from gsseg.ply import write_ply
 from gsseg.render import RenderOutput, backend_device, render, resolve_backend
-from gsseg.run_folder import (CHECKPOINTS, CLASSIFIER, CONFIG, GAUSSIANS, METRICS, make_classifier,
+from gsseg.run_folder import (CHECKPOINTS, CLASSIFIER, CONFIG, ENVIRONMENT, GAUSSIANS, METRICS, make_classifier,
                               write_json, write_torch)
 from gsseg.train.config import TrainConfig
 from gsseg.train.densify import DensifyOptions, DensifyStats, densify_and_prune
@@ -115,7 +116,12 @@ def train(scene_dir: Path | str, run: Path | str, cfg: TrainConfig, *, resume: b
     torch.manual_seed(cfg.seed)
     opt = GaussianOptimizer(_initial_gaussians(scene, cfg).to(device), cfg.lr, extent)
     classifier = make_classifier(cfg.num_classes).to(device)
-    cls_opt = torch.optim.Adam(classifier.parameters(), lr=cfg.lr.classifier, eps=1e-15)
+    environment = Environment(cfg.environment_degree).to(device) if cfg.environment_degree is not None else None
+    # The classifier and the environment: small modules beside the Gaussians, one Adam.
+    groups = [{"params": list(classifier.parameters()), "lr": cfg.lr.classifier}]
+    if environment is not None:
+        groups.append({"params": list(environment.parameters()), "lr": cfg.lr.environment})
+    cls_opt = torch.optim.Adam(groups, eps=1e-15)
     stats = DensifyStats.zeros(len(opt), device)
     history: list[dict] = []
     step = 0
@@ -123,6 +129,8 @@ def train(scene_dir: Path | str, run: Path | str, cfg: TrainConfig, *, resume: b
         ckpt = torch.load(_latest_checkpoint(run), map_location=device, weights_only=False)
         opt.load_state_dict(ckpt["gaussians"])
         classifier.load_state_dict(ckpt["classifier"])
+        if environment is not None:
+            environment.load_state_dict(ckpt["environment"])
         cls_opt.load_state_dict(ckpt["classifier_adam"])
         stats = DensifyStats(**ckpt["densify"])
         history, step = ckpt["history"], ckpt["step"]
@@ -130,6 +138,7 @@ def train(scene_dir: Path | str, run: Path | str, cfg: TrainConfig, *, resume: b
     def save_checkpoint() -> None:
         write_torch(run / CHECKPOINTS / f"step_{step:07d}.pt", {
             "step": step, "gaussians": opt.state_dict(), "classifier": classifier.state_dict(),
+            "environment": environment.state_dict() if environment is not None else None,
             "classifier_adam": cls_opt.state_dict(), "densify": vars(stats), "history": history})
         for old in sorted((run / CHECKPOINTS).glob("step_*.pt"))[:-2]:
             old.unlink()
@@ -145,7 +154,7 @@ def train(scene_dir: Path | str, run: Path | str, cfg: TrainConfig, *, resume: b
             step += 1
             opt.set_lr("means", _means_lr(step, cfg, timing.iters, extent))
             view = views[_view_at(step, len(views), cfg.seed)]
-            losses, out = _train_step(opt, classifier, view, cfg, backend,
+            losses, out = _train_step(opt, classifier, environment, view, cfg, backend,
                                       sh_degree=min(cfg.sh_degree, step // timing.sh_increase_every),
                                       obj_pixels=timing.object_loss_pixels,
                                       generator=torch.Generator(device).manual_seed(cfg.seed * 7919 + step))
@@ -182,18 +191,21 @@ def train(scene_dir: Path | str, run: Path | str, cfg: TrainConfig, *, resume: b
     if finished:
         write_ply(opt.gaussians.detach().to("cpu"), run / GAUSSIANS)
         write_torch(run / CLASSIFIER, {k: v.cpu() for k, v in classifier.state_dict().items()})
+        if environment is not None:
+            write_torch(run / ENVIRONMENT, {k: v.cpu() for k, v in environment.state_dict().items()})
         write_json(run / METRICS, {"train": {"steps": step, "gaussians": len(opt), "history": history}})
     return TrainResult(run=run, step=step, num_gaussians=len(opt),
                        seconds=time.perf_counter() - start_time, finished=finished)
 
 
-def _train_step(opt: GaussianOptimizer, classifier: torch.nn.Linear, view: TrainView, cfg: TrainConfig,
-                backend: str, sh_degree: int, obj_pixels: int = 0,
+def _train_step(opt: GaussianOptimizer, classifier: torch.nn.Linear, environment: Environment | None,
+                view: TrainView, cfg: TrainConfig, backend: str, sh_degree: int, obj_pixels: int = 0,
                 generator: torch.Generator | None = None) -> tuple[dict, RenderOutput]:
     """Render one view, compute the loss and back-propagate it (unless it is not finite).
     Returns the loss terms and the render."""
     use_mask = view.mask is not None and cfg.gamma_obj != 0
     out = render(opt.gaussians, view.camera, view.cam_from_world, sh_degree=sh_degree,
+                 background=background_image(environment, view.camera, view.cam_from_world),
                  with_features=use_mask, backend=backend)
     rgb_loss = photometric_loss(out.rgb, view.image, cfg.lambda_dssim)
     obj = object_loss(out.features, view.mask, classifier, obj_pixels, generator) if use_mask else torch.zeros((), device=rgb_loss.device)

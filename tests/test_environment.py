@@ -1,0 +1,96 @@
+"""The learned environment behind the Gaussians: ray directions, SH colour, compositing,
+training and the run folder."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from dataset_tools.cameras import PinholeCamera
+from gsseg.environment import Environment, background_image, ray_directions
+from gsseg.gaussians import Gaussians
+from gsseg.render import render
+from gsseg.sh import C0, C1
+
+CAMERA = PinholeCamera(width=8, height=6, fx=10.0, fy=10.0, cx=4.0, cy=3.0)
+
+
+def rotation_z(deg: float) -> np.ndarray:
+    a = np.deg2rad(deg)
+    return np.array([[np.cos(a), -np.sin(a), 0.0], [np.sin(a), np.cos(a), 0.0], [0.0, 0.0, 1.0]])
+
+
+def test_ray_directions_are_the_world_rays_through_pixel_centres():
+    R = rotation_z(30.0) @ np.array([[1.0, 0, 0], [0, 0, -1], [0, 1, 0]])  # any rotation
+    pose = torch.as_tensor(np.concatenate([R, [[1.0], [2.0], [3.0]]], 1), dtype=torch.float32)
+    dirs = ray_directions(CAMERA, pose)
+    assert dirs.shape == (6, 8, 3) and torch.allclose(dirs.norm(dim=-1), torch.ones(6, 8))
+    # Pixel (row 2, column 3) is centred at (3.5, 2.5): camera ray (-0.05, -0.05, 1).
+    d_cam = np.array([-0.05, -0.05, 1.0]) / np.linalg.norm([-0.05, -0.05, 1.0])
+    assert dirs[2, 3].numpy() == pytest.approx(R.T @ d_cam, abs=1e-6)
+
+
+def test_environment_colour_follows_its_sh_coefficients():
+    env = Environment(degree=1)
+    with torch.no_grad():
+        env.coeffs[0, 0] = torch.tensor([0.4, 0.0, -0.4]) / C0  # grey 0.5 +-0.4
+        env.coeffs[0, 2, 1] = 0.3 / C1  # green follows the world z of the ray
+    pose = torch.eye(4)[:3]  # camera looking along world +z
+    image = env(CAMERA, pose)
+    z = ray_directions(CAMERA, pose)[..., 2]
+    assert torch.allclose(image[..., 0], torch.full_like(z, 0.9), atol=1e-6)
+    assert torch.allclose(image[..., 1], 0.5 + 0.3 * z, atol=1e-6)
+    assert torch.allclose(image[..., 2], torch.full_like(z, 0.1), atol=1e-6)
+    assert background_image(None, CAMERA, pose) is None
+
+
+def test_render_composites_an_image_background_behind_the_gaussians():
+    g = Gaussians(means=torch.tensor([[0.0, 0.0, 2.0]]), log_scales=torch.full((1, 3), -2.0),
+                  quats=torch.tensor([[1.0, 0, 0, 0]]), opacity_logits=torch.tensor([2.0]),
+                  sh_dc=torch.zeros(1, 3), sh_rest=torch.zeros(1, 15, 3), obj_feat=torch.zeros(1, 16))
+    pose = torch.eye(4)[:3]
+    background = torch.rand(6, 8, 3, generator=torch.Generator().manual_seed(0))
+    plain = render(g, CAMERA, pose, with_features=False)
+    over = render(g, CAMERA, pose, background=background, with_features=False)
+    assert torch.allclose(over.rgb, plain.rgb + (1 - plain.alpha[..., None]) * background, atol=1e-6)
+    assert plain.alpha.max() > 0.5 and plain.alpha.min() < 0.01  # both cases occur
+
+
+def test_environment_is_learned_through_the_composite():
+    """Fitting a render whose only Gaussian covers part of the view to a sky that brightens
+    upwards recovers that sky in the environment: the gradient reaches it through (1 - alpha)."""
+    g = Gaussians(means=torch.tensor([[0.0, 0.0, 2.0]]), log_scales=torch.full((1, 3), -2.0),
+                  quats=torch.tensor([[1.0, 0, 0, 0]]), opacity_logits=torch.tensor([4.0]),
+                  sh_dc=torch.zeros(1, 3), sh_rest=torch.zeros(1, 15, 3), obj_feat=torch.zeros(1, 16))
+    pose = torch.as_tensor([[1.0, 0, 0, 0], [0, 0, -1, 0], [0, 1, 0, 0]])  # looking along world +y
+    sky = 0.5 + 0.4 * ray_directions(CAMERA, pose)[..., 2:3].expand(-1, -1, 3)
+    target = render(g, CAMERA, pose, background=sky, with_features=False).rgb
+    env = Environment(degree=1)
+    adam = torch.optim.Adam(env.parameters(), lr=0.05)
+    for _ in range(300):
+        loss = ((render(g, CAMERA, pose, background=env(CAMERA, pose), with_features=False).rgb - target) ** 2).mean()
+        adam.zero_grad()
+        loss.backward()
+        adam.step()
+    assert torch.allclose(env(CAMERA, pose), sky, atol=0.02)
+
+
+def test_runs_carry_their_environment_to_the_renderers(small_scene, trained, tmp_path):
+    from dataset_tools import load_scene
+    from dataset_tools.image_files import read_image
+    from gsseg.render import to_uint8
+    from gsseg.render_views import render_run
+    from gsseg.run_folder import load_run
+
+    run = load_run(trained)
+    assert run.environment is not None and run.environment.degree == 3
+    out = render_run(trained, small_scene.root, tmp_path / "r", what=("rgb",), backend="cpu", progress=False)
+    view = load_scene(small_scene.root).split("test")[0]
+    pose = torch.as_tensor(view.cam_from_world, dtype=torch.float32)
+    with torch.no_grad():
+        expected = render(run.gaussians, view.camera, pose, with_features=False,
+                          background=background_image(run.environment, view.camera, pose)).rgb
+        black = render(run.gaussians, view.camera, pose, with_features=False).rgb
+    written = read_image(out / "rgb" / f"{view.stem}.png")
+    assert np.array_equal(written, to_uint8(expected)) and not np.array_equal(written, to_uint8(black))
