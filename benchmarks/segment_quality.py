@@ -15,13 +15,11 @@ import json
 import tempfile
 from pathlib import Path
 
-import numpy as np
 import torch
 
 from benchmarks.scenes import corrupted_scene
-from dataset_tools.label_maps import match_ids, overlap
 from dataset_tools.scene import load_scene
-from eval.metrics import mean_iou
+from eval.metrics import matched_miou
 from eval.report import markdown_table
 from gsseg.render_views import segment_pixels
 from gsseg.run_folder import load_run
@@ -39,10 +37,7 @@ def score(run: Path, scene: Path, masks: str, method: str, gamma_p: float) -> fl
     views = load_scene(scene).split("test")
     preds = [segment_pixels(model, seg.labels, v.camera, torch.as_tensor(v.cam_from_world, dtype=torch.float32),
                             backend="cpu") for v in views]
-    truths = [v.load_mask() for v in views]
-    mapping = match_ids(sum(overlap(p, t) for p, t in zip(preds, truths)))
-    renamed = [np.where(mapping[p] >= 0, mapping[p], 255).astype(np.uint8) for p in preds]
-    return mean_iou(renamed, truths)
+    return matched_miou(preds, [v.load_mask() for v in views])
 
 
 def main() -> None:

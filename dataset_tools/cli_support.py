@@ -29,11 +29,3 @@ def run_cli(group: click.Group, prog_name: str) -> Callable[[], None]:
 
     return main
 
-
-def add_planned_command(group: click.Group, name: str, summary: str) -> None:
-    """List a sub-command that a later version provides; running it says so and exits 2."""
-
-    @group.command(name=name, help=f"{summary} (not in this version yet)",
-                   context_settings={"ignore_unknown_options": True, "allow_extra_args": True})
-    def planned() -> None:
-        raise InputError(f"`{group.name} {name}` is not available in this version yet; see the README for what is.")

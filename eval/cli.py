@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from dataset_tools.cli_support import add_planned_command, run_cli
+from dataset_tools.cli_support import run_cli
 
 
 @click.group(name="gseval", context_settings={"help_option_names": ["-h", "--help"]})
@@ -23,14 +23,16 @@ def cli() -> None:
 @click.option("--object-id", type=int, default=None, help="Label to edit in the image rows (default: the largest).")
 @click.option("--color", nargs=3, type=int, default=(255, 40, 200), show_default=True, help="Recolour target, 0..255.")
 @click.option("--backend", default="auto", show_default=True, help="auto, cpu, torch or gsplat.")
+@click.option("--lpips", type=click.Path(path_type=Path), default=None,
+              help="LPIPS network (ONNX, from `gseval export-lpips`); without it LPIPS is n/a.")
 @click.option("--force", is_flag=True, help="Replace --out if it exists.")
 def report(run: Path, scene: Path, out: Path, gt_masks: str, split: str, object_id: int | None,
-           color: tuple[int, int, int], backend: str, force: bool) -> None:
+           color: tuple[int, int, int], backend: str, lpips: Path | None, force: bool) -> None:
     """Metrics (visible and extracted mIoU/mAcc, PSNR, SSIM) and a markdown/HTML report of RUN."""
     from eval.report import report_run
 
     ev = report_run(run, scene, out, gt_masks=gt_masks, split=split, object_id=object_id, color=color,
-                    backend=backend, overwrite=force)
+                    backend=backend, lpips=lpips, overwrite=force)
     s = ev.summary()
     click.echo(f"mIoU visible {s['visible']['miou']:.3f}, extracted {s['extracted']['miou']:.3f}; "
                f"PSNR {s['psnr']:.2f} dB")
@@ -51,6 +53,30 @@ def compare(runs: tuple[Path, ...], out: Path | None) -> None:
         write_bytes_atomic(out, (table + "\n").encode())
 
 
-add_planned_command(cli, "paper-tables", "The analogs of the paper's tables on synthetic scenes")
+@cli.command("paper-tables")
+@click.option("--out", required=True, type=click.Path(path_type=Path), help="Folder for the tables and the work.")
+@click.option("--quick", is_flag=True, help="Two small scenes and a short schedule (about 10 minutes on 2 cores).")
+@click.option("--backend", default="auto", show_default=True, help="auto, cpu, torch or gsplat.")
+def paper_tables(out: Path, quick: bool, backend: str) -> None:
+    """The analogs of the paper's tables on synthetic scenes (markdown and JSON); rerunning
+    reuses the finished work in OUT/work."""
+    from eval.paper_tables import SETUPS
+    from eval.paper_tables import paper_tables as run_tables
+
+    path = run_tables(out, setup=SETUPS["quick" if quick else "full"], backend=backend)
+    click.echo(path.read_text())
+    click.echo(f"wrote {path} and {path.with_suffix('.json')}")
+
+
+@cli.command("export-lpips")
+@click.option("--out", required=True, type=click.Path(path_type=Path), help="ONNX file to write.")
+@click.option("--net", type=click.Choice(["alex", "vgg", "squeeze"]), default="alex", show_default=True)
+@click.option("--force", is_flag=True, help="Replace --out if it exists.")
+def export_lpips_cmd(out: Path, net: str, force: bool) -> None:
+    """Write the lpips package's network as ONNX for `gseval report --lpips` (needs `pip install lpips`)."""
+    from eval.lpips import export_lpips
+
+    click.echo(f"wrote {export_lpips(out, net, overwrite=force)}")
+
 
 main = run_cli(cli, "gseval")

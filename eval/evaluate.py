@@ -14,6 +14,7 @@ binary IoU and pixel accuracy; mIoU and mAcc average them. PSNR and SSIM per tes
 from __future__ import annotations
 
 import json
+import dataclasses
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -24,6 +25,7 @@ from dataset_tools.atomic import write_bytes_atomic
 from dataset_tools.errors import InputError
 from dataset_tools.label_maps import match_ids, overlap
 from dataset_tools.scene import View, load_scene
+from eval.lpips import LPIPS
 from eval.metrics import binary_scores, psnr, ssim
 from eval.renders import ViewRenders, render_view
 from gsseg.render import backend_device, resolve_backend
@@ -39,8 +41,9 @@ LPIPS_NA = "n/a: weights not available"
 class Evaluation:
     """Every score of one run on one scene; ``summary()`` has the per-scene averages.
 
-    objects: rows {view, object, protocol, iou, acc}; views: rows {view, psnr, ssim};
-    id_map: predicted label -> ground-truth ID (unmatched labels are absent).
+    objects: rows {view, object, protocol, iou, acc}; views: rows {view, psnr, ssim} (and lpips
+    when an LPIPS network was given); id_map: predicted label -> ground-truth ID (unmatched
+    labels are absent).
     """
 
     run: str
@@ -49,11 +52,12 @@ class Evaluation:
     id_map: dict[int, int] = field(default_factory=dict)
     objects: list[dict] = field(default_factory=list)
     views: list[dict] = field(default_factory=list)
-    lpips: str = LPIPS_NA
 
     def summary(self) -> dict:
+        lpips = [v["lpips"] for v in self.views if "lpips" in v]
         out: dict = {"views": len(self.views), "psnr": _mean([v["psnr"] for v in self.views]),
-                     "ssim": _mean([v["ssim"] for v in self.views]), "lpips": self.lpips}
+                     "ssim": _mean([v["ssim"] for v in self.views]),
+                     "lpips": _mean(lpips) if lpips and len(lpips) == len(self.views) else LPIPS_NA}
         for protocol in PROTOCOLS:
             rows = [r for r in self.objects if r["protocol"] == protocol]
             out[protocol] = {"miou": _mean([r["iou"] for r in rows]), "macc": _mean([r["acc"] for r in rows]),
@@ -75,7 +79,7 @@ class Evaluation:
 
     @classmethod
     def from_json(cls, data: dict) -> Evaluation:
-        fields = {k: v for k, v in data.items() if k != "summary"}
+        fields = {k: v for k, v in data.items() if k in {f.name for f in dataclasses.fields(cls)}}
         fields["id_map"] = {int(k): v for k, v in fields.get("id_map", {}).items()}
         return cls(**fields)
 
@@ -87,15 +91,18 @@ def _mean(values: list[float]) -> float | None:
     return float(np.mean(values)) if values else None
 
 
-def score_views(renders: list[ViewRenders], *, run: str, scene: str, split: str) -> Evaluation:
-    """Match predicted labels to ground-truth IDs and score every view in both protocols."""
+def score_views(renders: list[ViewRenders], *, run: str, scene: str, split: str,
+                lpips: LPIPS | None = None) -> Evaluation:
+    """Match predicted labels to ground-truth IDs and score every view in both protocols
+    (and by ``lpips`` when given)."""
     with_truth = [r for r in renders if r.truth is not None]
     mapping = match_ids(sum(overlap(r.visible, r.truth) for r in with_truth)) if with_truth else np.full(256, -1)
     id_map = {int(p): int(g) for p, g in enumerate(mapping) if p > 0 and g > 0}
     label_of = {g: p for p, g in id_map.items()}
     result = Evaluation(run=run, scene=scene, split=split, id_map=id_map)
     for r in renders:
-        result.views.append({"view": r.stem, "psnr": psnr(r.rgb, r.image), "ssim": ssim(r.rgb, r.image)})
+        result.views.append({"view": r.stem, "psnr": psnr(r.rgb, r.image), "ssim": ssim(r.rgb, r.image),
+                             **({"lpips": lpips(r.rgb, r.image)} if lpips is not None else {})})
         if r.truth is None:
             continue
         renamed = mapping[r.visible]
@@ -123,20 +130,24 @@ def load_inputs(run_dir: Path, scene_dir: Path, gt_masks: str | None, split: str
 
 
 def evaluate(run: Run, segmentation: Segmentation, views: list[View], *, with_truth: bool, scene: str, split: str,
-             backend: str, progress: bool = True) -> tuple[Evaluation, list[ViewRenders]]:
+             backend: str, lpips: LPIPS | None = None, progress: bool = True) -> tuple[Evaluation, list[ViewRenders]]:
     """Render ``views`` with the segmented run and score them (against their masks when
-    ``with_truth``). ``backend`` must be resolved. Returns the scores and the renders."""
+    ``with_truth``; by ``lpips`` when given). ``backend`` must be resolved. Returns the scores
+    and the renders."""
     gaussians = run.gaussians.to(backend_device(backend))
     renders = [render_view(gaussians, segmentation, v, sh_degree=run.config.get("sh_degree", 3), backend=backend,
-                           truth=v.load_mask() if with_truth else None)
+                           truth=v.load_mask() if with_truth else None, environment=run.environment)
                for v in tqdm(views, desc="evaluating", unit="view", disable=not progress)]
-    return score_views(renders, run=str(run.root), scene=scene, split=split), renders
+    return score_views(renders, run=str(run.root), scene=scene, split=split, lpips=lpips), renders
 
 
 def evaluate_run(run_dir: Path | str, scene_dir: Path | str, *, gt_masks: str | None = "object_mask",
-                 split: str = "test", backend: str = "auto", progress: bool = True) -> tuple[Evaluation, list[ViewRenders]]:
+                 split: str = "test", backend: str = "auto", lpips: Path | str | None = None,
+                 progress: bool = True) -> tuple[Evaluation, list[ViewRenders]]:
     """Render the ``split`` views of a segmented run and score them against ``gt_masks``
-    (``None``: image metrics only). Returns the scores and the renders."""
+    (``None``: image metrics only) and with the LPIPS network file ``lpips`` (``None``: LPIPS
+    is reported as not available). Returns the scores and the renders."""
     run, segmentation, views = load_inputs(Path(run_dir), Path(scene_dir), gt_masks, split)
     return evaluate(run, segmentation, views, with_truth=gt_masks is not None, scene=str(scene_dir), split=split,
-                    backend=resolve_backend(backend), progress=progress)
+                    backend=resolve_backend(backend), lpips=LPIPS(lpips) if lpips is not None else None,
+                    progress=progress)

@@ -5,6 +5,8 @@ from __future__ import annotations
 import numpy as np
 import torch
 
+from dataset_tools.label_maps import match_ids, overlap
+
 
 def psnr(pred: np.ndarray, target: np.ndarray) -> float:
     """PSNR in dB of two uint8 images of the same shape."""
@@ -41,3 +43,10 @@ def mean_iou(preds: list[np.ndarray], targets: list[np.ndarray]) -> float:
     """mIoU: the IoU of every (view, ground-truth object) pair, averaged."""
     values = [iou for p, t in zip(preds, targets) for iou in object_ious(p, t).values()]
     return float(np.mean(values)) if values else float("nan")
+
+
+def matched_miou(preds: list[np.ndarray], targets: list[np.ndarray]) -> float:
+    """mIoU after renaming predicted IDs to ground-truth IDs by one Hungarian matching on the
+    pixel overlap summed over all views (unmatched predicted IDs count as wrong everywhere)."""
+    mapping = match_ids(sum(overlap(p, t) for p, t in zip(preds, targets)))
+    return mean_iou([np.where(mapping[p] >= 0, mapping[p], 255).astype(np.uint8) for p in preds], targets)

@@ -21,8 +21,10 @@ from dataset_tools.errors import InputError
 from dataset_tools.image_files import colorize_labels, encode_png
 from dataset_tools.scene import View
 from eval.evaluate import PROTOCOLS, Evaluation, evaluate, load_inputs
+from eval.lpips import LPIPS
 from eval.renders import ViewRenders
 from gsseg.edits import apply_edit
+from gsseg.environment import background_image
 from gsseg.render import backend_device, render, resolve_backend, to_uint8
 from gsseg.run_folder import METRICS, Run
 from gsseg.segment.reassign import Segmentation
@@ -51,13 +53,13 @@ def edit_panels(run: Run, segmentation: Segmentation, views: list[View], label: 
     out: dict[str, list[np.ndarray]] = {}
     for op in ("remove", "extract", "recolor"):
         edited = apply_edit(run.gaussians, selected, op, tuple(c / 255 for c in color)).to(device)
-        background = torch.ones(3, device=device) if op == "extract" else None
-        out[op] = [
-            to_uint8(render(edited, v.camera, torch.as_tensor(v.cam_from_world, dtype=torch.float32, device=device),
-                            sh_degree=run.config.get("sh_degree", 3), background=background, with_features=False,
-                            backend=backend).rgb)
-            for v in views
-        ]
+        out[op] = []
+        for v in views:
+            pose = torch.as_tensor(v.cam_from_world, dtype=torch.float32, device=device)
+            background = (torch.ones(3, device=device) if op == "extract"
+                          else background_image(run.environment, v.camera, pose))
+            out[op].append(to_uint8(render(edited, v.camera, pose, sh_degree=run.config.get("sh_degree", 3),
+                                           background=background, with_features=False, backend=backend).rgb))
     return out
 
 
@@ -102,16 +104,17 @@ def _tables(ev: Evaluation) -> tuple[list[str], list[list[str]], list[str], list
     s = ev.summary()
     summary_head = ["views", "mIoU visible", "mAcc visible", "mIoU extracted", "mAcc extracted", "PSNR", "SSIM", "LPIPS"]
     summary = [[str(s["views"]), _fmt(s["visible"]["miou"]), _fmt(s["visible"]["macc"]), _fmt(s["extracted"]["miou"]),
-                _fmt(s["extracted"]["macc"]), _fmt(s["psnr"], 2), _fmt(s["ssim"]), s["lpips"]]]
+                _fmt(s["extracted"]["macc"]), _fmt(s["psnr"], 2), _fmt(s["ssim"]),
+                s["lpips"] if isinstance(s["lpips"], str) else _fmt(s["lpips"])]]
     object_head = ["object", "predicted label", "IoU visible", "acc visible", "IoU extracted", "acc extracted"]
     label_of = {g: p for p, g in ev.id_map.items()}
     objects = [[str(o), str(label_of.get(o, "none")), *(_fmt(v[f"{p}_{m}"]) for p in PROTOCOLS for m in ("iou", "acc"))]
                for o, v in ev.per_object().items()]
-    view_head = ["view", "PSNR", "SSIM", "mIoU visible", "mIoU extracted"]
+    view_head = ["view", "PSNR", "SSIM", "LPIPS", "mIoU visible", "mIoU extracted"]
     views = []
     for v in ev.views:
         rows = {p: [r["iou"] for r in ev.objects if r["view"] == v["view"] and r["protocol"] == p] for p in PROTOCOLS}
-        views.append([v["view"], _fmt(v["psnr"], 2), _fmt(v["ssim"]),
+        views.append([v["view"], _fmt(v["psnr"], 2), _fmt(v["ssim"]), _fmt(v.get("lpips")),
                       *(_fmt(float(np.mean(rows[p])) if rows[p] else None) for p in PROTOCOLS)])
     return summary_head, summary, object_head, objects, view_head, views
 
@@ -172,15 +175,18 @@ figure{{margin:0 0 12px}} img{{max-width:100%;image-rendering:pixelated}} figcap
 
 def report_run(run_dir: Path | str, scene_dir: Path | str, out_dir: Path | str, *, gt_masks: str | None = "object_mask",
                split: str = "test", object_id: int | None = None, color: tuple[int, int, int] = (255, 40, 200),
-               backend: str = "auto", overwrite: bool = False, progress: bool = True) -> Evaluation:
-    """Evaluate a segmented run and write its report to ``out_dir`` and ``RUN/evaluation.json``."""
+               backend: str = "auto", lpips: Path | str | None = None, overwrite: bool = False,
+               progress: bool = True) -> Evaluation:
+    """Evaluate a segmented run and write its report to ``out_dir`` and ``RUN/evaluation.json``
+    (LPIPS with the network file ``lpips``, else reported as not available)."""
     run_dir, scene_dir, out_dir = Path(run_dir), Path(scene_dir), Path(out_dir)
     if out_dir.exists() and not overwrite:
         raise InputError(f"{out_dir}: already exists; pass --force to replace it.")
     backend = resolve_backend(backend)
+    lpips_net = LPIPS(lpips) if lpips is not None else None  # a bad file fails before any rendering
     run, segmentation, views = load_inputs(run_dir, scene_dir, gt_masks, split)
     ev, renders = evaluate(run, segmentation, views, with_truth=gt_masks is not None, scene=str(scene_dir), split=split,
-                           backend=backend, progress=progress)
+                           backend=backend, lpips=lpips_net, progress=progress)
     selected = default_object(segmentation) if object_id is None else int(object_id)
     edits = edit_panels(run, segmentation, views, selected, color, backend)
     metrics = run_dir / METRICS

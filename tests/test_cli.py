@@ -61,8 +61,3 @@ def test_user_errors_are_one_line_and_exit_2(tmp_path, args, message):
     assert message in r.stderr and "Traceback" not in r.stderr
     assert len(r.stderr.strip().splitlines()) == 1
     assert not (tmp_path / "x").exists()
-
-
-def test_planned_commands_say_so(tmp_path):
-    r = run(script("gseval"), "paper-tables", "--out", str(tmp_path))
-    assert r.returncode == 2 and "not available in this version" in r.stderr

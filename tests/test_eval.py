@@ -15,11 +15,13 @@ import pytest
 import torch
 
 from dataset_tools.cameras import PinholeCamera
+from dataset_tools.image_files import read_image
+from dataset_tools.scene import load_scene
 from eval.evaluate import score_views
 from eval.metrics import binary_scores, psnr, ssim
 from eval.renders import ViewRenders, render_view
 from gsseg.gaussians import Gaussians
-from gsseg.render_views import segment_pixels
+from gsseg.render_views import render_run, segment_pixels
 from gsseg.segment.reassign import Segmentation
 
 
@@ -177,6 +179,43 @@ def test_bad_input_is_one_sentence_and_exit_2(case, message, trained, segmented,
     assert len(r.stderr.strip().splitlines()) == 1 and not Path(out).exists()
 
 
+def _standin_lpips(path: Path) -> None:
+    """An ONNX graph with LPIPS's inputs and output that returns the mean squared difference of
+    its [-1, 1] inputs: a stand-in for the real network, to test the plumbing and the scaling."""
+
+    class MeanSquared(torch.nn.Module):
+        def forward(self, image0, image1):
+            return ((image0 - image1) ** 2).mean().reshape(1, 1, 1, 1)
+
+    x = torch.zeros(1, 3, 8, 8)
+    torch.onnx.export(MeanSquared(), (x, x), str(path), input_names=["image0", "image1"], output_names=["d"],
+                      dynamic_axes={"image0": {2: "h", 3: "w"}, "image1": {2: "h", 3: "w"}}, dynamo=False)
+
+
+def test_lpips_plumbing_reports_the_networks_value_per_view(segmented, small_scene, tmp_path):
+    from eval.report import report_run
+
+    net = tmp_path / "lpips.onnx"
+    _standin_lpips(net)
+    ev = report_run(segmented, small_scene.root, tmp_path / "report", backend="cpu", lpips=net, progress=False)
+    renders = render_run(segmented, small_scene.root, tmp_path / "renders", what=("rgb",), backend="cpu",
+                         progress=False)
+    for row, view in zip(ev.views, load_scene(small_scene.root).split("test"), strict=True):
+        rgb = read_image(renders / "rgb" / f"{view.stem}.png").astype(np.float64)
+        assert row["lpips"] == pytest.approx(np.mean(((rgb - view.load_image()) / 127.5) ** 2), rel=1e-4)
+    assert ev.summary()["lpips"] == pytest.approx(np.mean([v["lpips"] for v in ev.views]))
+    assert "n/a" not in (tmp_path / "report" / "report.md").read_text().split("## Objects")[0]
+
+
+def test_unusable_lpips_file_is_one_sentence(segmented, small_scene, tmp_path):
+    bad = tmp_path / "lpips.onnx"
+    bad.write_bytes(b"not onnx")
+    r = subprocess.run([script("gseval"), "report", str(segmented), "--scene", str(small_scene.root),
+                        "--out", str(tmp_path / "out"), "--lpips", str(bad)], capture_output=True, text=True)
+    assert r.returncode == 2 and "ONNX Runtime cannot load it" in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1 and not (tmp_path / "out").exists()
+
+
 def test_demo_plumbing_runs_every_stage_with_few_iterations(tmp_path):
     """Plumbing only: 20 training iterations, so the scores mean nothing; every stage runs and
     the report is where the demo says."""
@@ -189,3 +228,36 @@ def test_demo_plumbing_runs_every_stage_with_few_iterations(tmp_path):
     assert f"report: {report}" in r.stdout and report.is_file()
     edits = sorted(p.name for p in (tmp_path / "demo" / "run" / "edits").iterdir())
     assert [e.split("_")[0] for e in edits] == ["extract", "recolor", "remove"]
+
+
+def test_matched_miou_renames_before_scoring():
+    truth = np.zeros((4, 4), np.uint8)
+    truth[:2], truth[2:, :2] = 1, 2
+    pred = np.where(truth == 1, 7, np.where(truth == 2, 3, 0)).astype(np.uint8)
+    from eval.metrics import matched_miou
+
+    assert matched_miou([pred], [truth]) == 1.0
+    pred[3, 1] = 7  # one pixel of object 2 (4 px) taken by object 1 (8 px)
+    assert matched_miou([pred], [truth]) == pytest.approx((8 / 9 + 3 / 4) / 2)
+
+
+def test_paper_tables_plumbing_writes_every_table_and_reuses_its_work(tmp_path):
+    """Plumbing only (a tiny scene and 30 iterations): every table is produced, the JSON holds
+    every number the markdown shows, and a second run retrains nothing."""
+    from eval.paper_tables import GAMMAS, METHODS, TRAINING_MASKS, TableSetup, paper_tables
+
+    setup = TableSetup(paths=("orbit",), seeds=(3,), res=128, views=8, objects=2, iters=30, images="images_4",
+                       min_area=20)
+    md = paper_tables(tmp_path, setup=setup, backend="cpu", progress=False).read_text()
+    for title in ("Table 1", "Table 2", "Table 3", "Table 4"):
+        assert title in md
+    scene = json.loads((tmp_path / "paper_tables.json").read_text())["scenes"]["orbit-3"]
+    assert set(scene["training"]) == set(TRAINING_MASKS) and set(scene["methods"]) == {m for m, _ in METHODS}
+    assert set(scene["gamma_p"]) == {f"{g:g}" for g in GAMMAS}
+    assert f"| exact | {scene['training']['exact']['psnr']:.2f} |" in md
+    assert all(0 <= scene["masks"][k]["consistency"] <= 1 for k in scene["masks"])
+
+    paper_tables(tmp_path, setup=setup, backend="cpu", progress=False)
+    again = json.loads((tmp_path / "paper_tables.json").read_text())["scenes"]["orbit-3"]
+    assert all(again["training"][k]["train_seconds"] is None for k in TRAINING_MASKS)
+    assert again["training"]["exact"]["psnr"] == scene["training"]["exact"]["psnr"]

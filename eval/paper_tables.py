@@ -1,0 +1,239 @@
+"""``gseval paper-tables``: the analogs of the paper's tables on synthetic scenes with exact
+ground truth.
+
+For every scene of the setup (orbit and forward camera paths, several seeds) the masks come
+in four kinds, each trained on:
+
+- ``exact``: the generator's masks;
+- ``coarse``: low-resolution boundaries (as SAM's against SAM-HQ's), made consistent and
+  cleaned by ``hqmask build --proposer existing``;
+- ``noisy``: corrupted at ``medium`` (wrong boundaries, spurious islands, merged and split
+  objects, IDs permuted per view), used as they are;
+- ``hqmask``: the noisy masks after ``hqmask build`` (noise removal and association).
+
+Tables:
+
+1. training masks -> test PSNR / SSIM (and mIoU of ``prior``): Table 1 (coarse vs clean),
+   and the effect of noise removal and association on the 3D result;
+2. the masks themselves against the exact ones: noisy, after noise removal alone, after
+   noise removal and association (scene-level ID consistency and matched mIoU);
+3. reassignment methods on the ``hqmask`` run: ``flashsplat`` vs ``prior`` vs
+   ``classifier``, mIoU / mAcc in both protocols, per scene (Table 3);
+4. the gamma_p ablation of ``prior`` on the same run.
+
+Work goes to ``OUT/work/`` and is reused when the command runs again (finished runs are not
+retrained), so an interrupted full run resumes. Results: ``OUT/paper_tables.md`` and
+``OUT/paper_tables.json``.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from dataset_tools.atomic import write_bytes_atomic
+from dataset_tools.corrupt import corrupt_scene
+from dataset_tools.image_files import write_downsampled
+from dataset_tools.label_maps import consistent_fraction
+from dataset_tools.scene import load_scene
+from dataset_tools.synth import SynthConfig, generate_scene
+from eval.evaluate import evaluate
+from eval.metrics import matched_miou
+from eval.report import markdown_table
+from gsseg.render import resolve_backend
+from gsseg.run_folder import GAUSSIANS, load_run
+from gsseg.segment.segment_run import segment_run
+from gsseg.train import TrainConfig, train
+from hqmask.build import BuildConfig, build_masks, clean_scene_masks
+
+TRAINING_MASKS = ("exact", "coarse", "noisy", "hqmask")
+MASK_FOLDERS = {"exact": "object_mask", "coarse": "coarse_hqmask", "noisy": "noisy", "hqmask": "noisy_hqmask"}
+METHODS = (("flashsplat", 0.0), ("classifier", 0.0), ("prior", 0.2))
+GAMMAS = (-1.0, 0.0, 0.2, 1.0)
+
+
+@dataclass(frozen=True)
+class TableSetup:
+    """The scenes and schedule behind the tables."""
+
+    paths: tuple[str, ...]
+    seeds: tuple[int, ...]
+    res: int
+    views: int
+    objects: int
+    iters: int | None  # None: the CPU default schedule
+    images: str = "images"  # trained on: ``images`` or a downsampled copy such as ``images_2``
+    severity: str = "medium"
+    min_area: int = 500  # noise removal, at the resolution the masks are made and corrupted at
+
+    @property
+    def scenes(self) -> list[tuple[str, int]]:
+        return [(p, s) for p in self.paths for s in self.seeds]
+
+
+SETUPS = {
+    # Masks are made, corrupted and cleaned at 256x256 (the corruption's speckles are sized
+    # against the 500 px cleanup threshold); quick trains on the 128x128 copies.
+    "quick": TableSetup(paths=("orbit", "forward"), seeds=(0,), res=256, views=16, objects=4, iters=400,
+                        images="images_2"),
+    "full": TableSetup(paths=("orbit", "forward"), seeds=(0, 1, 2), res=256, views=24, objects=6, iters=None),
+}
+
+
+def _prepare_scene(root: Path, path: str, seed: int, setup: TableSetup) -> Path:
+    """The synthetic scene with every mask folder of :data:`MASK_FOLDERS` (and the
+    noise-removal-only masks), made once and reused."""
+    scene = root / "scene"
+    if not (scene / "noisy_hqmask").is_dir():
+        cfg = SynthConfig(views=setup.views, res=setup.res, objects=setup.objects, path=path, seed=seed)
+        generate_scene(cfg, scene, overwrite=True, progress=False)
+        if setup.images != "images":
+            write_downsampled(scene / "images", scene / setup.images, int(setup.images.rsplit("_", 1)[1]))
+        corrupt_scene(scene, "coarse", "low", coarse=True, seed=seed, overwrite=True, progress=False)
+        corrupt_scene(scene, "noisy", setup.severity, seed=seed, overwrite=True, progress=False)
+        clean_scene_masks(scene, "noisy", "noisy_cleaned", min_area=setup.min_area, force=True, progress=False)
+        for src in ("coarse", "noisy"):
+            build_masks(scene, BuildConfig(proposer="existing", from_masks=src, associate="tracks",
+                                           min_area=setup.min_area, out_masks=f"{src}_hqmask", force=True),
+                        progress=False)
+    return scene
+
+
+def _train_once(scene: Path, run: Path, masks: str, setup: TableSetup, backend: str) -> float | None:
+    """Train on ``masks`` unless ``run`` is finished already (resuming one that was
+    interrupted). Returns the seconds spent, None when the run was reused."""
+    if (run / GAUSSIANS).is_file():
+        return None
+    start = time.perf_counter()
+    train(scene, run, TrainConfig(iters=setup.iters, images=setup.images, masks=masks, backend=backend),
+          resume=(run / "checkpoints").is_dir(), progress=False)
+    return time.perf_counter() - start
+
+
+def _mask_scores(scene: Path) -> dict[str, dict[str, float]]:
+    """Table 2: each mask kind against the exact masks."""
+    truth = [v.load_mask() for v in load_scene(scene).views]
+    out = {}
+    for name in ("noisy", "noisy_cleaned", "noisy_hqmask", "coarse", "coarse_hqmask"):
+        masks = [v.load_mask() for v in load_scene(scene, masks=name).views]
+        out[name] = {"consistency": consistent_fraction(masks, truth), "miou": matched_miou(masks, truth)}
+    return out
+
+
+def _segment_and_score(run: Path, scene: Path, setup: TableSetup, masks: str, method: str, gamma_p: float,
+                       backend: str) -> dict:
+    segmentation = segment_run(run, scene, method=method, gamma_p=gamma_p, masks=masks, backend=backend,
+                               progress=False)
+    views = load_scene(scene, images=setup.images).split("test")
+    evaluation, _ = evaluate(load_run(run), segmentation, views, with_truth=True, scene=str(scene), split="test",
+                             backend=backend, progress=False)
+    return evaluation.summary()
+
+
+def scene_tables(root: Path, path: str, seed: int, setup: TableSetup, backend: str, bar: tqdm) -> dict:
+    """Every number of one scene; each step advances ``bar``."""
+    bar.set_postfix_str(f"{path}-{seed}: scene and masks")
+    scene = _prepare_scene(root, path, seed, setup)
+    bar.update(1)
+    result: dict = {"masks": _mask_scores(scene), "training": {}, "methods": {}, "gamma_p": {}}
+    for kind in TRAINING_MASKS:
+        bar.set_postfix_str(f"{path}-{seed}: training on {kind} masks")
+        run = root / f"run_{kind}"
+        seconds = _train_once(scene, run, MASK_FOLDERS[kind], setup, backend)
+        # The pipeline segments with the masks it trained on; `noisy` ones cannot be voted
+        # with (their IDs differ per view), so that run is segmented by its classifier alone.
+        method = ("classifier", 0.0) if kind == "noisy" else ("prior", 0.2)
+        summary = _segment_and_score(run, scene, setup, MASK_FOLDERS[kind], *method, backend)
+        result["training"][kind] = {"psnr": summary["psnr"], "ssim": summary["ssim"],
+                                    "miou": summary["visible"]["miou"], "method": method[0],
+                                    "train_seconds": seconds}
+        bar.update(1)
+    bar.set_postfix_str(f"{path}-{seed}: reassignment methods")
+    run = root / "run_hqmask"
+    for method, gamma_p in METHODS:
+        s = _segment_and_score(run, scene, setup, MASK_FOLDERS["hqmask"], method, gamma_p, backend)
+        result["methods"][method] = {p: s[p] for p in ("visible", "extracted")}
+    for gamma_p in GAMMAS:
+        s = _segment_and_score(run, scene, setup, MASK_FOLDERS["hqmask"], "prior", gamma_p, backend)
+        result["gamma_p"][f"{gamma_p:g}"] = {p: s[p] for p in ("visible", "extracted")}
+    bar.update(1)
+    return result
+
+
+def _f(x: float | None, digits: int = 3) -> str:
+    return "n/a" if x is None or not np.isfinite(x) else f"{x:.{digits}f}"
+
+
+def _mean(values: list[float]) -> float:
+    return float(np.mean(values))
+
+
+def render_tables(scenes: dict[str, dict], setup: TableSetup) -> str:
+    """The four tables as markdown, per scene and averaged."""
+    names = list(scenes)
+    schedule = "the CPU default schedule" if setup.iters is None else f"{setup.iters} iterations"
+    parts = [f"Scenes: {', '.join(names)} ({setup.res}x{setup.res}, {setup.views} views, {setup.objects} objects; "
+             f"masks made at that size, noise removal min_area {setup.min_area} px; trained on `{setup.images}` "
+             f"for {schedule}; test views: LLFF hold-out)."]
+
+    rows = []
+    for kind in TRAINING_MASKS:
+        cells = [scenes[n]["training"][kind] for n in names]
+        rows.append([kind, _f(_mean([c["psnr"] for c in cells]), 2), _f(_mean([c["ssim"] for c in cells])),
+                     _f(_mean([c["miou"] for c in cells])), cells[0]["method"]])
+    parts.append("### Table 1: training masks (test views, mean over scenes)\n\n" + markdown_table(
+        ["training masks", "PSNR", "SSIM", "mIoU (visible)", "labels by"], rows))
+
+    labels = {"noisy": "noisy (medium)", "noisy_cleaned": "noisy + noise removal",
+              "noisy_hqmask": "noisy + noise removal + association", "coarse": "coarse",
+              "coarse_hqmask": "coarse + noise removal + association"}
+    rows = [[label, _f(_mean([scenes[n]["masks"][k]["consistency"] for n in names])),
+             _f(_mean([scenes[n]["masks"][k]["miou"] for n in names]))] for k, label in labels.items()]
+    parts.append("### Table 2: 2D masks against the exact masks (all views, mean over scenes)\n\n" + markdown_table(
+        ["masks", "ID consistency", "mIoU"], rows))
+
+    head = ["scene"] + [f"{m} {p}" for m, _ in METHODS for p in ("mIoU", "mAcc")]
+    for protocol in ("visible", "extracted"):
+        rows = [[n] + [_f(scenes[n]["methods"][m][protocol][k]) for m, _ in METHODS for k in ("miou", "macc")]
+                for n in names]
+        rows.append(["mean"] + [_f(_mean([scenes[n]["methods"][m][protocol][k] for n in names]))
+                                for m, _ in METHODS for k in ("miou", "macc")])
+        parts.append(f"### Table 3: reassignment methods, `{protocol}` protocol (trained on hqmask masks)\n\n"
+                     + markdown_table(head, rows))
+
+    gammas = [f"{g:g}" for g in GAMMAS]
+    rows = [[n] + [_f(scenes[n]["gamma_p"][g][p]["miou"]) for g in gammas for p in ("visible", "extracted")]
+            for n in names]
+    rows.append(["mean"] + [_f(_mean([scenes[n]["gamma_p"][g][p]["miou"] for n in names]))
+                            for g in gammas for p in ("visible", "extracted")])
+    parts.append("### Table 4: gamma_p ablation of `prior` (mIoU, visible / extracted)\n\n" + markdown_table(
+        ["scene"] + [f"gamma_p {g} {p[:3]}" for g in gammas for p in ("visible", "extracted")], rows))
+    return "\n\n".join(parts) + "\n"
+
+
+def paper_tables(out: Path | str, *, setup: TableSetup = SETUPS["full"], backend: str = "auto",
+                 progress: bool = True) -> Path:
+    """Run the tables' experiments on ``setup`` (one of :data:`SETUPS` or your own), reusing
+    finished work in ``out/work``, and write ``out/paper_tables.md`` and
+    ``out/paper_tables.json``. Returns the markdown path."""
+    out = Path(out)
+    backend = resolve_backend(backend)
+    steps_per_scene = 2 + len(TRAINING_MASKS)
+    start = time.perf_counter()
+    scenes = {}
+    with tqdm(total=steps_per_scene * len(setup.scenes), desc="paper tables", unit="step",
+              disable=not progress, dynamic_ncols=True) as bar:
+        for path, seed in setup.scenes:
+            name = f"{path}-{seed}"
+            scenes[name] = scene_tables(out / "work" / name, path, seed, setup, backend, bar)
+    markdown = "## Paper tables\n\n" + render_tables(scenes, setup)
+    write_bytes_atomic(out / "paper_tables.md", markdown.encode())
+    data = {"setup": {**asdict(setup), "backend": backend},
+            "seconds": time.perf_counter() - start, "scenes": scenes}
+    write_bytes_atomic(out / "paper_tables.json", (json.dumps(data, indent=2) + "\n").encode())
+    return out / "paper_tables.md"
