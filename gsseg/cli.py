@@ -28,6 +28,8 @@ def cli() -> None:
 @click.option("--environment", "environment_degree", type=click.Choice(["none", "0", "1", "2", "3"]), default="3",
               show_default=True, callback=lambda ctx, param, v: None if v == "none" else int(v),
               help="SH degree of the learned background behind the Gaussians (sky, far ground); none: black.")
+@click.option("--max-gaussians", type=int, default=None,
+              help="Densification stops at this many Gaussians (default: 150 000 on the cpu schedule, 6 000 000 on gpu).")
 @click.option("--seed", type=int, default=0, show_default=True)
 @click.option("--resume", is_flag=True, help="Continue the run in --out from its latest checkpoint.")
 @click.option("--stop-after", type=int, default=None, help="Checkpoint and stop at this step; continue with --resume.")

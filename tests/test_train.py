@@ -47,6 +47,18 @@ def test_resume_continues_the_same_loss_curve(small_scene, tmp_path):
     assert all(torch.equal(x, y) for x, y in zip(a.tensors().values(), b.tensors().values()))
 
 
+def test_max_gaussians_caps_densification(small_scene, tmp_path):
+    free = _history(train(small_scene.root, tmp_path / "free", TrainConfig(iters=60, backend="cpu"),
+                          progress=False).run)
+    start = free[0]["gaussians"]
+    assert max(h["gaussians"] for h in free) > start + 20  # densification does grow this scene
+    cap = start + 20
+    capped = _history(train(small_scene.root, tmp_path / "capped", TrainConfig(iters=60, backend="cpu", max_gaussians=cap),
+                            progress=False).run)
+    assert max(h["gaussians"] for h in capped) <= cap
+    assert json.loads((tmp_path / "capped" / "config.json").read_text())["timing"]["max_gaussians"] == cap
+
+
 def test_a_loss_that_turns_nan_stops_and_keeps_the_last_checkpoint(small_scene, tmp_path, monkeypatch):
     """Divergence is simulated by a photometric loss that returns NaN from step 12 on."""
     real = trainer_module.photometric_loss

@@ -76,6 +76,7 @@ class TrainConfig:
     prune_opacity: float = 0.005
     initial_opacity: float = 0.1
     random_init_points: int = 20_000
+    max_gaussians: int | None = None  # densification stops at this count; None: the schedule's cap
     lr: LearningRates = field(default_factory=LearningRates)
     seed: int = 0
 
@@ -88,11 +89,16 @@ class TrainConfig:
             raise InputError(f"--sh-degree must be 0..3 (got {self.sh_degree}).")
         if self.environment_degree is not None and not 0 <= self.environment_degree <= 3:
             raise InputError(f"--environment-degree must be 0..3 (got {self.environment_degree}).")
+        if self.max_gaussians is not None and self.max_gaussians < 1:
+            raise InputError(f"--max-gaussians must be at least 1 (got {self.max_gaussians}).")
 
     @property
     def timing(self) -> Schedule:
-        """The schedule, stretched or shrunk to ``iters`` when it is given."""
+        """The schedule, stretched or shrunk to ``iters`` when it is given, with the cap
+        ``max_gaussians`` when it is given."""
         base = SCHEDULES[self.schedule]
+        if self.max_gaussians is not None:
+            base = replace(base, max_gaussians=self.max_gaussians)
         if self.iters is None or self.iters == base.iters:
             return base
         k = self.iters / base.iters
