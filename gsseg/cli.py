@@ -106,13 +106,15 @@ def edit(run: Path, point, click_, scene, force: bool, **options) -> None:
 @click.option("--scene", default=None, type=click.Path(path_type=Path), help="Your scene folder instead of the synthetic one.")
 @click.option("--images", default="images", show_default=True, help="Image folder of --scene (images or images_N).")
 @click.option("--iters", type=int, default=1500, show_default=True, help="Training iterations.")
+@click.option("--max-gaussians", type=int, default=30_000, show_default=True, help="Densification stops at this many Gaussians.")
 @click.option("--backend", type=click.Choice(["auto", "cpu", "torch", "gsplat"]), default="auto", show_default=True)
 @click.option("--force", is_flag=True, help="Replace the outputs in --out.")
-def demo(out: Path, scene: Path | None, images: str, iters: int, backend: str, force: bool) -> None:
+def demo(out: Path, scene: Path | None, images: str, iters: int, max_gaussians: int, backend: str, force: bool) -> None:
     """The whole pipeline: scene, masks, training, segmentation, a 3D-point edit, the report."""
     from gsseg.demo import run_demo
 
-    result = run_demo(out, scene=scene, images=images, iters=iters, backend=backend, overwrite=force)
+    result = run_demo(out, scene=scene, images=images, iters=iters, max_gaussians=max_gaussians, backend=backend,
+                      overwrite=force)
     score = "" if result.miou is None else f"mIoU {result.miou:.3f} (visible); "
     click.echo(f"object {result.object_id} at {np.round(result.point, 3).tolist()} removed, extracted and recoloured "
                f"in {result.out / 'run' / 'edits'}; {score}{result.seconds / 60:.1f} min")

@@ -5,7 +5,8 @@
    128x128 copies;
 2. masks from the weight-free ``graph`` proposer, associated across views by SfM tracks and
    cleaned (``hqmask build``);
-3. 3D-GS with object features trained on those masks (CPU schedule, shortened);
+3. 3D-GS with object features trained on those masks (CPU schedule, shortened, at most
+   30k Gaussians);
 4. prior-guided reassignment (``gsseg segment``);
 5. the object under a 3D point (the first object's centre in the synthetic scene, the
    surface under the centre pixel of the first test view otherwise) removed, extracted
@@ -39,6 +40,7 @@ from hqmask.build import BuildConfig, build_masks
 DEMO_SCENE = SynthConfig(views=24, res=256, objects=4, seed=1)
 DEMO_IMAGES = "images_2"
 DEMO_ITERS = 1500
+DEMO_MAX_GAUSSIANS = 30_000  # about two per pixel of a 128x128 view; keeps the demo under 10 min on 2 cores
 MASKS = "hqmask"
 
 
@@ -61,7 +63,7 @@ def _prompt_point(scene_dir: Path, run: Run, synth_point: np.ndarray | None, bac
 
 
 def run_demo(out: Path | str, *, scene: Path | str | None = None, images: str = "images", iters: int = DEMO_ITERS,
-             backend: str = "auto", overwrite: bool = False, progress: bool = True) -> DemoResult:
+             max_gaussians: int = DEMO_MAX_GAUSSIANS, backend: str = "auto", overwrite: bool = False, progress: bool = True) -> DemoResult:
     """Run the pipeline into ``out`` (``out/scene`` when synthetic, ``out/run``, ``out/report``)."""
     from eval.report import report_run
 
@@ -83,7 +85,8 @@ def run_demo(out: Path | str, *, scene: Path | str | None = None, images: str = 
     build_masks(scene_dir, BuildConfig(proposer="graph", associate="tracks", out_masks=MASKS,
                                        images="images" if scene is None else images, force=overwrite), progress=progress)
     run_dir = out / "run"
-    train(scene_dir, run_dir, TrainConfig(iters=iters, masks=MASKS, images=images, backend=backend), progress=progress)
+    train(scene_dir, run_dir, TrainConfig(iters=iters, masks=MASKS, images=images, backend=backend,
+                                          max_gaussians=max_gaussians), progress=progress)
     segmentation = segment_run(run_dir, scene_dir, masks=MASKS, backend=backend, progress=progress)
     run = load_run(run_dir)
     point = np.asarray(_prompt_point(scene_dir, run, synth_point, backend), np.float64)

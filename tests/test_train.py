@@ -16,6 +16,10 @@ from gsseg.ply import read_ply
 from gsseg.render_views import render_run
 from gsseg.train import TrainConfig, TrainingDiverged, train
 from gsseg.train import trainer as trainer_module
+from gsseg.train.config import LearningRates
+from gsseg.train.densify import DensifyOptions, DensifyStats, densify_and_prune
+from gsseg.train.optim import GaussianOptimizer
+from tests.render_scenes import random_gaussians
 
 
 def _history(run):
@@ -57,6 +61,23 @@ def test_max_gaussians_caps_densification(small_scene, tmp_path):
                             progress=False).run)
     assert max(h["gaussians"] for h in capped) <= cap
     assert json.loads((tmp_path / "capped" / "config.json").read_text())["timing"]["max_gaussians"] == cap
+
+
+def test_densification_over_budget_takes_the_largest_gradients():
+    """Every Gaussian is over the gradient threshold and small enough to be cloned, but only
+    three more fit: exactly the three with the largest gradients are cloned."""
+    g = random_gaussians(10, seed=3, dtype=torch.float32)
+    g.opacity_logits = torch.full_like(g.opacity_logits, 3.0)  # nothing is pruned as transparent
+    opt = GaussianOptimizer(g, LearningRates(), extent=100.0)
+    grads = torch.tensor([5.0, 9.0, 1.0, 7.0, 2.0, 8.0, 3.0, 4.0, 6.0, 1.5]) * 1e-3
+    stats = DensifyStats(grad_sum=grads.clone(), count=torch.ones(10), max_radii=torch.ones(10))
+    options = DensifyOptions(grad_threshold=1e-4, percent_dense=0.01, prune_opacity=0.005, extent=100.0,
+                             max_gaussians=13)
+    densify_and_prune(opt, stats, options, prune_large=False, generator=torch.Generator().manual_seed(0))
+    means = opt.gaussians.means.detach()
+    copies = [int((means == g.means[i]).all(dim=1).sum()) for i in range(10)]
+    assert len(opt) == 13
+    assert [i for i, c in enumerate(copies) if c == 2] == [1, 3, 5] and min(copies) == 1
 
 
 def test_a_loss_that_turns_nan_stops_and_keeps_the_last_checkpoint(small_scene, tmp_path, monkeypatch):

@@ -14,7 +14,9 @@ import torch
 from dataset_tools.cameras import PinholeCamera
 from gsseg.render.blend_rules import ALPHA_MIN
 
-NEAR_PLANE = 0.01
+# 3D-GS culls Gaussians closer than 0.2 to the camera: a Gaussian that close, fitted to be
+# seen from far away in other views, would otherwise cover the whole image with one blob.
+NEAR_PLANE = 0.2
 EPS_2D = 0.3  # low-pass filter added to the 2D covariance, in pixels^2, as in 3D-GS
 TILE_SIZE = 16
 

@@ -53,10 +53,14 @@ def densify_and_prune(opt: GaussianOptimizer, stats: DensifyStats, options: Dens
     scales = g.scales.max(dim=1).values
     big = scales > options.percent_dense * options.extent
     hot = grads >= options.grad_threshold
+    # A clone or a split (two children replacing the parent) adds one Gaussian each; over the
+    # budget, the largest gradients are densified first.
+    budget = max(options.max_gaussians - len(opt), 0)
+    if int(hot.sum()) > budget:
+        hottest = torch.topk(torch.where(hot, grads, -1.0), budget).indices
+        hot = torch.zeros_like(hot)
+        hot[hottest] = True
     clone, split = hot & ~big, hot & big
-    n_new = int(clone.sum()) + 2 * int(split.sum())
-    if len(opt) + n_new - int(split.sum()) > options.max_gaussians:
-        clone = split = torch.zeros_like(hot)
 
     if split.any():
         s = g.select(split)
