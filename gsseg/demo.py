@@ -63,7 +63,8 @@ def _prompt_point(scene_dir: Path, run: Run, synth_point: np.ndarray | None, bac
 
 
 def run_demo(out: Path | str, *, scene: Path | str | None = None, images: str = "images", iters: int = DEMO_ITERS,
-             max_gaussians: int = DEMO_MAX_GAUSSIANS, backend: str = "auto", overwrite: bool = False, progress: bool = True) -> DemoResult:
+             max_gaussians: int = DEMO_MAX_GAUSSIANS, backend: str = "auto", overwrite: bool = False,
+             progress: bool = True) -> DemoResult:
     """Run the pipeline into ``out`` (``out/scene`` when synthetic, ``out/run``, ``out/report``)."""
     from eval.report import report_run
 

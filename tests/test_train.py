@@ -57,8 +57,8 @@ def test_max_gaussians_caps_densification(small_scene, tmp_path):
     start = free[0]["gaussians"]
     assert max(h["gaussians"] for h in free) > start + 20  # densification does grow this scene
     cap = start + 20
-    capped = _history(train(small_scene.root, tmp_path / "capped", TrainConfig(iters=60, backend="cpu", max_gaussians=cap),
-                            progress=False).run)
+    capped_cfg = TrainConfig(iters=60, backend="cpu", max_gaussians=cap)
+    capped = _history(train(small_scene.root, tmp_path / "capped", capped_cfg, progress=False).run)
     assert max(h["gaussians"] for h in capped) <= cap
     assert json.loads((tmp_path / "capped" / "config.json").read_text())["timing"]["max_gaussians"] == cap
 
