@@ -7,12 +7,15 @@ from dataclasses import dataclass
 import numpy as np
 
 PINHOLE_MODELS = ("PINHOLE", "SIMPLE_PINHOLE")
+# 3D-GS's near plane, for cameras whose scene gives no better bound (see ``scene_near_plane``).
+DEFAULT_NEAR = 0.2
 
 
 @dataclass(frozen=True)
 class PinholeCamera:
     """An undistorted pinhole camera. Pixel centres lie at half-integer coordinates
-    (COLMAP's convention): pixel (row i, column j) is centred at (u, v) = (j + 0.5, i + 0.5)."""
+    (COLMAP's convention): pixel (row i, column j) is centred at (u, v) = (j + 0.5, i + 0.5).
+    Renderers draw nothing nearer than ``near`` (camera-space depth, scene units)."""
 
     width: int
     height: int
@@ -20,6 +23,7 @@ class PinholeCamera:
     fy: float
     cx: float
     cy: float
+    near: float = DEFAULT_NEAR
 
     @property
     def K(self) -> np.ndarray:
@@ -29,7 +33,7 @@ class PinholeCamera:
     def resized(self, width: int, height: int) -> PinholeCamera:
         """The same camera for an image resampled to ``width`` x ``height``."""
         sx, sy = width / self.width, height / self.height
-        return PinholeCamera(width, height, self.fx * sx, self.fy * sy, self.cx * sx, self.cy * sy)
+        return PinholeCamera(width, height, self.fx * sx, self.fy * sy, self.cx * sx, self.cy * sy, self.near)
 
 
 @dataclass(frozen=True)

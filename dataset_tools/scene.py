@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import json
 import shutil
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 from pathlib import Path
 from typing import Literal
@@ -21,7 +21,7 @@ import numpy as np
 
 from dataset_tools import colmap
 from dataset_tools.atomic import atomic_directory, write_bytes_atomic
-from dataset_tools.cameras import PinholeCamera, SourceCamera
+from dataset_tools.cameras import DEFAULT_NEAR, PinholeCamera, SourceCamera
 from dataset_tools.errors import InputError
 from dataset_tools.image_files import encode_png, image_size, read_image, read_mask
 
@@ -169,6 +169,31 @@ def llff_test_names(names: list[str], every: int = 8) -> frozenset[str]:
     return frozenset(n for k, n in enumerate(sorted(names)) if k % every == 0)
 
 
+def scene_near_plane(images: list[colmap.ColmapImage], xyz: np.ndarray, fraction: float = 0.5) -> float:
+    """The near plane of a scene's cameras: ``fraction`` of the smallest depth at which a view
+    observes SfM points (each view's 1st percentile, so that a stray point does not decide),
+    as LLFF derives NeRF's near bound from the same depths; 3D-GS's 0.2 when no view
+    observes a point.
+
+    Nothing the SfM reconstruction saw lies nearer. What 3D-GS grows there is a floater: on
+    a 360-degree capture, Gaussians just in front of a held-out camera, outside the fields of
+    view of the training cameras beside it, model far background for the opposite views and
+    veil the held-out view.
+
+    Args:
+        images: the COLMAP images, with (3, 4) ``cam_from_world`` and observed ``point_ids``.
+        xyz: (P, 3) SfM points.
+    """
+    nearest = []
+    for im in images:
+        if len(im.point_ids):
+            depth = xyz[im.point_ids] @ im.cam_from_world[2, :3] + im.cam_from_world[2, 3]
+            depth = depth[depth > 0]
+            if len(depth):
+                nearest.append(np.percentile(depth, 1.0))
+    return fraction * float(min(nearest)) if nearest else DEFAULT_NEAR
+
+
 def read_scene_json(root: Path) -> dict:
     path = Path(root) / "scene.json"
     if not path.exists():
@@ -199,7 +224,8 @@ def load_scene(
         test_every: LLFF hold-out period, used unless scene.json lists ``split.test``.
 
     Non-pinhole COLMAP cameras are undistorted on load into pinhole cameras (COLMAP's
-    undistorted camera, OpenCV remapping); observations are moved accordingly.
+    undistorted camera, OpenCV remapping); observations are moved accordingly. Every camera
+    gets the scene's near plane (:func:`scene_near_plane`).
     """
     root = Path(root)
     if not root.is_dir():
@@ -209,6 +235,7 @@ def load_scene(
         raise InputError(f"{image_root}: image folder not found; put the views in {images}/ or pick another with --images.")
     model = colmap.read_model(root / "sparse" / "0")
     mask_root = root / masks if masks else None
+    near = scene_near_plane(model.images, model.xyz)
     views = []
     for im in model.images:
         path = image_root / im.name
@@ -225,7 +252,7 @@ def load_scene(
                 f"{path}: image is {width}x{height} but its COLMAP camera is "
                 f"{im.camera.width}x{im.camera.height}; the image folder does not match the model."
             )
-        camera = colmap.pinhole_camera(src)
+        camera = replace(colmap.pinhole_camera(src), near=near)
         uv = im.uv * [width / im.camera.width, height / im.camera.height]
         distorted = src.model not in ("PINHOLE", "SIMPLE_PINHOLE")
         if distorted:

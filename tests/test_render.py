@@ -86,6 +86,20 @@ def test_gaussians_behind_the_camera_are_culled_with_zero_gradient(backend):
         assert torch.isfinite(value.grad).all() and value.grad[1:].abs().max() == 0, name
 
 
+@pytest.mark.parametrize("backend", ["cpu", "torch"])
+def test_the_cameras_near_plane_culls_nearer_gaussians(backend):
+    g = Gaussians(means=torch.tensor([[0.0, 0.0, 0.5], [0.0, 0.0, 3.0]]), log_scales=torch.full((2, 3), math.log(0.05)),
+                  quats=torch.tensor([[1.0, 0, 0, 0]] * 2), opacity_logits=torch.zeros(2),
+                  sh_dc=torch.zeros(2, 3), sh_rest=torch.zeros(2, 15, 3), obj_feat=torch.ones(2, 16))
+    for near, drawn in ((0.2, [True, True]), (1.0, [False, True])):
+        out = render(g, PinholeCamera(16, 16, 20.0, 20.0, 8.0, 8.0, near=near), torch.eye(4)[:3], backend=backend)
+        assert (out.radii > 0).tolist() == drawn
+    # with the near Gaussian culled, the image is the far one's alone
+    alone = render(g.select(torch.tensor([False, True])), PinholeCamera(16, 16, 20.0, 20.0, 8.0, 8.0), torch.eye(4)[:3],
+                   backend=backend)
+    torch.testing.assert_close(out.alpha, alone.alpha)
+
+
 def test_background_fills_what_the_gaussians_leave():
     cam, pose = look_down_z(24, 20)
     g = random_gaussians(30, 4)

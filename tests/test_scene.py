@@ -10,7 +10,9 @@ import pytest
 
 from dataset_tools import InputError, load_scene, save_scene
 from dataset_tools.image_files import write_png
-from dataset_tools.scene import llff_test_names
+from dataset_tools.cameras import DEFAULT_NEAR
+from dataset_tools.colmap import ColmapImage, read_model
+from dataset_tools.scene import llff_test_names, scene_near_plane
 
 
 def assert_same_scene(a, b):
@@ -39,6 +41,27 @@ def test_save_load_round_trip(small_scene, tmp_path, text):
 def test_llff_split_takes_every_eighth_view_by_name():
     names = [f"{k:03d}.jpg" for k in range(20)][::-1]
     assert llff_test_names(names) == {"000.jpg", "008.jpg", "016.jpg"}
+
+
+def test_near_plane_is_half_the_nearest_depth_a_view_observes():
+    xyz = np.stack([np.zeros(201), np.zeros(201), np.linspace(-1.0, 199.0, 201)], axis=1)  # depths -1..199 along +z
+    pose = np.hstack([np.eye(3), np.zeros((3, 1))])
+    moved = np.hstack([np.eye(3), [[0.0], [0.0], [4.0]]])  # sees every point 4 deeper
+
+    def image(cam_from_world, ids):
+        return ColmapImage("v", None, cam_from_world, np.asarray(ids, np.int64), np.zeros((len(ids), 2)))
+
+    # the first view's positive depths are 1..199 (1st percentile 2.98); the second's 3..203
+    near = scene_near_plane([image(pose, range(201)), image(moved, range(201)), image(pose, [])], xyz)
+    assert near == pytest.approx(0.5 * np.percentile(np.arange(1.0, 200.0), 1.0))
+    assert scene_near_plane([image(pose, [])], xyz) == DEFAULT_NEAR
+
+
+def test_every_camera_of_a_scene_gets_its_near_plane(small_scene):
+    model = read_model(small_scene.root / "sparse" / "0")
+    near = scene_near_plane(model.images, model.xyz)
+    assert 0 < near < 10 and near != DEFAULT_NEAR
+    assert {v.camera.near for v in load_scene(small_scene.root).views} == {near}
 
 
 def test_scene_json_split_overrides_llff(scene_copy):

@@ -5,7 +5,7 @@ from __future__ import annotations
 import torch
 
 from dataset_tools.cameras import PinholeCamera
-from gsseg.render.projection import EPS_2D, NEAR_PLANE, TILE_SIZE
+from gsseg.render.projection import EPS_2D, TILE_SIZE
 
 
 def gsplat_available() -> bool:
@@ -48,7 +48,7 @@ def rasterize_gsplat(
     image, alpha, meta = rasterization(
         means=means, quats=quats, scales=scales, opacities=opacities, colors=features,
         viewmats=viewmat[None], Ks=K[None], width=camera.width, height=camera.height,
-        near_plane=NEAR_PLANE, eps2d=EPS_2D, tile_size=TILE_SIZE, render_mode="RGB+D",
+        near_plane=camera.near, eps2d=EPS_2D, tile_size=TILE_SIZE, render_mode="RGB+D",
         packed=False, rasterize_mode="classic",
     )
     means2d = meta["means2d"]

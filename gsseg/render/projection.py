@@ -14,9 +14,6 @@ import torch
 from dataset_tools.cameras import PinholeCamera
 from gsseg.render.blend_rules import ALPHA_MIN
 
-# 3D-GS culls Gaussians closer than 0.2 to the camera: a Gaussian that close, fitted to be
-# seen from far away in other views, would otherwise cover the whole image with one blob.
-NEAR_PLANE = 0.2
 EPS_2D = 0.3  # low-pass filter added to the 2D covariance, in pixels^2, as in 3D-GS
 TILE_SIZE = 16
 
@@ -67,7 +64,7 @@ def project_gaussians(
     Args:
         means: (N, 3) world centres. quats: (N, 4). scales: (N, 3) standard deviations.
         cam_from_world: (3, 4) or (4, 4) world-to-camera transform (x right, y down, z forward).
-        camera: pinhole intrinsics and image size.
+        camera: pinhole intrinsics, image size and near plane.
         opacities: (N,) optional; when given, a footprint ends where the Gaussian's alpha
             falls below 1/255 (blending skips it there anyway), never beyond 3 sigma.
 
@@ -79,7 +76,7 @@ def project_gaussians(
     R, t = cam_from_world[:3, :3].to(means), cam_from_world[:3, 3].to(means)
     p = means @ R.T + t
     z = p[:, 2]
-    in_front = z > NEAR_PLANE
+    in_front = z > camera.near
     z = torch.where(in_front, z, torch.ones_like(z))
     fx, fy, cx, cy = camera.fx, camera.fy, camera.cx, camera.cy
     # Clamp the direction used by the Jacobian to 1.3x the field of view, as 3D-GS does,
