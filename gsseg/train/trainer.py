@@ -111,7 +111,8 @@ def train(scene_dir: Path | str, run: Path | str, cfg: TrainConfig, *, resume: b
     extent = camera_extent(scene.views)
     views = load_views(train_views, progress=progress, device=device)
     write_json(run / CONFIG, {**cfg.to_json(), "scene": str(Path(scene_dir).resolve()), "backend_used": backend,
-                              "extent": extent, "train_views": [v.name for v in views]})
+                              "extent": extent, "near_plane": scene.views[0].camera.near,
+                              "train_views": [v.name for v in views]})
 
     torch.manual_seed(cfg.seed)
     opt = GaussianOptimizer(_initial_gaussians(scene, cfg).to(device), cfg.lr, extent)
