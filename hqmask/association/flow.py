@@ -6,9 +6,13 @@ poses exist, else file order). In each direction:
 1. the previous view's object masks are carried to the current view by dense optical flow
    (OpenCV DIS, computed from the current view back to the previous one);
 2. the current view's segments are matched to the carried masks by IoU with the Hungarian
-   algorithm (IoU >= ``min_iou``); a segment lying mostly (>= ``contain``) inside an
-   already matched object joins it (fixing splits); other segments start new tracks;
-3. tracks without a match are carried on for ``memory`` views and can be re-identified.
+   algorithm (IoU >= ``min_iou``), then what is left to the tracks left free at a weaker
+   IoU (>= ``weak_iou``: large steps between views move the carried masks off their
+   objects), two rounds as in ByteTrack; other segments start new tracks;
+3. a new track whose segment lies mostly (>= ``contain``) inside a matched object is a
+   piece of it (a split mask) and takes its ID at the end, unless the two meet again in a
+   later view (then the mask had merged two objects, and they stay apart);
+4. tracks without a match are carried on for ``memory`` views and can be re-identified.
 
 The forward and backward passes are merged by bidirectional consensus: a forward and a
 backward track are the same object when the pixels they share cover at least
@@ -64,18 +68,21 @@ def _run_pass(
     segments: list[np.ndarray],
     *,
     min_iou: float,
+    weak_iou: float,
     contain: float,
     memory: int,
 ) -> list[np.ndarray]:
     dis = cv2.DISOpticalFlow_create(cv2.DISOPTICAL_FLOW_PRESET_MEDIUM)
     track_of: list[np.ndarray | None] = [None] * len(segments)
     tracks: dict[int, _Track] = {}
+    fragment_of: dict[int, int] = {}  # track born inside a matched track -> that track
     next_id = 0
     prev = None
     for v in order:
         seg = segments[v]
         n_local = int(seg.max())
         assign = np.full(n_local + 1, -1, np.int64)
+        inside: dict[int, int] = {}  # unmatched segment -> the matched track it lies in
         if prev is not None and tracks:
             flow = dis.calc(_gray(images[v]), _gray(images[prev]), None)
             for t in tracks.values():
@@ -95,15 +102,26 @@ def _run_pass(
                 if iou[r, c] >= min_iou:
                     assign[local[r]] = ids[c]
             matched = {int(assign[l]) for l in local if assign[l] >= 0}
-            for r, l in enumerate(local):
-                if assign[l] < 0 and seg_area[l] > 0:
-                    frac = inter[l] / seg_area[l]
-                    j = int(np.argmax(frac))
-                    if frac[j] >= contain and ids[j] in matched:
-                        assign[l] = ids[j]
+            # second round, for what is left: a weaker overlap with a track left free
+            left = [r for r, l in enumerate(local) if assign[l] < 0 and seg_area[l] > 0]
+            free = [j for j, t in enumerate(ids) if t not in matched]
+            if left and free:
+                sub = iou[np.ix_(left, free)]
+                for r, c in zip(*linear_sum_assignment(-sub)):
+                    if sub[r, c] >= weak_iou:
+                        assign[local[left[r]]] = ids[free[c]]
+                        matched.add(ids[free[c]])
+            for r in left:  # a piece lying in a matched object: a provisional track of its own
+                l = local[r]
+                frac = inter[l] / seg_area[l]
+                j = int(np.argmax(frac))
+                if assign[l] < 0 and frac[j] >= contain and ids[j] in matched:
+                    inside[l] = ids[j]
         for l in local:
             if assign[l] < 0 and seg_area[l] > 0:
                 assign[l] = next_id
+                if l in inside:
+                    fragment_of[next_id] = inside[l]
                 next_id += 1
         for t in list(tracks):
             tracks[t].age += 1
@@ -113,7 +131,19 @@ def _run_pass(
             del tracks[t]
         track_of[v] = assign
         prev = v
-    return track_of  # type: ignore[return-value]
+    # A track born inside a matched one is a piece of it (a split mask) unless the two meet
+    # again in a later view, as two objects that one mask had merged do.
+    views_of: list[set[int]] = [set() for _ in range(next_id)]
+    for k, a in enumerate(track_of):
+        for t in np.unique(a[a >= 0]):
+            views_of[t].add(k)
+    final = np.arange(next_id)
+    for t in sorted(fragment_of):  # parents are older, so already resolved
+        root = final[fragment_of[t]]
+        if views_of[t] & views_of[root] == {min(views_of[t])}:
+            final[t] = root
+            views_of[root] |= views_of[t]
+    return [np.where(a >= 0, final[np.maximum(a, 0)], -1) for a in track_of]
 
 
 def associate_flow(
@@ -122,6 +152,7 @@ def associate_flow(
     centers: np.ndarray | None = None,
     *,
     min_iou: float = 0.3,
+    weak_iou: float = 0.1,
     contain: float = 0.6,
     memory: int = 5,
     consensus: float = 0.3,
@@ -137,7 +168,7 @@ def associate_flow(
         per view, (H, W) uint8 consistent ID map.
     """
     order = sequence_order(centers, len(images))
-    kw = dict(min_iou=min_iou, contain=contain, memory=memory)
+    kw = dict(min_iou=min_iou, weak_iou=weak_iou, contain=contain, memory=memory)
     fwd = _run_pass(order, images, segments, **kw)
     bwd = _run_pass(order[::-1], images, segments, **kw)
     n_f = 1 + max((int(a.max()) for a in fwd), default=0)
