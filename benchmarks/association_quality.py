@@ -1,7 +1,8 @@
 """Benchmark: multi-view ID consistency after `hqmask build --proposer existing` on masks
 corrupted at a severity, for `flow` and `tracks`, on orbit and forward scenes, beside the
-corrupted input. Consistency = share of ground-truth object pixels carrying their matched
-ID, with one Hungarian matching for the whole scene. Prints and writes JSON.
+corrupted input; and on the exact masks with IDs permuted per view (association alone).
+Consistency = share of ground-truth object pixels carrying their matched ID, with one
+Hungarian matching for the whole scene. Prints and writes JSON.
 
     python -m benchmarks.association_quality [--out association_quality.json] [--res 512] [--severity medium]
 """
@@ -14,7 +15,11 @@ import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
+
 from benchmarks.scenes import corrupted_scene
+from dataset_tools.corrupt import PERMUTE_ONLY, corrupt_mask
+from dataset_tools.image_files import write_png
 from dataset_tools.label_maps import consistent_fraction
 from dataset_tools.scene import load_scene
 from hqmask.build import BuildConfig, build_masks
@@ -38,6 +43,9 @@ def main() -> None:
             scene = corrupted_scene(Path(tmp), path, res=args.res, severity=args.severity, seed=args.seed,
                                     views=args.views)
             truth = _masks(scene, "object_mask")
+            for k, (view, mask) in enumerate(zip(load_scene(scene).views, truth)):
+                write_png(scene / "permuted" / f"{view.stem}.png",
+                          corrupt_mask(mask, PERMUTE_ONLY, np.random.default_rng(k)))
             row = {"input": consistent_fraction(_masks(scene, "noisy"), truth)}
             for method in ("flow", "tracks"):
                 start = time.perf_counter()
@@ -45,6 +53,9 @@ def main() -> None:
                                                out_masks=f"assoc_{method}"), progress=False)
                 row[method] = consistent_fraction(_masks(scene, f"assoc_{method}"), truth)
                 row[f"{method}_seconds"] = time.perf_counter() - start
+                build_masks(scene, BuildConfig(proposer="existing", from_masks="permuted", associate=method,
+                                               out_masks=f"permuted_{method}"), progress=False)
+                row[f"{method}_on_permuted_exact"] = consistent_fraction(_masks(scene, f"permuted_{method}"), truth)
             results[path] = row
             print(path, json.dumps(row))
     results["setup"] = vars(args)

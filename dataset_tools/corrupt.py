@@ -59,6 +59,8 @@ SEVERITIES: dict[str, CorruptionModel] = {
     "medium": CorruptionModel(1.5, 6.0, 8, 0.3, 0.02, 0.03, 0.02),
     "high": CorruptionModel(3.0, 6.0, 20, 1.5, 0.06, 0.08, 0.06),
 }
+# Exact masks, IDs permuted per view: what association alone has to undo.
+PERMUTE_ONLY = CorruptionModel(0.0, 6.0, 0, 0.0, 0.0, 0.0, 0.0, permute=True)
 
 
 def corruption_model(severity: str, *, coarse: bool = False) -> CorruptionModel:

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from dataset_tools import InputError, load_scene
-from dataset_tools.corrupt import CorruptionModel, corrupt_mask
+from dataset_tools.corrupt import PERMUTE_ONLY, corrupt_mask
 from dataset_tools.image_files import write_png
 from dataset_tools.label_maps import consistent_fraction, match_ids, overlap
 from dataset_tools.synth import SynthConfig, generate_scene
@@ -17,9 +17,8 @@ from hqmask.build import BuildConfig, build_masks, clean_scene_masks
 
 def permuted_masks(scene_dir: Path, name: str) -> None:
     scene = load_scene(scene_dir)
-    model = CorruptionModel(0.0, 6.0, 0, 0.0, 0.0, 0.0, 0.0, permute=True)
     for k, v in enumerate(scene.views):
-        write_png(scene_dir / name / f"{v.stem}.png", corrupt_mask(v.load_mask(), model, np.random.default_rng(k)))
+        write_png(scene_dir / name / f"{v.stem}.png", corrupt_mask(v.load_mask(), PERMUTE_ONLY, np.random.default_rng(k)))
 
 
 @pytest.mark.parametrize("method, path", [("flow", "forward"), ("tracks", "forward"), ("tracks", "orbit")])
