@@ -75,7 +75,7 @@ def _run_pass(
     dis = cv2.DISOpticalFlow_create(cv2.DISOPTICAL_FLOW_PRESET_MEDIUM)
     track_of: list[np.ndarray | None] = [None] * len(segments)
     tracks: dict[int, _Track] = {}
-    fragment_of: dict[int, int] = {}  # track born inside a matched track -> that track
+    fragment_of: dict[int, tuple[int, int]] = {}  # track born inside a matched one -> (it, the view)
     next_id = 0
     prev = None
     for v in order:
@@ -121,7 +121,7 @@ def _run_pass(
             if assign[l] < 0 and seg_area[l] > 0:
                 assign[l] = next_id
                 if l in inside:
-                    fragment_of[next_id] = inside[l]
+                    fragment_of[next_id] = (inside[l], v)
                 next_id += 1
         for t in list(tracks):
             tracks[t].age += 1
@@ -134,13 +134,14 @@ def _run_pass(
     # A track born inside a matched one is a piece of it (a split mask) unless the two meet
     # again in a later view, as two objects that one mask had merged do.
     views_of: list[set[int]] = [set() for _ in range(next_id)]
-    for k, a in enumerate(track_of):
+    for v, a in enumerate(track_of):
         for t in np.unique(a[a >= 0]):
-            views_of[t].add(k)
+            views_of[t].add(v)
     final = np.arange(next_id)
     for t in sorted(fragment_of):  # parents are older, so already resolved
-        root = final[fragment_of[t]]
-        if views_of[t] & views_of[root] == {min(views_of[t])}:
+        parent, born = fragment_of[t]
+        root = final[parent]
+        if views_of[t] & views_of[root] == {born}:
             final[t] = root
             views_of[root] |= views_of[t]
     return [np.where(a >= 0, final[np.maximum(a, 0)], -1) for a in track_of]
