@@ -1,10 +1,15 @@
 """Numba kernels of the ``cpu`` backend: tile binning, front-to-back blending and its
 reverse-order backward pass. Compiled on first use and cached; no compiler at install.
 
-Per-pixel Gaussian values are computed in float32, as the CUDA rasterizers do; colour and
-transmittance accumulate in float64. Work is split over tiles; the
-backward pass gives every worker its own gradient buffer, summed afterwards, so results
-do not depend on thread timing.
+A tile is processed the way the CUDA rasterizers process it, with its pixels as the lanes:
+the kernels walk the tile's depth-sorted Gaussians and update all of its pixels at once,
+in branch-free loops over pixels that LLVM compiles to SIMD code. The exponential in those
+loops is :func:`_exp`, a polynomial, because numba has no vector exponential without Intel
+SVML. Those loops are separate (not inlined) functions, whose array arguments let LLVM
+bound the memory they touch, and run over unsigned indices, which numba does not wrap
+around; both are needed for LLVM to vectorise them. Per-pixel values are float32, as on the GPU;
+per-Gaussian gradients are summed in float64. Work is split over tiles; the backward pass gives every worker its own gradient
+buffer, summed afterwards, so results do not depend on thread timing.
 """
 
 from __future__ import annotations
@@ -15,6 +20,14 @@ import numba
 import numpy as np
 
 from gsseg.render.blend_rules import ALPHA_MAX, ALPHA_MIN, T_MIN
+
+f32 = np.float32
+# Below this power exp(power) < ALPHA_MIN, so no Gaussian (opacity <= 1) is blended there.
+POWER_FLOOR = f32(-6.0)
+_LN2, _INV_LN2 = f32(math.log(2.0)), f32(1.0 / math.log(2.0))
+_C2, _C3, _C4, _C5, _C6 = (f32(1.0 / math.factorial(k)) for k in range(2, 7))
+# Reduction loops may be reordered (and so vectorised); nothing assumes finite values.
+_FAST = {"reassoc", "contract", "nsz"}
 
 
 @numba.njit(cache=True)
@@ -47,18 +60,30 @@ def bin_gaussians(rects: np.ndarray, order: np.ndarray, n_tiles_x: int, n_tiles_
     return offsets, ids
 
 
+@numba.njit(inline="always")
+def _exp(x):
+    """exp(x) in float32 for x in [POWER_FLOOR, 0], as accurate as ``math.exp`` in float32
+    (relative error < 3e-7): x = k ln 2 + r with |r| <= ln(2) / 2, a degree-6 Taylor
+    polynomial for exp(r), and 2^k (k in -9..0) as a product of selected powers of two."""
+    k = np.floor(x * _INV_LN2 + f32(0.5))
+    r = x - k * _LN2
+    p = f32(1.0) + r * (f32(1.0) + r * (_C2 + r * (_C3 + r * (_C4 + r * (_C5 + r * _C6)))))
+    m = -np.int32(k)
+    s = ((f32(0.5) if m & 1 else f32(1.0)) * (f32(0.25) if m & 2 else f32(1.0))
+         * (f32(1.0 / 16) if m & 4 else f32(1.0)) * (f32(1.0 / 256) if m & 8 else f32(1.0)))
+    return p * s
+
+
 @numba.njit(cache=True)
 def _gather_tile(ids, start, end, means2d, conics, opacities):
-    """The tile's Gaussians as one contiguous (m, 7) float32 block: mean x, mean y, conic
-    a, b, c, opacity, and log(ALPHA_MIN / opacity), the power below which a Gaussian is skipped
-    (so most skips need no exponential)."""
-    loc = np.empty((end - start, 7), np.float32)
+    """The tile's Gaussians as one contiguous (m, 6) float32 block: mean x, mean y, conic
+    a, b, c, opacity."""
+    loc = np.empty((end - start, 6), np.float32)
     for j in range(end - start):
         g = ids[start + j]
         loc[j, 0], loc[j, 1] = means2d[g, 0], means2d[g, 1]
         loc[j, 2], loc[j, 3], loc[j, 4] = conics[g, 0], conics[g, 1], conics[g, 2]
         loc[j, 5] = opacities[g]
-        loc[j, 6] = math.log(ALPHA_MIN / opacities[g]) if opacities[g] > 0 else np.inf
     return loc
 
 
@@ -72,52 +97,156 @@ def _gather_rows(ids, start, end, values):
 
 
 @numba.njit(inline="always")
-def _alpha_at(loc, j, px, py):
-    """(alpha, gaussian value, dx, dy) of the tile's j-th Gaussian at pixel centre (px, py);
-    alpha is 0 where the 3D-GS rules skip the Gaussian."""
-    dx = loc[j, 0] - px
-    dy = loc[j, 1] - py
-    power = np.float32(-0.5) * (loc[j, 2] * dx * dx + loc[j, 4] * dy * dy) - loc[j, 3] * dx * dy
-    if power > 0 or power < loc[j, 6]:
-        return np.float32(0), np.float32(0), dx, dy
-    gauss = np.float32(math.exp(power))
-    alpha = min(np.float32(ALPHA_MAX), loc[j, 5] * gauss)
-    if alpha < np.float32(ALPHA_MIN):
-        return np.float32(0), gauss, dx, dy
-    return alpha, gauss, dx, dy
+def _tile_pixels(t, n_tiles_x, tile, width, height, px, py, inside):
+    """Fill the pixel centres px, py (P,) of tile t (P = tile^2, row-major) and whether
+    each lies in the image; returns the tile's origin (x0, y0)."""
+    x0, y0 = (t % n_tiles_x) * tile, (t // n_tiles_x) * tile
+    for k in range(tile * tile):
+        x, y = x0 + k % tile, y0 + k // tile
+        px[k], py[k] = f32(x + 0.5), f32(y + 0.5)
+        inside[k] = x < width and y < height
+    return x0, y0
 
 
 @numba.njit(inline="always")
-def _pixel_weights(loc, px, py, weights):
-    """Front-to-back blending weights alpha_j T_j of the tile's Gaussians at one pixel, with
-    the 3D-GS rules. Fills weights[:last] (0 where a Gaussian is skipped) and returns
-    (final transmittance, last), ``last`` being one past the last blended entry."""
-    trans = 1.0
-    last = 0
-    for j in range(loc.shape[0]):
-        alpha = _alpha_at(loc, j, px, py)[0]
-        weights[j] = 0.0
-        if alpha == 0:
-            continue
-        next_t = trans * (1.0 - alpha)
-        if next_t < T_MIN:
-            break
-        weights[j] = alpha * trans
-        trans = next_t
-        last = j + 1
-    return trans, last
+def _pixel_span(loc, j, y0, tile, height):
+    """The pixels [lo, hi) of a tile at y0 (row-major, P = tile^2) in the rows that the
+    tile's j-th Gaussian can reach: those within the bounding box of its ellipse
+    alpha >= ALPHA_MIN, padded by a row. Empty when its opacity is below ALPHA_MIN."""
+    a, b, c, o = loc[j, 2], loc[j, 3], loc[j, 4], loc[j, 5]
+    if o < ALPHA_MIN:
+        return 0, 0
+    det = a * c - b * b
+    if not det > 0:
+        return 0, tile * tile
+    # alpha >= ALPHA_MIN  <=>  d^T conic d <= 2 log(o / ALPHA_MIN); the ellipse's half-height
+    # is sqrt of that times the covariance's yy entry, a / det.
+    half = math.sqrt(2.0 * math.log(o / ALPHA_MIN) * a / det) + 1.0
+    lo = max(0, int(math.floor(loc[j, 1] - half)) - y0)
+    hi = min(tile, min(height - y0, int(math.ceil(loc[j, 1] + half)) - y0))
+    return lo * tile, max(lo, hi) * tile
+
+
+@numba.njit(cache=True, fastmath=_FAST, error_model="numpy")
+def _alphas(loc, j, px, py, lo, hi, alpha, gauss):
+    """alpha and gauss at pixels [lo, hi) of the tile for its j-th Gaussian, alpha = min(0.99,
+    opacity * gauss) and 0 where the 3D-GS rules skip it. Returns how many pixels it reaches."""
+    mx, my, a, b, c, o = loc[j, 0], loc[j, 1], loc[j, 2], loc[j, 3], loc[j, 4], loc[j, 5]
+    hits = f32(0.0)
+    for p in range(np.uint64(lo), np.uint64(hi)):
+        dx, dy = mx - px[p], my - py[p]
+        power = f32(-0.5) * (a * dx * dx + c * dy * dy) - b * dx * dy
+        g = _exp(max(power, POWER_FLOOR))
+        al = min(f32(ALPHA_MAX), o * g)
+        ok = (power <= f32(0.0)) & (al >= f32(ALPHA_MIN))
+        alpha[p] = al if ok else f32(0.0)
+        gauss[p] = g
+        hits += f32(1.0) if ok else f32(0.0)
+    return hits
+
+
+@numba.njit(cache=True, fastmath=_FAST, error_model="numpy")
+def _blend_step(j, lo, hi, alpha, trans, live, weight, last):
+    """Blend the tile's j-th Gaussian, with alpha from :func:`_alphas`, into the live pixels
+    in [lo, hi): weight = alpha T, T *= 1 - alpha, unless that would take T below T_MIN,
+    which ends the pixel (live = 0). last becomes j + 1 where it blends. Returns (pixels
+    blended, pixels ended)."""
+    blended = f32(0.0)
+    ended = f32(0.0)
+    for p in range(np.uint64(lo), np.uint64(hi)):
+        al = alpha[p] * live[p]
+        keep = f32(0.0) if trans[p] * (f32(1.0) - al) < f32(T_MIN) else f32(1.0)
+        ended += live[p] * (f32(1.0) - keep)
+        live[p] *= keep
+        al *= keep
+        weight[p] = al * trans[p]
+        trans[p] = trans[p] * (f32(1.0) - al)
+        last[p] = np.int32(j + 1) if al > f32(0.0) else last[p]
+        blended += f32(1.0) if al > f32(0.0) else f32(0.0)
+    return blended, ended
+
+
+@numba.njit(cache=True, fastmath=_FAST, error_model="numpy")
+def _add_weighted(acc, feat, j, weight, lo, hi):
+    """acc[:, p] += weight[p] * feat[j] for the pixels p in [lo, hi); acc is (C, P)."""
+    for ch in range(acc.shape[0]):
+        f = feat[j, ch]
+        row = acc[ch]
+        for p in range(np.uint64(lo), np.uint64(hi)):
+            row[p] += weight[p] * f
+
+
+@numba.njit(cache=True, fastmath=_FAST, error_model="numpy")
+def _unblend_step(j, lo, hi, n_last, alpha, trans, weight):
+    """The backward pass's step to the tile's j-th Gaussian: keep alpha where the pixel's
+    forward pass blended entry j (j < n_last), recover T before it by division and set
+    weight = alpha T. Returns how many pixels it blended."""
+    active = f32(0.0)
+    for p in range(np.uint64(lo), np.uint64(hi)):
+        al = alpha[p] if j < n_last[p] else f32(0.0)
+        alpha[p] = al
+        trans[p] = trans[p] / (f32(1.0) - al)
+        weight[p] = al * trans[p]
+        active += f32(1.0) if al > f32(0.0) else f32(0.0)
+    return active
+
+
+@numba.njit(cache=True, fastmath=_FAST, error_model="numpy")
+def _feature_grads(feat, j, d_pix, weight, lo, hi, f_dot, tg):
+    """Gradient of the tile's j-th Gaussian's features, tg[j, 6 + ch] += sum_p weight[p]
+    d_pix[ch, p], and f_dot[p] = feat[j] . d_pix[:, p] over the pixels in [lo, hi)."""
+    f_dot[lo:hi] = 0.0
+    for ch in range(d_pix.shape[0]):
+        f = feat[j, ch]
+        d_row = d_pix[ch]
+        s = f32(0.0)
+        for p in range(np.uint64(lo), np.uint64(hi)):
+            f_dot[p] += f * d_row[p]
+            s += weight[p] * d_row[p]
+        tg[j, 6 + ch] += s
+
+
+@numba.njit(cache=True, fastmath=_FAST, error_model="numpy")
+def _shape_grads(loc, j, px, py, lo, hi, alpha, gauss, trans, weight, f_dot, behind, d_out, tg):
+    """Gradients of the tile's j-th Gaussian's mean, conic and opacity, summed over the
+    pixels in [lo, hi) into tg[j, :6], through dL/dalpha, which needs the blended colour
+    behind the Gaussian (``behind``, updated here) and d_out = dL/dalpha_pixel * T_final."""
+    mx, my, a, b, c, o = loc[j, 0], loc[j, 1], loc[j, 2], loc[j, 3], loc[j, 4], loc[j, 5]
+    s_mx = s_my = s_a = s_b = s_c = s_o = f32(0.0)
+    for p in range(np.uint64(lo), np.uint64(hi)):
+        one_minus = f32(1.0) - alpha[p]
+        d_alpha = (d_out[p] - behind[p]) / one_minus + f_dot[p] * trans[p]
+        behind[p] += weight[p] * f_dot[p]
+        og = o * gauss[p]
+        # Where the 0.99 clamp is active, no gradient reaches opacity or shape.
+        free = (alpha[p] > f32(0.0)) & (og <= f32(ALPHA_MAX))
+        d_power = og * d_alpha if free else f32(0.0)
+        dx, dy = mx - px[p], my - py[p]
+        s_mx += d_power * (-a * dx - b * dy)
+        s_my += d_power * (-c * dy - b * dx)
+        s_a += f32(-0.5) * dx * dx * d_power
+        s_b += -dx * dy * d_power
+        s_c += f32(-0.5) * dy * dy * d_power
+        s_o += gauss[p] * d_alpha if free else f32(0.0)
+    tg[j, 0] += s_mx
+    tg[j, 1] += s_my
+    tg[j, 2] += s_a
+    tg[j, 3] += s_b
+    tg[j, 4] += s_c
+    tg[j, 5] += s_o
 
 
 @numba.njit(parallel=True, cache=True)
 def blend_forward(means2d, conics, opacities, features, offsets, ids, width, height, tile):
-    """Blend every tile. Returns image (H, W, C) float32, final transmittance (H, W) float64
+    """Blend every tile. Returns image (H, W, C) float32, final transmittance (H, W) float32
     and n_contrib (H, W) int32: how many entries of the tile list the pixel went through
     up to its last blended Gaussian."""
     n_ch = features.shape[1]
     n_tiles_x = (width + tile - 1) // tile
     n_tiles = offsets.shape[0] - 1
+    n_pix = tile * tile
     image = np.zeros((height, width, n_ch), np.float32)
-    final_t = np.ones((height, width), np.float64)
+    final_t = np.ones((height, width), np.float32)
     n_contrib = np.zeros((height, width), np.int32)
     for t in numba.prange(n_tiles):
         start, end = offsets[t], offsets[t + 1]
@@ -125,22 +254,32 @@ def blend_forward(means2d, conics, opacities, features, offsets, ids, width, hei
             continue
         loc = _gather_tile(ids, start, end, means2d, conics, opacities)
         feat = _gather_rows(ids, start, end, features)
-        y0, x0 = (t // n_tiles_x) * tile, (t % n_tiles_x) * tile
-        acc = np.empty(n_ch, np.float64)
-        weights = np.empty(end - start, np.float64)
-        for y in range(y0, min(y0 + tile, height)):
-            for x in range(x0, min(x0 + tile, width)):
-                trans, last = _pixel_weights(loc, np.float32(x + 0.5), np.float32(y + 0.5), weights)
-                acc[:] = 0.0
-                for j in range(last):
-                    w = weights[j]
-                    if w != 0.0:
-                        for ch in range(n_ch):
-                            acc[ch] += w * feat[j, ch]
+        px, py = np.empty(n_pix, np.float32), np.empty(n_pix, np.float32)
+        inside = np.empty(n_pix, np.bool_)
+        x0, y0 = _tile_pixels(t, n_tiles_x, tile, width, height, px, py, inside)
+        alpha, gauss, weight = np.empty(n_pix, np.float32), np.empty(n_pix, np.float32), np.empty(n_pix, np.float32)
+        trans = np.ones(n_pix, np.float32)
+        live = inside.astype(np.float32)
+        last = np.zeros(n_pix, np.int32)
+        acc = np.zeros((n_ch, n_pix), np.float32)
+        n_live = live.sum()
+        for j in range(end - start):
+            lo, hi = _pixel_span(loc, j, y0, tile, height)
+            if lo == hi or _alphas(loc, j, px, py, lo, hi, alpha, gauss) == 0:
+                continue
+            blended, ended = _blend_step(j, lo, hi, alpha, trans, live, weight, last)
+            if blended > 0:
+                _add_weighted(acc, feat, j, weight, lo, hi)
+            n_live -= ended
+            if n_live == 0:
+                break
+        for p in range(n_pix):
+            if inside[p]:
+                y, x = y0 + p // tile, x0 + p % tile
                 for ch in range(n_ch):
-                    image[y, x, ch] = acc[ch]
-                final_t[y, x] = trans
-                n_contrib[y, x] = last
+                    image[y, x, ch] = acc[ch, p]
+                final_t[y, x] = trans[p]
+                n_contrib[y, x] = last[p]
     return image, final_t, n_contrib
 
 
@@ -150,60 +289,53 @@ def blend_backward(means2d, conics, opacities, features, offsets, ids, width, he
     """Gradients of a loss with respect to means2d (N, 2), conics (N, 3), opacities (N,)
     and features (N, C), given its gradients grad_image (H, W, C) and grad_alpha (H, W).
 
-    Walks each pixel's list back to front, recovering transmittance by division as the
-    3D-GS backward pass does. Worker w handles tiles w, w + n_workers, ...
+    Walks each tile's list back to front, recovering every pixel's transmittance by
+    division as the 3D-GS backward pass does. Worker w handles tiles w, w + n_workers, ...
     """
     n = means2d.shape[0]
     n_ch = features.shape[1]
     n_tiles_x = (width + tile - 1) // tile
     n_tiles = offsets.shape[0] - 1
+    n_pix = tile * tile
     g_means = np.zeros((n_workers, n, 2), np.float64)
     g_conics = np.zeros((n_workers, n, 3), np.float64)
     g_opac = np.zeros((n_workers, n), np.float64)
     g_feat = np.zeros((n_workers, n, n_ch), np.float64)
     for w_id in numba.prange(n_workers):
-        d_pix = np.empty(n_ch, np.float64)
+        px, py = np.empty(n_pix, np.float32), np.empty(n_pix, np.float32)
+        inside = np.empty(n_pix, np.bool_)
+        alpha, gauss, trans = np.empty(n_pix, np.float32), np.empty(n_pix, np.float32), np.empty(n_pix, np.float32)
+        weight, f_dot = np.empty(n_pix, np.float32), np.empty(n_pix, np.float32)
+        behind, d_out = np.empty(n_pix, np.float32), np.empty(n_pix, np.float32)
+        n_last = np.empty(n_pix, np.int32)
+        d_pix = np.empty((n_ch, n_pix), np.float32)
         for t in range(w_id, n_tiles, n_workers):
             start, end = offsets[t], offsets[t + 1]
             if start == end:
                 continue
             loc = _gather_tile(ids, start, end, means2d, conics, opacities)
             feat = _gather_rows(ids, start, end, features)
+            x0, y0 = _tile_pixels(t, n_tiles_x, tile, width, height, px, py, inside)
+            n_max = 0
+            for p in range(n_pix):
+                y, x = min(y0 + p // tile, height - 1), min(x0 + p % tile, width - 1)
+                n_last[p] = n_contrib[y, x] if inside[p] else 0
+                trans[p] = final_t[y, x]
+                d_out[p] = grad_alpha[y, x] * final_t[y, x]
+                for ch in range(n_ch):
+                    d_pix[ch, p] = grad_image[y, x, ch]
+                n_max = max(n_max, n_last[p])
+            behind[:] = 0.0
             # Tile-local gradients: mean x, y, conic a, b, c, opacity, then the features.
             tg = np.zeros((end - start, 6 + n_ch), np.float64)
-            y0, x0 = (t // n_tiles_x) * tile, (t % n_tiles_x) * tile
-            for y in range(y0, min(y0 + tile, height)):
-                for x in range(x0, min(x0 + tile, width)):
-                    t_final = final_t[y, x]
-                    trans = t_final
-                    behind = 0.0  # (contributions behind the current Gaussian) . grad_image
-                    d_alpha_out = grad_alpha[y, x]
-                    px, py = np.float32(x + 0.5), np.float32(y + 0.5)
-                    for ch in range(n_ch):
-                        d_pix[ch] = grad_image[y, x, ch]
-                    for j in range(n_contrib[y, x] - 1, -1, -1):
-                        alpha, gauss, dx, dy = _alpha_at(loc, j, px, py)
-                        if alpha == 0:
-                            continue
-                        one_minus = 1.0 - alpha
-                        trans = trans / one_minus
-                        weight = alpha * trans
-                        f_dot = 0.0
-                        for ch in range(n_ch):
-                            tg[j, 6 + ch] += weight * d_pix[ch]
-                            f_dot += feat[j, ch] * d_pix[ch]
-                        d_alpha = d_alpha_out * t_final / one_minus + f_dot * trans - behind / one_minus
-                        behind += weight * f_dot
-                        if loc[j, 5] * gauss > ALPHA_MAX:
-                            continue  # clamped: no gradient reaches opacity or shape
-                        d_power = loc[j, 5] * gauss * d_alpha
-                        a, b, c = loc[j, 2], loc[j, 3], loc[j, 4]
-                        tg[j, 0] += d_power * (-a * dx - b * dy)
-                        tg[j, 1] += d_power * (-c * dy - b * dx)
-                        tg[j, 2] += -0.5 * dx * dx * d_power
-                        tg[j, 3] += -dx * dy * d_power
-                        tg[j, 4] += -0.5 * dy * dy * d_power
-                        tg[j, 5] += gauss * d_alpha
+            for j in range(n_max - 1, -1, -1):
+                lo, hi = _pixel_span(loc, j, y0, tile, height)
+                if lo == hi or _alphas(loc, j, px, py, lo, hi, alpha, gauss) == 0:
+                    continue
+                if _unblend_step(j, lo, hi, n_last, alpha, trans, weight) == 0:
+                    continue
+                _feature_grads(feat, j, d_pix, weight, lo, hi, f_dot, tg)
+                _shape_grads(loc, j, px, py, lo, hi, alpha, gauss, trans, weight, f_dot, behind, d_out, tg)
             for j in range(end - start):
                 g = ids[start + j]
                 g_means[w_id, g, 0] += tg[j, 0]
@@ -227,24 +359,40 @@ def accumulate_weights(means2d, conics, opacities, offsets, ids, width, height, 
     n = means2d.shape[0]
     n_tiles_x = (width + tile - 1) // tile
     n_tiles = offsets.shape[0] - 1
+    n_pix = tile * tile
     buffers = np.zeros((n_workers, n_rows, n), np.float32)
     for w_id in numba.prange(n_workers):
+        px, py = np.empty(n_pix, np.float32), np.empty(n_pix, np.float32)
+        inside = np.empty(n_pix, np.bool_)
+        alpha, gauss, weight = np.empty(n_pix, np.float32), np.empty(n_pix, np.float32), np.empty(n_pix, np.float32)
+        trans, live = np.empty(n_pix, np.float32), np.empty(n_pix, np.float32)
+        last = np.empty(n_pix, np.int32)
+        row = np.empty(n_pix, np.int64)
         for t in range(w_id, n_tiles, n_workers):
             start, end = offsets[t], offsets[t + 1]
             if start == end:
                 continue
             loc = _gather_tile(ids, start, end, means2d, conics, opacities)
+            x0, y0 = _tile_pixels(t, n_tiles_x, tile, width, height, px, py, inside)
+            for p in range(n_pix):
+                y, x = min(y0 + p // tile, height - 1), min(x0 + p % tile, width - 1)
+                row[p] = rows[y, x]
+                live[p] = f32(1.0) if inside[p] and row[p] >= 0 else f32(0.0)
+            n_live = live.sum()
+            trans[:] = 1.0
             local = np.zeros((end - start, n_rows), np.float64)
-            weights = np.empty(end - start, np.float64)
-            y0, x0 = (t // n_tiles_x) * tile, (t % n_tiles_x) * tile
-            for y in range(y0, min(y0 + tile, height)):
-                for x in range(x0, min(x0 + tile, width)):
-                    r = rows[y, x]
-                    if r < 0:
-                        continue
-                    last = _pixel_weights(loc, np.float32(x + 0.5), np.float32(y + 0.5), weights)[1]
-                    for j in range(last):
-                        local[j, r] += weights[j]
+            for j in range(end - start):
+                if n_live == 0:
+                    break
+                lo, hi = _pixel_span(loc, j, y0, tile, height)
+                if lo == hi or _alphas(loc, j, px, py, lo, hi, alpha, gauss) == 0:
+                    continue
+                blended, ended = _blend_step(j, lo, hi, alpha, trans, live, weight, last)
+                n_live -= ended
+                if blended > 0:
+                    for p in range(lo, hi):
+                        if weight[p] > 0:
+                            local[j, row[p]] += weight[p]
             for j in range(end - start):
                 g = ids[start + j]
                 for r in range(n_rows):
