@@ -9,9 +9,10 @@ from dataset_tools.cameras import PinholeCamera
 from gsseg.gaussians import Gaussians
 
 
-def random_gaussians(n: int, seed: int, dtype: torch.dtype = torch.float32) -> Gaussians:
-    """``n`` Gaussians in front of :func:`look_down_z`, with varied shapes, opacities,
-    SH colours and object features."""
+def random_gaussians(n: int, seed: int, dtype: torch.dtype = torch.float32,
+                     scales: tuple[float, float] = (0.04, 0.24)) -> Gaussians:
+    """``n`` Gaussians in front of :func:`look_down_z`, with varied shapes (axis standard
+    deviations drawn in ``scales``), opacities, SH colours and object features."""
     gen = torch.Generator().manual_seed(seed)
 
     def rand(*shape: int) -> torch.Tensor:
@@ -20,7 +21,7 @@ def random_gaussians(n: int, seed: int, dtype: torch.dtype = torch.float32) -> G
     means = (rand(n, 3) - 0.5) * torch.tensor([2.4, 1.8, 2.0], dtype=torch.float64)
     g = Gaussians(
         means=means,
-        log_scales=torch.log(0.04 + 0.2 * rand(n, 3)),
+        log_scales=torch.log(scales[0] + (scales[1] - scales[0]) * rand(n, 3)),
         quats=rand(n, 4) - 0.5,
         opacity_logits=8 * rand(n) - 2,
         sh_dc=rand(n, 3) * 2 - 1,

@@ -5,12 +5,13 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 import torch
 
 from dataset_tools.cameras import PinholeCamera
 from gsseg.gaussians import Gaussians
-from gsseg.render import render, resolve_backend
+from gsseg.render import cpu_kernels, render, resolve_backend
 from gsseg.render.gsplat_blend import gsplat_available
 from tests.render_scenes import look_down_z, output_weights, random_gaussians, weighted_sum
 
@@ -24,10 +25,15 @@ def _render_with_grads(g: Gaussians, backend: str, weights, cam, pose):
     return out, {k: v.grad for k, v in g.tensors().items()}
 
 
-@pytest.mark.parametrize("seed", [0, 1, 2])
-def test_cpu_backend_matches_torch_reference(seed):
-    cam, pose = look_down_z(40, 32)
-    g = random_gaussians(150, seed)
+@pytest.mark.parametrize("seed, size, scales", [
+    (0, (40, 32), (0.04, 0.24)), (1, (40, 32), (0.04, 0.24)), (2, (40, 32), (0.04, 0.24)),
+    # small, elongated Gaussians over many tiles: the cpu kernels visit only the rows of a
+    # tile that a Gaussian's footprint reaches, and tiles at the image border are partial
+    (3, (90, 70), (0.005, 0.08)),
+])
+def test_cpu_backend_matches_torch_reference(seed, size, scales):
+    cam, pose = look_down_z(*size)
+    g = random_gaussians(400 if seed == 3 else 150, seed, scales=scales)
     weights = output_weights(cam.width, cam.height, seed, torch.float32)
     ref, ref_grads = _render_with_grads(g, "torch", weights, cam, pose)
     out, grads = _render_with_grads(g, "cpu", weights, cam, pose)
@@ -38,6 +44,14 @@ def test_cpu_backend_matches_torch_reference(seed):
     for name, expected in ref_grads.items():
         rel = (grads[name] - expected).norm() / expected.norm()
         assert expected.norm() > 0 and rel < 1e-3, (name, rel.item())
+
+
+def test_cpu_exponential_matches_math_exp():
+    """The kernels' polynomial exponential, over the range of powers they evaluate."""
+    x = np.linspace(float(cpu_kernels.POWER_FLOOR), 0.0, 20001).astype(np.float32)
+    approx = np.array([cpu_kernels.exp_f32(v) for v in x[::50]], np.float64)
+    exact = np.exp(x[::50].astype(np.float64))
+    assert np.abs(approx / exact - 1).max() < 3e-7
 
 
 def test_torch_reference_matches_finite_differences():

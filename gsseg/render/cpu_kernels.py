@@ -4,7 +4,7 @@ reverse-order backward pass. Compiled on first use and cached; no compiler at in
 A tile is processed the way the CUDA rasterizers process it, with its pixels as the lanes:
 the kernels walk the tile's depth-sorted Gaussians and update all of its pixels at once,
 in branch-free loops over pixels that LLVM compiles to SIMD code. The exponential in those
-loops is :func:`_exp`, a polynomial, because numba has no vector exponential without Intel
+loops is :func:`exp_f32`, a polynomial, because numba has no vector exponential without Intel
 SVML. Those loops are separate (not inlined) functions, whose array arguments let LLVM
 bound the memory they touch, and run over unsigned indices, which numba does not wrap
 around; both are needed for LLVM to vectorise them. Per-pixel values are float32, as on the GPU;
@@ -61,7 +61,7 @@ def bin_gaussians(rects: np.ndarray, order: np.ndarray, n_tiles_x: int, n_tiles_
 
 
 @numba.njit(inline="always")
-def _exp(x):
+def exp_f32(x):
     """exp(x) in float32 for x in [POWER_FLOOR, 0], as accurate as ``math.exp`` in float32
     (relative error < 3e-7): x = k ln 2 + r with |r| <= ln(2) / 2, a degree-6 Taylor
     polynomial for exp(r), and 2^k (k in -9..0) as a product of selected powers of two."""
@@ -136,7 +136,7 @@ def _alphas(loc, j, px, py, lo, hi, alpha, gauss):
     for p in range(np.uint64(lo), np.uint64(hi)):
         dx, dy = mx - px[p], my - py[p]
         power = f32(-0.5) * (a * dx * dx + c * dy * dy) - b * dx * dy
-        g = _exp(max(power, POWER_FLOOR))
+        g = exp_f32(max(power, POWER_FLOOR))
         al = min(f32(ALPHA_MAX), o * g)
         ok = (power <= f32(0.0)) & (al >= f32(ALPHA_MIN))
         alpha[p] = al if ok else f32(0.0)
