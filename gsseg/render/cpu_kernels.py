@@ -2,14 +2,18 @@
 reverse-order backward pass. Compiled on first use and cached; no compiler at install.
 
 A tile is processed the way the CUDA rasterizers process it, with its pixels as the lanes:
-the kernels walk the tile's depth-sorted Gaussians and update all of its pixels at once,
-in branch-free loops over pixels that LLVM compiles to SIMD code. The exponential in those
-loops is :func:`exp_f32`, a polynomial, because numba has no vector exponential without Intel
-SVML. Those loops are separate (not inlined) functions, whose array arguments let LLVM
-bound the memory they touch, and run over unsigned indices, which numba does not wrap
-around; both are needed for LLVM to vectorise them. Per-pixel values are float32, as on the GPU;
-per-Gaussian gradients are summed in float64. Work is split over tiles; the backward pass gives every worker its own gradient
-buffer, summed afterwards, so results do not depend on thread timing.
+the kernels walk the tile's depth-sorted Gaussians and update all of its pixels at once, in
+branch-free loops over pixels that LLVM compiles to SIMD code. Those loops
+
+- use :func:`exp_f32`, a polynomial, because numba has no vector exponential without SVML;
+- are separate (not inlined) functions, whose array arguments let LLVM bound the memory
+  they touch, and run over unsigned indices, which numba does not wrap around: LLVM needs
+  both to vectorise them;
+- visit only the rows of the tile that the Gaussian's footprint reaches.
+
+Per-pixel values are float32, as on the GPU; per-Gaussian gradients are summed in float64.
+Work is split over tiles; the backward pass gives every worker its own gradient buffer,
+summed afterwards, so results do not depend on thread timing.
 """
 
 from __future__ import annotations
@@ -122,8 +126,9 @@ def _pixel_span(loc, j, y0, tile, height):
     # alpha >= ALPHA_MIN  <=>  d^T conic d <= 2 log(o / ALPHA_MIN); the ellipse's half-height
     # is sqrt of that times the covariance's yy entry, a / det.
     half = math.sqrt(2.0 * math.log(o / ALPHA_MIN) * a / det) + 1.0
-    lo = max(0, int(math.floor(loc[j, 1] - half)) - y0)
-    hi = min(tile, min(height - y0, int(math.ceil(loc[j, 1] + half)) - y0))
+    rows = min(tile, height - y0)
+    lo = int(min(max(math.floor(loc[j, 1] - half) - y0, 0.0), rows))
+    hi = int(min(max(math.ceil(loc[j, 1] + half) - y0, 0.0), rows))
     return lo * tile, max(lo, hi) * tile
 
 
