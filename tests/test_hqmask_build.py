@@ -108,3 +108,28 @@ def test_tracks_splits_a_mask_that_merges_two_objects(tmp_path):
     mapping = match_ids(sum(overlap(o.load_mask(), g) for o, g in zip(load_scene(scene, masks="out").views, gt)))
     for obj in (a, b):
         assert np.mean(mapping[out[gt[3] == obj]] == obj) > 0.8, obj
+
+
+def test_tracks_joins_the_pieces_of_a_mask_split_alike_in_two_views(tmp_path):
+    """Views 3 and 4 cut the largest object in two along the same vertical line through its
+    centre, each half under a new ID: the halves of the two views link to each other, but
+    every other view holds their points inside the whole object, so they are pieces of it."""
+    scene = generate_scene(SynthConfig(views=12, res=128, path="orbit", seed=1), tmp_path / "s", progress=False).root
+    views = load_scene(scene).views
+    gt = [v.load_mask() for v in views]
+    obj = int(np.argmax(np.bincount(gt[3].ravel(), minlength=256)[1:]) + 1)
+    for k, v in enumerate(views):
+        m = gt[k].copy()
+        if k in (3, 4):
+            cols = np.nonzero(m == obj)[1]
+            left = np.zeros_like(m, bool)
+            left[:, : int(cols.mean())] = True
+            m[(m == obj) & left] = 201
+            m[(m == obj) & ~left] = 202
+        write_png(scene / "split" / f"{v.stem}.png", m)
+    build_masks(scene, BuildConfig(proposer="existing", from_masks="split", associate="tracks", min_area=20,
+                                   out_masks="out"), progress=False)
+    out = [o.load_mask() for o in load_scene(scene, masks="out").views]
+    mapping = match_ids(sum(overlap(o, g) for o, g in zip(out, gt)))
+    for k in (3, 4):
+        assert np.mean(mapping[out[k][gt[k] == obj]] == obj) > 0.95, k

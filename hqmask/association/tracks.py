@@ -7,9 +7,12 @@
    strongest first (most shared points) into a union-find that refuses to join two groups
    holding different segments of one view: the core objects. A segment covering two
    objects can join one of them but never chains the two together.
-3. Merges repaired: a segment whose points belong to two or more objects (each with a fair
+3. Pieces joined: a core object seen in fewer views than those in which its points lie
+   inside one other object is a piece of that object (the halves of a mask cut alike in
+   two views link to each other) and takes its ID.
+4. Merges repaired: a segment whose points belong to two or more objects (each with a fair
    share of them) is split between them by nearest point.
-4. Conflicts and leftovers: a segment outside every core object of two or more segments
+5. Conflicts and leftovers: a segment outside every core object of two or more segments
    (a split half, a merged blob, a speck) joins the object, or background, that holds most
    of its points in the other views; a segment with no points stays background.
 """
@@ -55,6 +58,32 @@ def _split_by_points(view: View, region: np.ndarray, pts: np.ndarray, objs: np.n
         pixels[region] = owner == obj
         parts.append((int(obj), pixels))
     return parts
+
+
+def _pieces(obj_at: np.ndarray, objects: np.ndarray) -> dict[int, int]:
+    """{piece: whole} for the core objects that are pieces of another.
+
+    Args:
+        obj_at: (V, P) core object under each SfM point in each view; -1 where the view
+            does not see the point or it falls in no core object, -2 in background.
+        objects: the core objects' IDs.
+    """
+    whole_of = {}
+    for obj in objects.tolist():
+        inside = obj_at == obj
+        seen_in = inside.any(1)
+        pts = inside.any(0)
+        tally: dict[int, int] = defaultdict(int)
+        for v in np.flatnonzero(~seen_in):
+            there = obj_at[v, pts]
+            values, counts = np.unique(there[there != -1], return_counts=True)
+            if len(values) and values[np.argmax(counts)] >= 0:
+                tally[int(values[np.argmax(counts)])] += 1
+        if tally:
+            whole, n_views = max(tally.items(), key=lambda kv: (kv[1], -kv[0]))
+            if n_views > seen_in.sum():
+                whole_of[obj] = whole
+    return whole_of
 
 
 def associate_tracks(
@@ -109,10 +138,18 @@ def associate_tracks(
     for r in root[~is_bg]:
         members[int(r)] += 1
     core = np.array([not is_bg[i] and members[int(root[i])] >= 2 for i in range(len(root))])
-    # each point's object: majority over views of the core object it falls in (or background)
-    votes: dict[int, dict[int, int]] = defaultdict(lambda: defaultdict(int))
     obj_of_node = np.where(core, root, -1)
     obj_of_node[is_bg] = -2  # background
+    whole_of = _pieces(np.where(node >= 0, obj_of_node[np.maximum(node, 0)], -1), np.unique(root[core]))
+    for piece in whole_of:
+        whole = whole_of[piece]
+        while whole in whole_of:  # a piece of a piece (no cycles: a whole is seen in more views)
+            whole = whole_of[whole]
+        root[root == piece] = whole
+    obj_of_node = np.where(core, root, -1)
+    obj_of_node[is_bg] = -2
+    # each point's object: majority over views of the core object it falls in (or background)
+    votes: dict[int, dict[int, int]] = defaultdict(lambda: defaultdict(int))
     for v in range(V):
         seen = np.flatnonzero(node[v] >= 0)
         for p, o in zip(seen, obj_of_node[node[v, seen]]):
