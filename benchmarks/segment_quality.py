@@ -31,9 +31,7 @@ from gsseg.train import TrainConfig, train
 from hqmask.build import BuildConfig, build_masks
 
 SETTINGS = [("prior", -1.0), ("prior", 0.0), ("prior", 0.2), ("prior", 1.0), ("flashsplat", 0.0), ("classifier", 0.0)]
-
-
-TRAIN_IMAGES = "images_2"
+TRAIN_IMAGES = "images_2"  # training and scoring at half the size the masks are made at
 
 
 def score(run: Path, scene: Path, masks: str, method: str, gamma_p: float) -> float:

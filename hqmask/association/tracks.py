@@ -61,7 +61,10 @@ def _split_by_points(view: View, region: np.ndarray, pts: np.ndarray, objs: np.n
 
 
 def _pieces(obj_at: np.ndarray, objects: np.ndarray) -> dict[int, int]:
-    """{piece: whole} for the core objects that are pieces of another.
+    """{piece: whole} for the core objects that are pieces of another: in more views than
+    the piece appears in itself, most of its points that the view sees lie inside the whole.
+    A real object's points fall in its own segments wherever it is seen, so it is never
+    anyone's piece; the halves of a mask cut alike in two views are.
 
     Args:
         obj_at: (V, P) core object under each SfM point in each view; -1 where the view
