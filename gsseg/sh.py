@@ -39,19 +39,22 @@ def eval_sh(degree: int, coeffs: torch.Tensor, dirs: torch.Tensor) -> torch.Tens
     Returns:
         (N, 3) colour, offset by +0.5 and clamped at 0 as 3D-GS does.
     """
-    result = C0 * coeffs[:, 0]
+    # One view per coefficient through ``unbind``: its backward stacks the K gradients once,
+    # where indexing coeffs[:, k] would zero-fill an (N, K, 3) gradient for every k.
+    c = coeffs.unbind(1)
+    result = C0 * c[0]
     if degree > 0:
         x, y, z = dirs[:, 0:1], dirs[:, 1:2], dirs[:, 2:3]
-        result = result - C1 * y * coeffs[:, 1] + C1 * z * coeffs[:, 2] - C1 * x * coeffs[:, 3]
+        result = result - C1 * y * c[1] + C1 * z * c[2] - C1 * x * c[3]
         if degree > 1:
             xx, yy, zz, xy, yz, xz = x * x, y * y, z * z, x * y, y * z, x * z
-            result = (result + C2[0] * xy * coeffs[:, 4] + C2[1] * yz * coeffs[:, 5]
-                      + C2[2] * (2 * zz - xx - yy) * coeffs[:, 6] + C2[3] * xz * coeffs[:, 7]
-                      + C2[4] * (xx - yy) * coeffs[:, 8])
+            result = (result + C2[0] * xy * c[4] + C2[1] * yz * c[5]
+                      + C2[2] * (2 * zz - xx - yy) * c[6] + C2[3] * xz * c[7]
+                      + C2[4] * (xx - yy) * c[8])
             if degree > 2:
-                result = (result + C3[0] * y * (3 * xx - yy) * coeffs[:, 9] + C3[1] * xy * z * coeffs[:, 10]
-                          + C3[2] * y * (4 * zz - xx - yy) * coeffs[:, 11]
-                          + C3[3] * z * (2 * zz - 3 * xx - 3 * yy) * coeffs[:, 12]
-                          + C3[4] * x * (4 * zz - xx - yy) * coeffs[:, 13] + C3[5] * z * (xx - yy) * coeffs[:, 14]
-                          + C3[6] * x * (xx - 3 * yy) * coeffs[:, 15])
+                result = (result + C3[0] * y * (3 * xx - yy) * c[9] + C3[1] * xy * z * c[10]
+                          + C3[2] * y * (4 * zz - xx - yy) * c[11]
+                          + C3[3] * z * (2 * zz - 3 * xx - 3 * yy) * c[12]
+                          + C3[4] * x * (4 * zz - xx - yy) * c[13] + C3[5] * z * (xx - yy) * c[14]
+                          + C3[6] * x * (xx - 3 * yy) * c[15])
     return torch.clamp_min(result + 0.5, 0.0)
