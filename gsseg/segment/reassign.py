@@ -152,8 +152,13 @@ def reassign(
             selections[r, on_obj] = fg[r, on_obj] + bonus[on_obj] > 1.0 - fg[r, on_obj]
             mine[r, on_obj] = True
         selections = torch.where(observed[None, :], selections, mine)
-        # the last selecting object in ID order: argmax over reversed rows of the selections
-        last = len(obj_ids) - 1 - torch.flip(selections, [0]).to(torch.uint8).argmax(dim=0)
-        labels = torch.where(selections.any(dim=0), obj_ids[last], 0) if len(obj_ids) else torch.zeros(n, dtype=torch.int64)
+        # the last selecting object in ID order: the largest 1-based row number that selects
+        # (uint8 holds it: there are at most 255 objects); 0 where none does
+        if len(obj_ids):
+            rank = torch.arange(1, len(obj_ids) + 1, dtype=torch.uint8)[:, None]
+            last = (selections.to(torch.uint8) * rank).amax(dim=0).long()
+            labels = torch.where(last > 0, obj_ids[(last - 1).clamp_min(0)], 0)
+        else:
+            labels = torch.zeros(n, dtype=torch.int64)
     return Segmentation(labels=labels.numpy().astype(np.uint8), objects=objects,
                         selections=selections.numpy(), method=method, mode=mode, gamma_p=gamma_p)
