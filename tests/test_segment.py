@@ -96,6 +96,13 @@ def test_binary_mode_matches_a_per_object_loop():
         fg = share[row] + 0.2 * p.numpy() * mine
         rest = 1 - share[row] + 0.2 * p.numpy() * ~mine
         assert np.array_equal(seg.selection(obj), fg > rest)
+    # a Gaussian's label is the last object, in ID order, that selects it (0 if none does);
+    # a negative prior lowers the rest side of every other object, so selections overlap
+    seg = reassign(_contributions(w, (0, 1, 2, 5)), prior, p, mode="binary", gamma_p=-1.0)
+    sel = np.stack([seg.selection(obj) for obj in (1, 2, 5)])
+    assert sel.sum(0).max() > 1 and not sel.any(0).all()
+    expected = np.where(sel.any(0), np.array([1, 2, 5])[2 - np.argmax(sel[::-1], axis=0)], 0)
+    assert np.array_equal(seg.labels, expected)
     with pytest.raises(InputError, match="object 9 is not among"):
         seg.selection(9)
 
