@@ -48,9 +48,9 @@ def test_cpu_backend_matches_torch_reference(seed, n, size, scales):
 
 def test_cpu_exponential_matches_math_exp():
     """The kernels' polynomial exponential, over the range of powers they evaluate."""
-    x = np.linspace(float(cpu_kernels.POWER_FLOOR), 0.0, 20001).astype(np.float32)
-    approx = np.array([cpu_kernels.exp_f32(v) for v in x[::50]], np.float64)
-    exact = np.exp(x[::50].astype(np.float64))
+    x = np.linspace(float(cpu_kernels.POWER_FLOOR), 0.0, 401).astype(np.float32)
+    approx = np.array([cpu_kernels.exp_f32(v) for v in x], np.float64)
+    exact = np.exp(x.astype(np.float64))
     assert np.abs(approx / exact - 1).max() < 3e-7
 
 

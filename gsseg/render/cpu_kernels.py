@@ -150,6 +150,16 @@ def _alphas(loc, j, px, py, lo, hi, alpha, gauss):
     return hits
 
 
+@numba.njit(inline="always")
+def _reached(loc, j, y0, tile, height, px, py, alpha, gauss):
+    """The pixels [lo, hi) of the tile that its j-th Gaussian can reach, with alpha and gauss
+    filled there by :func:`_alphas`; lo == hi when it blends into none of them."""
+    lo, hi = _pixel_span(loc, j, y0, tile, height)
+    if lo == hi or _alphas(loc, j, px, py, lo, hi, alpha, gauss) == 0:
+        return lo, lo
+    return lo, hi
+
+
 @numba.njit(cache=True, fastmath=_FAST, error_model="numpy")
 def _blend_step(j, lo, hi, alpha, trans, live, weight, last):
     """Blend the tile's j-th Gaussian, with alpha from :func:`_alphas`, into the live pixels
@@ -269,8 +279,8 @@ def blend_forward(means2d, conics, opacities, features, offsets, ids, width, hei
         acc = np.zeros((n_ch, n_pix), np.float32)
         n_live = live.sum()
         for j in range(end - start):
-            lo, hi = _pixel_span(loc, j, y0, tile, height)
-            if lo == hi or _alphas(loc, j, px, py, lo, hi, alpha, gauss) == 0:
+            lo, hi = _reached(loc, j, y0, tile, height, px, py, alpha, gauss)
+            if lo == hi:
                 continue
             blended, ended = _blend_step(j, lo, hi, alpha, trans, live, weight, last)
             if blended > 0:
@@ -334,8 +344,8 @@ def blend_backward(means2d, conics, opacities, features, offsets, ids, width, he
             # Tile-local gradients: mean x, y, conic a, b, c, opacity, then the features.
             tg = np.zeros((end - start, 6 + n_ch), np.float64)
             for j in range(n_max - 1, -1, -1):
-                lo, hi = _pixel_span(loc, j, y0, tile, height)
-                if lo == hi or _alphas(loc, j, px, py, lo, hi, alpha, gauss) == 0:
+                lo, hi = _reached(loc, j, y0, tile, height, px, py, alpha, gauss)
+                if lo == hi:
                     continue
                 if _unblend_step(j, lo, hi, n_last, alpha, trans, weight) == 0:
                     continue
@@ -389,8 +399,8 @@ def accumulate_weights(means2d, conics, opacities, offsets, ids, width, height, 
             for j in range(end - start):
                 if n_live == 0:
                     break
-                lo, hi = _pixel_span(loc, j, y0, tile, height)
-                if lo == hi or _alphas(loc, j, px, py, lo, hi, alpha, gauss) == 0:
+                lo, hi = _reached(loc, j, y0, tile, height, px, py, alpha, gauss)
+                if lo == hi:
                     continue
                 blended, ended = _blend_step(j, lo, hi, alpha, trans, live, weight, last)
                 n_live -= ended

@@ -149,8 +149,7 @@ def associate_tracks(
         while whole in whole_of:  # a piece of a piece (no cycles: a whole is seen in more views)
             whole = whole_of[whole]
         root[root == piece] = whole
-    obj_of_node = np.where(core, root, -1)
-    obj_of_node[is_bg] = -2
+    obj_of_node[core] = root[core]
     # each point's object: majority over views of the core object it falls in (or background)
     votes: dict[int, dict[int, int]] = defaultdict(lambda: defaultdict(int))
     for v in range(V):
