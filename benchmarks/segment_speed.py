@@ -1,4 +1,5 @@
-"""Benchmark: (1) the contribution pass against an RGB forward render over the same views;
+"""Benchmark: (1) the contribution pass against an RGB forward render over the same views (on
+``cpu``, and on ``gsplat`` where a GPU is present);
 (2) reassignment of N = 1M Gaussians over 64 labels in both modes, and the binary mode
 against a faithful per-label Python loop in the style of the seed authors' code, on the
 same inputs (selections must agree). Prints and writes JSON.
@@ -16,7 +17,8 @@ import numpy as np
 import torch
 
 from benchmarks.render_speed import scene
-from gsseg.render import render
+from gsseg.render import backend_device, render
+from gsseg.render.gsplat_blend import gsplat_available
 from gsseg.segment import Contributions, MaskedView, contribution_matrix, reassign
 
 
@@ -44,8 +46,27 @@ def timed(fn, repeats: int = 3):
     for _ in range(repeats):
         start = time.perf_counter()
         result = fn()
+        if torch.cuda.is_available():
+            torch.cuda.synchronize()
         best = min(best, time.perf_counter() - start)
     return best, result
+
+
+def contribution_vs_rgb(backend: str) -> dict:
+    """The contribution pass and an RGB forward render of the same 4 views, 30k Gaussians at
+    256x256 and 8 labels, on one backend."""
+    g, cam, pose = scene(30_000)
+    rng = np.random.default_rng(0)
+    mask = np.kron(rng.integers(0, 8, (8, 8)), np.ones((32, 32), int)).astype(np.uint8)
+    views = [MaskedView(cam, pose.numpy(), mask)] * 4
+    device = backend_device(backend)
+    on_device, pose_on_device = g.to(device), pose.to(device)
+    with torch.no_grad():
+        t_rgb, _ = timed(lambda: [render(on_device, cam, pose_on_device, with_features=False, backend=backend)
+                                  for _ in views])
+    t_contrib, _ = timed(lambda: contribution_matrix(g, views, backend=backend, progress=False))
+    return {"gaussians": len(g), "views": len(views), "size": [cam.width, cam.height], "rgb_forward_s": t_rgb,
+            "contribution_s": t_contrib, "ratio": t_contrib / t_rgb}
 
 
 def main() -> None:
@@ -56,16 +77,9 @@ def main() -> None:
     args = parser.parse_args()
     out = {}
 
-    # (1) contribution pass vs RGB forward, 30k Gaussians at 256x256, 4 views, 8 labels
-    g, cam, pose = scene(30_000)
-    rng = np.random.default_rng(0)
-    mask = np.kron(rng.integers(0, 8, (8, 8)), np.ones((32, 32), int)).astype(np.uint8)
-    views = [MaskedView(cam, pose.numpy(), mask)] * 4
-    with torch.no_grad():
-        t_rgb, _ = timed(lambda: [render(g, cam, pose, with_features=False) for _ in views])
-    t_contrib, _ = timed(lambda: contribution_matrix(g, views, progress=False))
-    out["contribution"] = {"gaussians": 30_000, "views": 4, "size": [256, 256], "rgb_forward_s": t_rgb,
-                           "contribution_s": t_contrib, "ratio": t_contrib / t_rgb}
+    out["contribution"] = contribution_vs_rgb("cpu")
+    if gsplat_available():
+        out["contribution_gsplat"] = contribution_vs_rgb("gsplat")
 
     # (2) reassignment at scale
     n, k = args.gaussians, args.labels

@@ -1,9 +1,11 @@
 """Benchmark: train on a synthetic orbit scene (256x256, 24 views, LLFF hold-out) with the
 CPU default schedule and score the test views: PSNR of the renders and mIoU of the rendered
 label argmax against the exact masks. Optionally the beer capture (images at 1/4 size, no
-masks: PSNR only), and gsplat beside cpu where a GPU is present. Prints and writes JSON.
+masks: PSNR only), and gsplat beside cpu where a GPU is present (also on the paper's 30k GPU
+schedule with ``--gpu-schedule``). Prints and writes JSON.
 
     python -m benchmarks.train_quality [--out train_quality.json] [--beer ../shared/data/beer]
+        [--backends cpu,gsplat] [--gpu-schedule]
 """
 
 from __future__ import annotations
@@ -47,19 +49,28 @@ def main() -> None:
     parser.add_argument("--out", default="train_quality.json")
     parser.add_argument("--iters", type=int, default=None, help="Override the schedule's length.")
     parser.add_argument("--beer", type=Path, default=None, help="Also train the beer capture found here.")
+    parser.add_argument("--backends", default=None,
+                        help="Comma-separated backends to train with (default: cpu, and gsplat where it can run).")
+    parser.add_argument("--gpu-schedule", action="store_true",
+                        help="Also train the orbit scene with gsplat on the paper's 30k-iteration schedule.")
     args = parser.parse_args()
+    backends = args.backends.split(",") if args.backends else ["cpu"] + (["gsplat"] if gsplat_available() else [])
 
     results = {}
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(tmp)
         synth = generate_scene(SynthConfig(views=24, res=256, path="orbit", seed=0), work / "orbit").root
-        results["orbit_cpu"] = train_and_score(synth, work, TrainConfig(iters=args.iters, backend="cpu"), "orbit_cpu")
-        if gsplat_available():
-            results["orbit_gsplat"] = train_and_score(
-                synth, work, TrainConfig(iters=args.iters, backend="gsplat", schedule="cpu"), "orbit_gsplat")
+        for backend in backends:
+            results[f"orbit_{backend}"] = train_and_score(
+                synth, work, TrainConfig(iters=args.iters, backend=backend), f"orbit_{backend}")
+        if args.gpu_schedule:
+            results["orbit_gsplat_gpu_schedule"] = train_and_score(
+                synth, work, TrainConfig(schedule="gpu", backend="gsplat"), "orbit_gsplat_gpu_schedule")
         if args.beer:
-            results["beer_cpu"] = train_and_score(
-                args.beer, work, TrainConfig(iters=args.iters, backend="cpu", images="images_4", masks=None), "beer_cpu")
+            for backend in backends:
+                results[f"beer_{backend}"] = train_and_score(
+                    args.beer, work, TrainConfig(iters=args.iters, backend=backend, images="images_4", masks=None),
+                    f"beer_{backend}")
     print(json.dumps(results, indent=2))
     Path(args.out).write_text(json.dumps(results, indent=2) + "\n")
 

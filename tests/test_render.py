@@ -132,15 +132,19 @@ def test_unknown_backend_is_refused():
 
 
 @pytest.mark.skipif(not gsplat_available(), reason="the gsplat backend needs gsplat and a CUDA GPU")
-def test_gsplat_backend_matches_torch_reference():
-    cam, pose = look_down_z(40, 32)
-    g = random_gaussians(150, 0)
-    weights = output_weights(cam.width, cam.height, 0, torch.float32)
+@pytest.mark.parametrize("seed, n, size, scales", [(0, 150, (40, 32), (0.04, 0.24)), (3, 400, (90, 70), (0.005, 0.08))])
+def test_gsplat_backend_matches_torch_reference(seed, n, size, scales):
+    """To the tolerances of the cpu backend, on opacities below 0.99: gsplat clamps one
+    Gaussian's alpha at 0.999 where 3D-GS (and ``cpu``, ``torch``) clamp at 0.99."""
+    cam, pose = look_down_z(*size)
+    g = random_gaussians(n, seed, scales=scales)
+    g = Gaussians(**{**g.tensors(), "opacity_logits": g.opacity_logits.clamp(max=math.log(0.985 / 0.015))})
+    weights = output_weights(cam.width, cam.height, seed, torch.float32)
     ref, ref_grads = _render_with_grads(g, "torch", weights, cam, pose)
     cuda = Gaussians(**{k: v.cuda() for k, v in g.tensors().items()})
     out, grads = _render_with_grads(cuda, "gsplat", {k: w.cuda() for k, w in weights.items()}, cam, pose.cuda())
     for name in OUTPUTS:
-        torch.testing.assert_close(getattr(out, name).cpu(), getattr(ref, name), atol=1e-3, rtol=0)
+        torch.testing.assert_close(getattr(out, name).cpu(), getattr(ref, name), atol=1e-4, rtol=0)
     for name, expected in ref_grads.items():
         rel = (grads[name].cpu() - expected).norm() / expected.norm()
-        assert rel < 1e-2, (name, rel.item())
+        assert expected.norm() > 0 and rel < 1e-3, (name, rel.item())

@@ -14,6 +14,7 @@ from gsseg.edits import apply_edit
 from gsseg.gaussians import Gaussians
 from gsseg.ply import read_ply
 from gsseg.render import render
+from gsseg.render.gsplat_blend import gsplat_available
 from gsseg.segment import (Contributions, MaskedView, contribution_matrix, object_at_point, reassign)
 
 F, SIZE = 20.0, 16
@@ -47,7 +48,8 @@ def _hand_alphas(g: Gaussians) -> np.ndarray:
     return np.stack(out)
 
 
-@pytest.mark.parametrize("backend", ["cpu", "torch"])
+@pytest.mark.parametrize("backend", ["cpu", "torch", pytest.param("gsplat", marks=pytest.mark.skipif(
+    not gsplat_available(), reason="the gsplat backend needs gsplat and a CUDA GPU"))])
 def test_contribution_matrix_equals_hand_computed_alpha_t_sums(backend):
     g = _two_gaussians()
     cam, pose = _camera()

@@ -1,4 +1,9 @@
-"""The ``gsplat`` backend: gsplat's CUDA rasterizer with the same rules and outputs."""
+"""The ``gsplat`` backend: gsplat's CUDA rasterizer with the same projection, tiles and outputs.
+
+One rule differs: gsplat clamps a Gaussian's alpha at a pixel to 0.999, where 3D-GS and the
+``cpu`` and ``torch`` backends clamp to 0.99 (:mod:`gsseg.render.blend_rules`). Below that
+clamp the backends agree to float32 rounding (``tests/test_render.py``).
+"""
 
 from __future__ import annotations
 

@@ -16,7 +16,7 @@ from tqdm import tqdm
 
 from dataset_tools.cameras import PinholeCamera
 from gsseg.gaussians import Gaussians
-from gsseg.render import cpu_kernels, render
+from gsseg.render import backend_device, cpu_kernels, render
 from gsseg.render.cpu_blend import as_float32_array, bin_tiles
 from gsseg.render.projection import TILE_SIZE, project_gaussians
 
@@ -59,9 +59,8 @@ def _weights_autograd(g: Gaussians, view: MaskedView, rows: np.ndarray, n_rows: 
     carrier = Gaussians(**{**g.tensors(), "obj_feat": probe})
     out = render(carrier, view.camera, torch.as_tensor(view.cam_from_world, dtype=torch.float32, device=device),
                  sh_degree=0, backend=backend)
-    row = torch.as_tensor(rows[view.mask], device=device, dtype=torch.int64)
-    target = torch.nn.functional.one_hot(row.clamp_min(0), n_rows).float() * (row >= 0)[..., None]
-    (out.features * target).sum().backward()
+    row = torch.as_tensor(rows[view.mask], device=device, dtype=torch.int64)[..., None]  # (H, W, 1)
+    (out.features.gather(-1, row.clamp_min(0)) * (row >= 0)).sum().backward()
     return probe.grad.T.cpu()
 
 
@@ -70,12 +69,13 @@ def contribution_matrix(gaussians: Gaussians, views: list[MaskedView], *, backen
     """Sum alpha * T per Gaussian and mask label over ``views``.
 
     ``cpu`` accumulates in a numba forward pass; ``torch`` and ``gsplat`` obtain the same sums
-    as a gradient. Memory: (K, N) float32 plus one such buffer per CPU thread.
+    as a gradient, on the backend's device. Memory: (K, N) float32 plus one such buffer per
+    CPU thread.
     """
     labels = np.unique(np.concatenate([np.unique(v.mask) for v in views])) if views else np.zeros(0, np.uint8)
     rows = np.full(256, -1, np.int64)
     rows[labels] = np.arange(len(labels))
-    g = gaussians.detach()
+    g = gaussians.detach().to(backend_device(backend))
     total = torch.zeros(len(labels), len(g))
     for view in tqdm(views, desc="contributions", unit="view", disable=not progress, leave=False):
         if backend == "cpu":

@@ -6,7 +6,7 @@ from pathlib import Path
 
 from dataset_tools.errors import InputError
 from dataset_tools.scene import load_scene
-from gsseg.render import backend_device, resolve_backend
+from gsseg.render import resolve_backend
 from gsseg.run_folder import load_run
 from gsseg.segment.contributions import MaskedView, contribution_matrix
 from gsseg.segment.reassign import Segmentation, classifier_prior, reassign
@@ -27,8 +27,7 @@ def segment_run(run_dir: Path | str, scene_dir: Path | str, *, method: str = "pr
     if not views and method != "classifier":
         raise InputError(f"{Path(scene_dir) / masks} holds no masks for the {split} views; "
                          "build them with `hqmask build` or use --method classifier.")
-    gaussians = run.gaussians.to(backend_device(backend))
-    contributions = contribution_matrix(gaussians, views, backend=backend, progress=progress)
+    contributions = contribution_matrix(run.gaussians, views, backend=backend, progress=progress)
     prior_labels, prior_probs = classifier_prior(run.gaussians.obj_feat, run.classifier)
     result = reassign(contributions, prior_labels, prior_probs, method=method, mode=mode, gamma_p=gamma_p,
                       slack=slack)
