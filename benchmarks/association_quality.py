@@ -2,11 +2,12 @@
 corrupted at a severity, for `flow` and `tracks`, on orbit and forward scenes, beside the
 corrupted input; and on the exact masks with IDs permuted per view (association alone).
 Consistency = share of ground-truth object pixels carrying their matched ID, with one
-Hungarian matching for the whole scene. For reference, the ceiling of association on the
-input after noise removal: every segment of every view given the ground-truth ID it overlaps
-most, the best any choice of IDs for those segments can score (a method can pass it only by
-changing segments, as `tracks` does when it splits a segment whose SfM points belong to two
-objects). Prints and writes JSON.
+Hungarian matching for the whole scene. Each method with its multi-view consensus (the
+default) and without. For reference, the ceiling of association on the input after noise
+removal: every segment of every view given the ground-truth ID it overlaps most, the best
+any choice of IDs for those segments can score (a method passes it only by changing
+segments: `tracks` splits a segment whose SfM points belong to two objects, and the
+consensus relabels pixels by the views around them). Prints and writes JSON.
 
     python -m benchmarks.association_quality [--out association_quality.json] [--res 512] [--severity medium]
 """
@@ -67,6 +68,9 @@ def main() -> None:
             clean_scene_masks(scene, "noisy", "cleaned", progress=False)
             row["ceiling_on_cleaned_segments"] = segment_ceiling(_masks(scene, "cleaned"), truth)
             for method in ("flow", "tracks"):
+                build_masks(scene, BuildConfig(proposer="existing", from_masks="noisy", associate=method, consensus=0,
+                                               out_masks=f"assoc_{method}_alone"), progress=False)
+                row[f"{method}_without_consensus"] = consistent_fraction(_masks(scene, f"assoc_{method}_alone"), truth)
                 start = time.perf_counter()
                 build_masks(scene, BuildConfig(proposer="existing", from_masks="noisy", associate=method,
                                                out_masks=f"assoc_{method}"), progress=False)

@@ -1,4 +1,5 @@
-"""``hqmask build`` and ``hqmask clean``: proposals -> noise removal -> association -> ID maps.
+"""``hqmask build`` and ``hqmask clean``: proposals -> noise removal -> association ->
+multi-view consensus -> noise removal -> ID maps.
 
 Proposals of the expensive proposers are cached per view under
 ``SCENE/.hqmask_cache/<cache name>/`` (the proposer and, for ``sam-hq``, the model and
@@ -20,6 +21,7 @@ from dataset_tools.image_files import encode_png, read_mask
 from dataset_tools.scene import Scene, load_scene
 from hqmask.association import associate_flow, associate_tracks
 from hqmask.cleanup import clean_mask
+from hqmask.consensus import multiview_consensus
 from hqmask.proposers import Proposer, make_proposer
 
 ASSOCIATIONS = ("flow", "tracks")
@@ -34,6 +36,7 @@ class BuildConfig:
     from_masks: str | None = None
     model: str | None = None
     associate: str = "flow"
+    consensus: int = 4  # neighbouring views that vote on each view's labels; 0: off
     min_area: int = 500
     out_masks: str = "object_mask"
     images: str = "images"
@@ -78,6 +81,8 @@ def build_masks(scene_dir: Path | str, cfg: BuildConfig, *, progress: bool = Tru
     scene_dir = Path(scene_dir)
     if cfg.associate not in ASSOCIATIONS:
         raise InputError(f"--associate {cfg.associate}: use flow or tracks.")
+    if cfg.consensus < 0:
+        raise InputError(f"--consensus {cfg.consensus}: use 0 (off) or a number of neighbouring views.")
     if cfg.proposer == "existing" and not cfg.from_masks:
         raise InputError("--proposer existing needs --from-masks NAME, the mask folder to re-associate.")
     if cfg.from_masks is not None and cfg.from_masks == cfg.out_masks:
@@ -98,10 +103,13 @@ def build_masks(scene_dir: Path | str, cfg: BuildConfig, *, progress: bool = Tru
         raise InputError(f"{scene_dir / cfg.from_masks}: mask folder not found; check --from-masks.")
     images = [v.load_image() for v in tqdm(scene.views, desc="loading images", disable=not progress)]
     segments = [s.astype(np.int32) for s in _segments(scene, proposer, cfg, images, progress)]
+    centers = np.stack([v.center for v in scene.views])
     if cfg.associate == "flow":
-        ids = associate_flow(images, segments, np.stack([v.center for v in scene.views]))
+        ids = associate_flow(images, segments, centers)
     else:
         ids = associate_tracks(scene.views, segments, len(scene.points))
+    if cfg.consensus:
+        ids = multiview_consensus(images, ids, centers, neighbours=cfg.consensus, progress=progress)
     n_objects = 0
     with atomic_directory(out_dir, overwrite=cfg.force) as tmp:
         for view, m in zip(tqdm(scene.views, desc="writing masks", disable=not progress), ids):

@@ -20,6 +20,8 @@ def cli() -> None:
 @click.option("--from-masks", default=None, help="Mask folder read by --proposer existing.")
 @click.option("--model", default=None, help="SAM-HQ ONNX model folder (--proposer sam-hq).")
 @click.option("--associate", default="flow", show_default=True, help="flow (sequences) or tracks (SfM points).")
+@click.option("--consensus", type=int, default=4, show_default=True,
+              help="Nearest views whose ID maps, carried by optical flow, vote on each view's labels (0: off).")
 @click.option("--min-area", type=int, default=500, show_default=True, help="Components under this many pixels are reassigned.")
 @click.option("--out-masks", default="object_mask", show_default=True, help="Mask folder to write inside SCENE.")
 @click.option("--images", default="images", show_default=True, help="Image folder (images or images_N).")

@@ -25,11 +25,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 from hqmask.association.common import ViewExclusiveUnion, compact_ids
+from hqmask.optical_flow import flow_between, pull_labels
 
 
 def sequence_order(centers: np.ndarray | None, n: int) -> list[int]:
@@ -43,17 +43,6 @@ def sequence_order(centers: np.ndarray | None, n: int) -> list[int]:
         order.append(nxt)
         left.remove(nxt)
     return order
-
-
-def _gray(img: np.ndarray) -> np.ndarray:
-    return cv2.cvtColor(img, cv2.COLOR_RGB2GRAY)
-
-
-def _warp(mask: np.ndarray, flow: np.ndarray) -> np.ndarray:
-    """Carry a mask of the previous view into the current one. flow: (H, W, 2) current -> previous."""
-    H, W = flow.shape[:2]
-    gx, gy = np.meshgrid(np.arange(W, dtype=np.float32), np.arange(H, dtype=np.float32))
-    return cv2.remap(mask, gx + flow[..., 0], gy + flow[..., 1], cv2.INTER_NEAREST, borderValue=0)
 
 
 @dataclass
@@ -72,7 +61,6 @@ def _run_pass(
     contain: float,
     memory: int,
 ) -> list[np.ndarray]:
-    dis = cv2.DISOpticalFlow_create(cv2.DISOPTICAL_FLOW_PRESET_MEDIUM)
     track_of: list[np.ndarray | None] = [None] * len(segments)
     tracks: dict[int, _Track] = {}
     fragment_of: dict[int, tuple[int, int]] = {}  # track born inside a matched one -> (it, the view)
@@ -84,9 +72,9 @@ def _run_pass(
         assign = np.full(n_local + 1, -1, np.int64)
         inside: dict[int, int] = {}  # unmatched segment -> the matched track it lies in
         if prev is not None and tracks:
-            flow = dis.calc(_gray(images[v]), _gray(images[prev]), None)
+            flow = flow_between(images[v], images[prev])
             for t in tracks.values():
-                t.mask = _warp(t.mask, flow)
+                t.mask = pull_labels(t.mask, flow)
         ids = list(tracks)
         local = np.arange(1, n_local + 1)
         seg_area = np.bincount(seg.ravel(), minlength=n_local + 1).astype(float)

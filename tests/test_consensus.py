@@ -1,0 +1,64 @@
+"""Multi-view consensus: flow-carried ID maps of neighbouring views vote on each view's labels."""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import ndimage
+
+from hqmask.consensus import multiview_consensus, vote
+from hqmask.optical_flow import consistent_flow, flow_between, pull_labels
+
+SHIFT = 4  # pixels the scene moves left from one view to the next
+
+
+def _views(n: int = 5, size: int = 128):
+    """``n`` views of one textured plane seen through a camera panning right by SHIFT pixels a
+    view; an object is the square [40, 80)^2 of the plane. Returns images, exact ID maps and
+    camera centres along x."""
+    rng = np.random.default_rng(0)
+    plane = ndimage.gaussian_filter(rng.random((size, size + SHIFT * n)), 2.0)
+    plane = (255 * (plane - plane.min()) / np.ptp(plane)).astype(np.uint8)
+    images, truth = [], []
+    for v in range(n):
+        crop = plane[:, SHIFT * v: SHIFT * v + size]
+        images.append(np.repeat(crop[..., None], 3, axis=2))
+        ids = np.zeros((size, size), np.uint8)
+        ids[40:80, 40 - SHIFT * v: 80 - SHIFT * v] = 7
+        truth.append(ids)
+    centers = np.stack([[SHIFT * v, 0.0, 0.0] for v in range(n)])
+    return images, truth, centers
+
+
+def test_vote_takes_the_weighted_majority_and_the_own_label_on_ties():
+    labels = np.array([[[1, 1, 1, 1]], [[2, 2, 3, 1]], [[2, 3, 3, 2]]], np.uint8)
+    weights = np.array([[[1.5] * 4], [[1, 1, 1, 0]], [[1, 1, 1, 1]]], np.float32)
+    # pixel 0: two witnesses for 2 (2.0) beat the own 1 (1.5); pixel 1: 1.5 against 1 and 1;
+    # pixel 2: 3 with 2.0; pixel 3: 1 (1.5) against 2 (1.0), the other witness does not vote
+    assert vote(labels, weights).tolist() == [[2, 1, 3, 1]]
+    assert vote(labels[:2], np.stack([weights[0], weights[0]])).tolist() == [[1, 1, 1, 1]]  # a tie keeps the own
+
+
+def test_flow_carries_labels_from_the_other_view():
+    images, truth, _ = _views()
+    flow = flow_between(images[2], images[3])
+    assert np.allclose(np.median(flow[..., 0]), -SHIFT, atol=0.25) and np.allclose(np.median(flow[..., 1]), 0, atol=0.25)
+    carried = pull_labels(truth[3], flow)
+    trusted = consistent_flow(flow, flow_between(images[3], images[2]), 1.0)
+    inner = np.s_[8:-8, 8:-8]
+    assert trusted[inner].mean() > 0.95
+    assert (carried == truth[2])[inner][trusted[inner]].mean() > 0.99
+
+
+def test_consensus_restores_a_missed_object_and_a_wandering_boundary():
+    images, truth, centers = _views()
+    noisy = [t.copy() for t in truth]
+    noisy[2][:] = 0  # the object missed in the middle view
+    noisy[1][40:80, 36 - SHIFT: 45 - SHIFT] = 7  # its left edge 4 px too far out in another
+    lone = [t.copy() for t in truth]
+    lone[2][60:70, 10:20] = 7  # a blob only this view has: one witness cannot outvote it
+    fixed = multiview_consensus(images, noisy, centers, neighbours=4)
+    inner = np.s_[8:-8, 8:-8]
+    for v in (1, 2):
+        assert (fixed[v] == truth[v])[inner].mean() > 0.99, v
+    kept = multiview_consensus(images, lone, centers, neighbours=1)
+    assert (kept[2][60:70, 10:20] == 7).all()
