@@ -15,6 +15,7 @@ does the same along a video.
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 from tqdm import tqdm
 
@@ -52,17 +53,23 @@ def multiview_consensus(
         ids: per view, (H, W) uint8 view-consistent ID map.
         centers: (V, 3) camera centres.
     Returns:
-        per view, (H, W) uint8 ID map. Views of another image size do not witness each other.
+        per view, (H, W) uint8 ID map. A neighbour of another image size (undistorted views of
+        one capture differ by a few pixels) is resized to the view's size first; the flow
+        takes up the small change of scale.
     """
     dist = np.sum((centers[:, None] - centers[None]) ** 2, axis=-1)
     out = []
     for v in tqdm(range(len(ids)), desc="multi-view consensus", unit="view", disable=not progress):
         labels, weights = [ids[v]], [np.full(ids[v].shape, own_weight, np.float32)]
-        near = [j for j in np.argsort(dist[v], kind="stable") if j != v and ids[j].shape == ids[v].shape]
-        for j in near[:neighbours]:
-            to_j, from_j = flow_between(images[v], images[j]), flow_between(images[j], images[v])
-            labels.append(pull_labels(ids[j], to_j))
-            trusted = consistent_flow(to_j, from_j, fb_tolerance) & matching_colors(images[v], images[j], to_j,
+        H, W = ids[v].shape
+        for j in [j for j in np.argsort(dist[v], kind="stable") if j != v][:neighbours]:
+            image, other = images[j], ids[j]
+            if other.shape != (H, W):
+                image = cv2.resize(image, (W, H), interpolation=cv2.INTER_AREA)
+                other = cv2.resize(other, (W, H), interpolation=cv2.INTER_NEAREST)
+            to_j, from_j = flow_between(images[v], image), flow_between(image, images[v])
+            labels.append(pull_labels(other, to_j))
+            trusted = consistent_flow(to_j, from_j, fb_tolerance) & matching_colors(images[v], image, to_j,
                                                                                      color_tolerance)
             weights.append(trusted.astype(np.float32))
         out.append(vote(np.stack(labels), np.stack(weights)))

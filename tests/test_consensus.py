@@ -62,3 +62,16 @@ def test_consensus_restores_a_missed_object_and_a_wandering_boundary():
         assert (fixed[v] == truth[v])[inner].mean() > 0.99, v
     kept = multiview_consensus(images, lone, centers, neighbours=1)
     assert (kept[2][60:70, 10:20] == 7).all()
+
+
+def test_a_neighbour_of_another_size_is_resized_to_witness():
+    """Undistorted views of one capture differ in size by a few pixels."""
+    images, truth, centers = _views(3)
+    noisy = [t.copy() for t in truth]
+    noisy[1][:] = 0
+    for v in (0, 2):  # both neighbours 4 px taller
+        images[v] = np.concatenate([images[v], images[v][-4:]])
+        noisy[v] = np.concatenate([noisy[v], noisy[v][-4:]])
+    fixed = multiview_consensus(images, noisy, centers, neighbours=2)
+    assert fixed[1].shape == truth[1].shape
+    assert (fixed[1] == truth[1])[8:-8, 8:-8].mean() > 0.99

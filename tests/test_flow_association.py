@@ -42,3 +42,30 @@ def test_two_objects_one_mask_merged_in_the_first_view_stay_apart_after_it():
         a, b = o[15, 15], o[15, 45]
         assert a > 0 and b > 0 and a != b
     assert len({(o[15, 15], o[15, 45]) for o in out[1:]}) == 1  # the same two IDs in every view
+
+
+def test_a_mask_split_in_two_separate_views_gets_one_id():
+    """Split in views 2 and 5: the pieces meet again, yet the views that show them as one
+    object (a segment holding both) outnumber those that show them apart."""
+    segments = [box((40, 60), {1: (10, 30, 10, 50)}) for _ in range(8)]
+    for k in (2, 5):
+        segments[k] = box((40, 60), {1: (10, 30, 10, 30), 2: (10, 30, 30, 50)})
+    out = associate(segments)
+    assert all(set(np.unique(o[s > 0])) == {1} for o, s in zip(out, segments))
+
+
+def test_a_lost_object_is_reidentified_by_its_colours():
+    """A red box is missed in views 3 and 4 and seen again far from where its mask was carried;
+    a blue box appearing at the same place and time is another object."""
+    def view(boxes: dict[int, tuple[tuple[int, int, int, int], tuple[int, int, int]]]):
+        seg, image = np.zeros((40, 200), np.int32), np.full((40, 200, 3), 128, np.uint8)
+        for label, ((y0, y1, x0, x1), color) in boxes.items():
+            seg[y0:y1, x0:x1], image[y0:y1, x0:x1] = label, color
+        return image, seg
+
+    red, blue = (200, 30, 30), (30, 30, 200)
+    for color, same in ((red, True), (blue, False)):
+        views = ([view({1: ((10, 30, 10, 30), red)}) for _ in range(3)] + [view({}) for _ in range(2)]
+                 + [view({1: ((10, 30, 150, 170), color)}) for _ in range(3)])
+        out = associate_flow([v[0] for v in views], [v[1] for v in views])
+        assert (out[0][20, 20] == out[7][20, 160]) == same and out[0][20, 20] > 0 and out[7][20, 160] > 0

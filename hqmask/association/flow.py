@@ -9,10 +9,15 @@ poses exist, else file order). In each direction:
    algorithm (IoU >= ``min_iou``), then what is left to the tracks left free at a weaker
    IoU (>= ``weak_iou``: large steps between views move the carried masks off their
    objects), two rounds as in ByteTrack; other segments start new tracks;
-3. a new track whose segment lies mostly (>= ``contain``) inside a matched object is a
-   piece of it (a split mask) and takes its ID at the end, unless the two meet again in a
-   later view (then the mask had merged two objects, and they stay apart);
-4. tracks without a match are carried on for ``memory`` views and can be re-identified.
+3. a segment left over that shares at least ``reid_colors`` of its colour histogram with a
+   track lost in the last ``memory`` views is that track seen again (a third Hungarian
+   round: after a few views the carried mask has drifted off its object);
+4. a new track whose segment lies mostly (>= ``contain``) inside a matched object may be a
+   piece of it (a split mask); at the end two tracks are one object when the views that
+   show them as one (a piece born inside the other, or a segment holding most of the other
+   as carried from the view before) are at least as many as the views in which both are
+   matched (a split mask, not two objects that one mask merged);
+5. tracks without a match are carried on for ``memory`` views.
 
 The forward and backward passes are merged by bidirectional consensus: a forward and a
 backward track are the same object when the pixels they share cover at least
@@ -23,12 +28,13 @@ views are dropped.
 
 from __future__ import annotations
 
+from collections import Counter
 from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from hqmask.association.common import ViewExclusiveUnion, compact_ids
+from hqmask.association.common import UnionFind, ViewExclusiveUnion, compact_ids
 from hqmask.optical_flow import flow_between, pull_labels
 
 
@@ -48,7 +54,15 @@ def sequence_order(centers: np.ndarray | None, n: int) -> list[int]:
 @dataclass
 class _Track:
     mask: np.ndarray  # (H, W) uint8, in the latest view
+    colors: np.ndarray  # (512,) colour histogram where it was last seen, summing to 1
     age: int = 0
+
+
+def _color_histograms(image: np.ndarray, seg: np.ndarray, n: int) -> np.ndarray:
+    """(n + 1, 512) pixel counts of each segment over 8 levels a channel. image (H, W, 3) uint8."""
+    q = image.astype(np.int64) // 32
+    bins = seg.astype(np.int64) * 512 + q[..., 0] * 64 + q[..., 1] * 8 + q[..., 2]
+    return np.bincount(bins.ravel(), minlength=(n + 1) * 512).reshape(n + 1, 512).astype(float)
 
 
 def _run_pass(
@@ -60,10 +74,11 @@ def _run_pass(
     weak_iou: float,
     contain: float,
     memory: int,
+    reid_colors: float,
 ) -> list[np.ndarray]:
     track_of: list[np.ndarray | None] = [None] * len(segments)
     tracks: dict[int, _Track] = {}
-    fragment_of: dict[int, tuple[int, int]] = {}  # track born inside a matched one -> (it, the view)
+    together: Counter[tuple[int, int]] = Counter()  # track pair -> views with evidence of one object
     next_id = 0
     prev = None
     for v in order:
@@ -78,6 +93,7 @@ def _run_pass(
         ids = list(tracks)
         local = np.arange(1, n_local + 1)
         seg_area = np.bincount(seg.ravel(), minlength=n_local + 1).astype(float)
+        hist = _color_histograms(images[v], seg, n_local)
         if ids and n_local:
             # intersection of every (segment, track) pair
             inter = np.zeros((n_local + 1, len(ids)))
@@ -105,33 +121,53 @@ def _run_pass(
                 j = int(np.argmax(frac))
                 if assign[l] < 0 and frac[j] >= contain and ids[j] in matched:
                     inside[l] = ids[j]
+            # third round, re-identification: a lost track whose colours the segment shares
+            rest = [r for r in left if assign[local[r]] < 0 and local[r] not in inside]
+            lost = [j for j in free if ids[j] not in matched and tracks[ids[j]].age > 0]
+            if rest and lost:
+                share = hist[local[rest]] / seg_area[local[rest], None]
+                sim = np.minimum(share[:, None], np.stack([tracks[ids[j]].colors for j in lost])[None]).sum(-1)
+                for r, c in zip(*linear_sum_assignment(-sim)):
+                    if sim[r, c] >= reid_colors:
+                        assign[local[rest[r]]] = ids[lost[c]]
+                        matched.add(ids[lost[c]])
         for l in local:
             if assign[l] < 0 and seg_area[l] > 0:
                 assign[l] = next_id
-                if l in inside:
-                    fragment_of[next_id] = (inside[l], v)
+                if l in inside:  # a piece born inside a matched track
+                    together[(inside[l], next_id)] += 1
                 next_id += 1
+        if ids and n_local:  # a segment holding most of a track seen in the last view, unmatched here
+            here = {int(a) for a in assign[1:] if a >= 0}
+            share = inter[1:] / np.maximum(trk_area[None], 1)
+            for r, l in enumerate(local):
+                for j in np.flatnonzero(share[r] >= contain) if assign[l] >= 0 else ():
+                    if ids[j] not in here and tracks[ids[j]].age == 0:
+                        together[(min(ids[j], int(assign[l])), max(ids[j], int(assign[l])))] += 1
         for t in list(tracks):
             tracks[t].age += 1
         for t in set(int(a) for a in assign[1:] if a >= 0):
-            tracks[t] = _Track(np.isin(seg, np.flatnonzero(assign == t)).astype(np.uint8), 0)
+            mine = np.flatnonzero(assign == t)
+            colors = hist[mine].sum(0)
+            tracks[t] = _Track(np.isin(seg, mine).astype(np.uint8), colors / max(colors.sum(), 1.0))
         for t in [t for t, tr in tracks.items() if tr.age > memory]:
             del tracks[t]
         track_of[v] = assign
         prev = v
-    # A track born inside a matched one is a piece of it (a split mask) unless the two meet
-    # again in a later view, as two objects that one mask had merged do.
+    # Two tracks are one object when the views that show them as one (a piece born inside the
+    # other, or one segment holding both) are at least as many as those that show them apart
+    # (both matched in one view): a mask split in a few views, not two objects a mask merged.
     views_of: list[set[int]] = [set() for _ in range(next_id)]
     for v, a in enumerate(track_of):
         for t in np.unique(a[a >= 0]):
             views_of[t].add(v)
-    final = np.arange(next_id)
-    for t in sorted(fragment_of):  # parents are older, so already resolved
-        parent, born = fragment_of[t]
-        root = final[parent]
-        if views_of[t] & views_of[root] == {born}:
-            final[t] = root
-            views_of[root] |= views_of[t]
+    uf = UnionFind(next_id)
+    for (a, b), n in sorted(together.items(), key=lambda kv: (-kv[1], kv[0])):
+        ra, rb = uf.find(a), uf.find(b)
+        if ra != rb and n >= len(views_of[ra] & views_of[rb]):
+            uf.union(ra, rb)
+            views_of[uf.find(ra)] = views_of[ra] | views_of[rb]
+    final = uf.roots()
     return [np.where(a >= 0, final[np.maximum(a, 0)], -1) for a in track_of]
 
 
@@ -144,6 +180,7 @@ def associate_flow(
     weak_iou: float = 0.1,
     contain: float = 0.6,
     memory: int = 5,
+    reid_colors: float = 0.5,
     consensus: float = 0.3,
     min_views: int = 2,
 ) -> list[np.ndarray]:
@@ -157,7 +194,7 @@ def associate_flow(
         per view, (H, W) uint8 consistent ID map.
     """
     order = sequence_order(centers, len(images))
-    kw = dict(min_iou=min_iou, weak_iou=weak_iou, contain=contain, memory=memory)
+    kw = dict(min_iou=min_iou, weak_iou=weak_iou, contain=contain, memory=memory, reid_colors=reid_colors)
     fwd = _run_pass(order, images, segments, **kw)
     bwd = _run_pass(order[::-1], images, segments, **kw)
     n_f = 1 + max((int(a.max()) for a in fwd), default=0)
