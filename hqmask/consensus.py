@@ -8,9 +8,9 @@ A witness counts only where the forward and backward flows between the two views
 within ``fb_tolerance`` pixels and the colour the flow points at matches within
 ``color_tolerance`` grey levels, so occluded pixels, and views too far apart for the flow to
 follow, vote nothing (without the colour test, flow that is consistent but wrong on weak
-texture spoiled exact masks on an orbit of views 30 degrees apart). This fills in objects that a view's masks missed and evens out
-boundaries that wander from view to view, which no choice of IDs can do; DEVA's propagation
-does the same along a video.
+texture spoiled exact masks on an orbit of views 30 degrees apart). This fills in objects
+that a view's masks missed and evens out boundaries that wander from view to view, which no
+choice of IDs can do; DEVA's propagation does the same along a video.
 """
 
 from __future__ import annotations

@@ -33,19 +33,19 @@ class ViewExclusiveUnion(UnionFind):
     """Union-find whose sets never hold two members seen in the same view.
 
     ``views[i]`` is the set of views member ``i`` appears in; ``union`` refuses (returns
-    False) when the two sets already share a view, which is how a segment covering two
-    objects is kept from chaining them together.
+    False) when the two sets share more than ``tolerate`` views (none by default), which is
+    how a segment covering two objects is kept from chaining them together.
     """
 
     def __init__(self, views: list[set[int]]) -> None:
         super().__init__(len(views))
         self.views = [set(v) for v in views]
 
-    def union(self, a: int, b: int) -> bool:  # type: ignore[override]
+    def union(self, a: int, b: int, tolerate: int = 0) -> bool:  # type: ignore[override]
         ra, rb = self.find(a), self.find(b)
         if ra == rb:
             return True
-        if self.views[ra] & self.views[rb]:
+        if len(self.views[ra] & self.views[rb]) > tolerate:
             return False
         lo, hi = min(ra, rb), max(ra, rb)
         self.parent[hi] = lo

@@ -34,7 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from hqmask.association.common import UnionFind, ViewExclusiveUnion, compact_ids
+from hqmask.association.common import ViewExclusiveUnion, compact_ids
 from hqmask.optical_flow import flow_between, pull_labels
 
 
@@ -125,8 +125,8 @@ def _run_pass(
             rest = [r for r in left if assign[local[r]] < 0 and local[r] not in inside]
             lost = [j for j in free if ids[j] not in matched and tracks[ids[j]].age > 0]
             if rest and lost:
-                share = hist[local[rest]] / seg_area[local[rest], None]
-                sim = np.minimum(share[:, None], np.stack([tracks[ids[j]].colors for j in lost])[None]).sum(-1)
+                profile = hist[local[rest]] / seg_area[local[rest], None]
+                sim = np.minimum(profile[:, None], np.stack([tracks[ids[j]].colors for j in lost])[None]).sum(-1)
                 for r, c in zip(*linear_sum_assignment(-sim)):
                     if sim[r, c] >= reid_colors:
                         assign[local[rest[r]]] = ids[lost[c]]
@@ -161,12 +161,9 @@ def _run_pass(
     for v, a in enumerate(track_of):
         for t in np.unique(a[a >= 0]):
             views_of[t].add(v)
-    uf = UnionFind(next_id)
+    uf = ViewExclusiveUnion(views_of)
     for (a, b), n in sorted(together.items(), key=lambda kv: (-kv[1], kv[0])):
-        ra, rb = uf.find(a), uf.find(b)
-        if ra != rb and n >= len(views_of[ra] & views_of[rb]):
-            uf.union(ra, rb)
-            views_of[uf.find(ra)] = views_of[ra] | views_of[rb]
+        uf.union(a, b, tolerate=n)
     final = uf.roots()
     return [np.where(a >= 0, final[np.maximum(a, 0)], -1) for a in track_of]
 
