@@ -69,3 +69,23 @@ def test_a_lost_object_is_reidentified_by_its_colours():
                  + [view({1: ((10, 30, 150, 170), color)}) for _ in range(3)])
         out = associate_flow([v[0] for v in views], [v[1] for v in views])
         assert (out[0][20, 20] == out[7][20, 160]) == same and out[0][20, 20] > 0 and out[7][20, 160] > 0
+
+
+def test_a_weak_overlap_with_another_objects_colours_is_not_a_match():
+    """Between views 2 and 3 the blue box jumps onto a corner of where the red one was (IoU
+    0.18, over the second round's 0.1) and the red one far away. Both colours have the grey
+    level of the background, so the optical flow (on grey levels) carries nothing; the
+    colours keep each box's ID."""
+    red, blue = (255, 80, 42), (60, 138, 255)  # grey level 128, as the background
+
+    def view(red_x: int, blue_x: int) -> tuple[np.ndarray, np.ndarray]:
+        seg, image = np.zeros((40, 200), np.int32), np.full((40, 200, 3), 128, np.uint8)
+        for label, x, color in ((1, red_x, red), (2, blue_x, blue)):
+            seg[10:30, x:x + 20], image[10:30, x:x + 20] = label, color
+        return image, seg
+
+    views = [view(10, 100) for _ in range(3)] + [view(160, 24) for _ in range(3)]
+    out = associate_flow([v[0] for v in views], [v[1] for v in views])
+    assert out[0][20, 20] == out[5][20, 170] > 0  # red
+    assert out[0][20, 110] == out[5][20, 34] > 0  # blue
+    assert out[0][20, 20] != out[0][20, 110]

@@ -8,10 +8,12 @@ poses exist, else file order). In each direction:
 2. the current view's segments are matched to the carried masks by IoU with the Hungarian
    algorithm (IoU >= ``min_iou``), then what is left to the tracks left free at a weaker
    IoU (>= ``weak_iou``: large steps between views move the carried masks off their
-   objects), two rounds as in ByteTrack; other segments start new tracks;
+   objects) where the segment also shares at least ``reid_colors`` of the track's colour
+   histogram (a weak overlap alone may be another object that the carried mask drifted
+   onto), two rounds as in ByteTrack;
 3. a segment left over that shares at least ``reid_colors`` of its colour histogram with a
-   track lost in the last ``memory`` views is that track seen again (a third Hungarian
-   round: after a few views the carried mask has drifted off its object);
+   free track (one lost in the last ``memory`` views, or one whose carried mask a large
+   step took off its object) is that track seen again (a third Hungarian round);
 4. a new track whose segment lies mostly (>= ``contain``) inside a matched object may be a
    piece of it (a split mask); at the end two tracks are one object when the views that
    show them as one (a piece born inside the other, or a segment holding most of the other
@@ -106,31 +108,30 @@ def _run_pass(
                 if iou[r, c] >= min_iou:
                     assign[local[r]] = ids[c]
             matched = {int(assign[l]) for l in local if assign[l] >= 0}
-            # second round, for what is left: a weaker overlap with a track left free
             left = [r for r, l in enumerate(local) if assign[l] < 0 and seg_area[l] > 0]
             free = [j for j, t in enumerate(ids) if t not in matched]
             if left and free:
-                sub = iou[np.ix_(left, free)]
-                for r, c in zip(*linear_sum_assignment(-sub)):
-                    if sub[r, c] >= weak_iou:
-                        assign[local[left[r]]] = ids[free[c]]
-                        matched.add(ids[free[c]])
+                # colours shared between each leftover segment and each free track
+                profile = hist[local[left]] / seg_area[local[left], None]
+                colors = np.minimum(profile[:, None], np.stack([tracks[ids[j]].colors for j in free])[None]).sum(-1)
+                # second round: a weaker overlap, confirmed by the colours
+                weak = np.where(colors >= reid_colors, iou[np.ix_(left, free)], 0.0)
+                # third round, re-identification: the colours alone (the carried mask of a
+                # track lost a while ago, or moved far by a large step, is off its object)
+                for score, floor in ((weak, weak_iou), (colors, reid_colors)):
+                    rows = [r for r in range(len(left)) if assign[local[left[r]]] < 0]
+                    cols = [c for c in range(len(free)) if ids[free[c]] not in matched]
+                    sub = score[np.ix_(rows, cols)]
+                    for r, c in zip(*linear_sum_assignment(-sub)):
+                        if sub[r, c] >= floor:
+                            assign[local[left[rows[r]]]] = ids[free[cols[c]]]
+                            matched.add(ids[free[cols[c]]])
             for r in left:  # a piece lying in a matched object: a provisional track of its own
                 l = local[r]
                 frac = inter[l] / seg_area[l]
                 j = int(np.argmax(frac))
                 if assign[l] < 0 and frac[j] >= contain and ids[j] in matched:
                     inside[l] = ids[j]
-            # third round, re-identification: a lost track whose colours the segment shares
-            rest = [r for r in left if assign[local[r]] < 0 and local[r] not in inside]
-            lost = [j for j in free if ids[j] not in matched and tracks[ids[j]].age > 0]
-            if rest and lost:
-                profile = hist[local[rest]] / seg_area[local[rest], None]
-                sim = np.minimum(profile[:, None], np.stack([tracks[ids[j]].colors for j in lost])[None]).sum(-1)
-                for r, c in zip(*linear_sum_assignment(-sim)):
-                    if sim[r, c] >= reid_colors:
-                        assign[local[rest[r]]] = ids[lost[c]]
-                        matched.add(ids[lost[c]])
         for l in local:
             if assign[l] < 0 and seg_area[l] > 0:
                 assign[l] = next_id
