@@ -4,10 +4,13 @@ at ``--res`` (512x512), made consistent by `hqmask build --proposer existing --a
 tracks` (noise removal at its default 500 px), 3D-GS trained on the half-size images with
 them, then every method (and gamma_p in {-1, 0, 0.2, 1} for `prior`) scored on the test
 views with the occlusion-aware protocol (pixel label = label with the largest blended
-weight) against the exact masks, IDs matched once per scene. Prints a markdown table and
-writes JSON.
+weight) against the exact masks, IDs matched once per scene. With several
+``--train-seeds`` each scene is trained once per seed on the same masks and the table gives
+the mean (the differences between methods are of the order of the spread between training
+runs). Prints markdown tables and writes JSON.
 
     python -m benchmarks.segment_quality [--out segment_quality.json] [--iters N] [--res 512]
+        [--train-seeds 0,1,2]
 """
 
 from __future__ import annotations
@@ -51,23 +54,33 @@ def main() -> None:
     parser.add_argument("--res", type=int, default=512,
                         help="Size the masks are made, corrupted and associated at; training uses half of it.")
     parser.add_argument("--severity", default="medium")
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--seed", type=int, default=0, help="Seed of the scenes and their corruption.")
+    parser.add_argument("--train-seeds", default="0", help="Comma-separated training seeds; the table is their mean.")
     args = parser.parse_args()
-    table = {}
+    train_seeds = [int(x) for x in args.train_seeds.split(",")]
+    table, runs = {}, {}
     with tempfile.TemporaryDirectory() as tmp:
         for path in ("orbit", "forward"):
             scene = corrupted_scene(Path(tmp), path, res=args.res, severity=args.severity, seed=args.seed)
             write_downsampled(scene / "images", scene / TRAIN_IMAGES, 2)
             build_masks(scene, BuildConfig(proposer="existing", from_masks="noisy", associate="tracks",
                                            out_masks="assoc"), progress=False)
-            run = Path(tmp) / f"run_{path}"
-            train(scene, run, TrainConfig(iters=args.iters, images=TRAIN_IMAGES, masks="assoc", backend="cpu"),
-                  progress=False)
-            table[path] = {f"{m} {g:g}" if m == "prior" else m: score(run, scene, "assoc", m, g) for m, g in SETTINGS}
-            print(path, json.dumps(table[path]))
+            runs[path] = {}
+            for train_seed in train_seeds:
+                run = Path(tmp) / f"run_{path}_{train_seed}"
+                train(scene, run, TrainConfig(iters=args.iters, images=TRAIN_IMAGES, masks="assoc", backend="cpu",
+                                              seed=train_seed), progress=False)
+                runs[path][train_seed] = {f"{m} {g:g}" if m == "prior" else m: score(run, scene, "assoc", m, g)
+                                          for m, g in SETTINGS}
+                print(path, train_seed, json.dumps(runs[path][train_seed]))
+            table[path] = {c: sum(r[c] for r in runs[path].values()) / len(train_seeds) for c in runs[path][train_seeds[0]]}
     columns = list(next(iter(table.values())))
-    print(markdown_table(["scene", *columns], [[path, *(f"{row[c]:.3f}" for c in columns)] for path, row in table.items()]))
-    Path(args.out).write_text(json.dumps({"mIoU": table, "setup": vars(args)}, indent=2) + "\n")
+    print(markdown_table(["scene", *columns], [[path, *(f"{row[c]:.4f}" for c in columns)] for path, row in table.items()]))
+    if len(train_seeds) > 1:
+        print(markdown_table(["scene", "training seed", *columns],
+                             [[path, str(seed), *(f"{row[c]:.4f}" for c in columns)]
+                              for path, by_seed in runs.items() for seed, row in by_seed.items()]))
+    Path(args.out).write_text(json.dumps({"mIoU": table, "per_training_seed": runs, "setup": vars(args)}, indent=2) + "\n")
 
 
 if __name__ == "__main__":
