@@ -58,16 +58,26 @@ def multiview_consensus(
         takes up the small change of scale.
     """
     dist = np.sum((centers[:, None] - centers[None]) ** 2, axis=-1)
+    near = [[j for j in np.argsort(dist[v], kind="stable") if j != v][:neighbours] for v in range(len(ids))]
+    # Flows of a pair of mutual neighbours serve both views: (v, j) -> flows v -> j and j -> v,
+    # computed while j was corrected and kept until v is.
+    saved: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
     out = []
     for v in tqdm(range(len(ids)), desc="multi-view consensus", unit="view", disable=not progress):
         labels, weights = [ids[v]], [np.full(ids[v].shape, own_weight, np.float32)]
         H, W = ids[v].shape
-        for j in [j for j in np.argsort(dist[v], kind="stable") if j != v][:neighbours]:
+        for j in near[v]:
             image, other = images[j], ids[j]
-            if other.shape != (H, W):
+            resized = other.shape != (H, W)
+            if resized:
                 image = cv2.resize(image, (W, H), interpolation=cv2.INTER_AREA)
                 other = cv2.resize(other, (W, H), interpolation=cv2.INTER_NEAREST)
-            to_j, from_j = flow_between(images[v], image), flow_between(image, images[v])
+            if (v, j) in saved:
+                to_j, from_j = saved.pop((v, j))
+            else:
+                to_j, from_j = flow_between(images[v], image), flow_between(image, images[v])
+                if not resized and j > v and v in near[j]:
+                    saved[j, v] = from_j, to_j
             labels.append(pull_labels(other, to_j))
             trusted = consistent_flow(to_j, from_j, fb_tolerance) & matching_colors(images[v], image, to_j,
                                                                                      color_tolerance)

@@ -6,7 +6,7 @@ import numpy as np
 from scipy import ndimage
 
 from hqmask.consensus import multiview_consensus, vote
-from hqmask.optical_flow import consistent_flow, flow_between, pull_labels
+from hqmask.optical_flow import consistent_flow, flow_between, matching_colors, pull_labels
 
 SHIFT = 4  # pixels the scene moves left from one view to the next
 
@@ -75,3 +75,35 @@ def test_a_neighbour_of_another_size_is_resized_to_witness():
     fixed = multiview_consensus(images, noisy, centers, neighbours=2)
     assert fixed[1].shape == truth[1].shape
     assert (fixed[1] == truth[1])[8:-8, 8:-8].mean() > 0.99
+
+
+def test_mutual_neighbours_share_their_flows(monkeypatch):
+    """Each pair of mutual neighbours computes its two flows once, and the result is that of
+    computing them afresh for each view: on 5 views that all neighbour each other, 20 flows
+    instead of 40."""
+    import hqmask.consensus as consensus
+
+    images, truth, centers = _views()
+    noisy = [t.copy() for t in truth]
+    noisy[2][:] = 0
+    calls = []
+
+    def counted(image, other):
+        calls.append(1)
+        return flow_between(image, other)
+
+    def afresh(v: int) -> np.ndarray:
+        H, W = truth[v].shape
+        near = [j for j in np.argsort(np.sum((centers - centers[v]) ** 2, -1), kind="stable") if j != v][:4]
+        labels, weights = [noisy[v]], [np.full((H, W), 1.5, np.float32)]
+        for j in near:
+            to_j, from_j = flow_between(images[v], images[j]), flow_between(images[j], images[v])
+            labels.append(pull_labels(noisy[j], to_j))
+            weights.append((consistent_flow(to_j, from_j, 2.0)
+                            & matching_colors(images[v], images[j], to_j, 10.0)).astype(np.float32))
+        return vote(np.stack(labels), np.stack(weights))
+
+    monkeypatch.setattr(consensus, "flow_between", counted)
+    fixed = multiview_consensus(images, noisy, centers, neighbours=4)
+    assert len(calls) == 20
+    assert all(np.array_equal(fixed[v], afresh(v)) for v in range(5))
