@@ -36,8 +36,7 @@ class Environment(torch.nn.Module):
     def forward(self, camera: PinholeCamera, cam_from_world: torch.Tensor) -> torch.Tensor:
         """The background image of one camera, (H, W, 3)."""
         dirs = ray_directions(camera, cam_from_world).to(self.coeffs.device)
-        coeffs = self.coeffs.expand(camera.width * camera.height, -1, -1)
-        return eval_sh(self.degree, coeffs, dirs.reshape(-1, 3)).reshape(camera.height, camera.width, 3)
+        return eval_sh(self.degree, self.coeffs[0], dirs.reshape(-1, 3)).reshape(camera.height, camera.width, 3)
 
     @classmethod
     def from_state(cls, state: dict[str, torch.Tensor]) -> Environment:

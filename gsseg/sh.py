@@ -28,33 +28,39 @@ def sh_dc_to_rgb(dc: torch.Tensor) -> torch.Tensor:
     return dc * C0 + 0.5
 
 
+def sh_basis(degree: int, dirs: torch.Tensor) -> torch.Tensor:
+    """The real SH basis functions up to ``degree`` at unit directions, in the order and signs
+    of 3D-GS: (N, 3) -> (N, (degree + 1)^2)."""
+    x, y, z = dirs.unbind(-1)
+    columns = [torch.full_like(x, C0)]
+    if degree > 0:
+        columns += [-C1 * y, C1 * z, -C1 * x]
+    if degree > 1:
+        xx, yy, zz, xy, yz, xz = x * x, y * y, z * z, x * y, y * z, x * z
+        columns += [C2[0] * xy, C2[1] * yz, C2[2] * (2 * zz - xx - yy), C2[3] * xz, C2[4] * (xx - yy)]
+    if degree > 2:
+        columns += [C3[0] * y * (3 * xx - yy), C3[1] * xy * z, C3[2] * y * (4 * zz - xx - yy),
+                    C3[3] * z * (2 * zz - 3 * xx - 3 * yy), C3[4] * x * (4 * zz - xx - yy),
+                    C3[5] * z * (xx - yy), C3[6] * x * (xx - 3 * yy)]
+    return torch.stack(columns, dim=-1)
+
+
 def eval_sh(degree: int, coeffs: torch.Tensor, dirs: torch.Tensor) -> torch.Tensor:
     """Colour of SH coefficients seen along unit directions.
 
     Args:
         degree: highest band used, 0..3.
-        coeffs: (N, K, 3) coefficients, K >= (degree + 1)^2; band order as in 3D-GS.
-        dirs: (N, 3) unit vectors from the camera centre to each Gaussian.
+        coeffs: (N, K, 3) coefficients of each direction, or (K, 3) shared by all of them,
+            K >= (degree + 1)^2; band order as in 3D-GS.
+        dirs: (N, 3) unit vectors (for Gaussians: from the camera centre to each of them).
 
     Returns:
         (N, 3) colour, offset by +0.5 and clamped at 0 as 3D-GS does.
     """
-    # One view per coefficient through ``unbind``: its backward stacks the K gradients once,
-    # where indexing coeffs[:, k] would zero-fill an (N, K, 3) gradient for every k.
-    c = coeffs.unbind(1)
-    result = C0 * c[0]
-    if degree > 0:
-        x, y, z = dirs[:, 0:1], dirs[:, 1:2], dirs[:, 2:3]
-        result = result - C1 * y * c[1] + C1 * z * c[2] - C1 * x * c[3]
-        if degree > 1:
-            xx, yy, zz, xy, yz, xz = x * x, y * y, z * z, x * y, y * z, x * z
-            result = (result + C2[0] * xy * c[4] + C2[1] * yz * c[5]
-                      + C2[2] * (2 * zz - xx - yy) * c[6] + C2[3] * xz * c[7]
-                      + C2[4] * (xx - yy) * c[8])
-            if degree > 2:
-                result = (result + C3[0] * y * (3 * xx - yy) * c[9] + C3[1] * xy * z * c[10]
-                          + C3[2] * y * (4 * zz - xx - yy) * c[11]
-                          + C3[3] * z * (2 * zz - 3 * xx - 3 * yy) * c[12]
-                          + C3[4] * x * (4 * zz - xx - yy) * c[13] + C3[5] * z * (xx - yy) * c[14]
-                          + C3[6] * x * (xx - 3 * yy) * c[15])
-    return torch.clamp_min(result + 0.5, 0.0)
+    basis = sh_basis(degree, dirs)
+    k = basis.shape[1]
+    if coeffs.dim() == 2:
+        colour = basis @ coeffs[:k]
+    else:  # one (1, K) x (K, 3) product per direction
+        colour = torch.bmm(basis[:, None], coeffs[:, :k]).squeeze(1)
+    return torch.clamp_min(colour + 0.5, 0.0)
