@@ -28,6 +28,8 @@ def cli() -> None:
 @click.option("--environment", "environment_degree", type=click.Choice(["none", "0", "1", "2", "3"]), default="3",
               show_default=True, callback=lambda ctx, param, v: None if v == "none" else int(v),
               help="SH degree of the learned background behind the Gaussians (sky, far ground); none: black.")
+@click.option("--environment-profile/--no-environment-profile", default=True, show_default=True,
+              help="Add a colour per elevation angle to the background: a sharp horizon.")
 @click.option("--max-gaussians", type=int, default=None,
               help="Densification stops at this many Gaussians (default: 150 000 on the cpu schedule, 6 000 000 on gpu).")
 @click.option("--seed", type=int, default=0, show_default=True)

@@ -2,16 +2,27 @@
 
 What lies at infinity (the sky, the far end of a ground plane) is the same from every camera
 position. Gaussians can only imitate it by sitting at a finite depth, where they turn into
-floaters in front of the objects seen from other views. An environment map expressed in
-spherical harmonics of the ray direction (the 3D-GS basis, degree 3 by default) takes that
-part of the image instead: it is composited behind the Gaussians, ``rgb + (1 - alpha) * env``.
+floaters in front of the objects seen from other views, and a camera at another height sees
+past them. The environment takes that part of the image instead: it is composited behind the
+Gaussians, ``rgb + (1 - alpha) * env``, and is the sum of two terms:
+
+- spherical harmonics of the ray direction (the 3D-GS basis, degree 3 by default): smooth
+  variation in every direction (a bright side of the sky);
+- an elevation profile: a colour per elevation angle above the horizon plane (perpendicular
+  to the cameras' mean up direction), linearly interpolated between bins about one pixel
+  apart. It holds what low-order SH cannot, the sharp step at the horizon between the sky
+  and the far ground, without the capacity to learn detail that varies around the horizon.
 """
 
 from __future__ import annotations
 
+import math
+
+import numpy as np
 import torch
 
 from dataset_tools.cameras import PinholeCamera
+from dataset_tools.errors import InputError
 from gsseg.sh import eval_sh, num_coeffs
 
 
@@ -24,23 +35,65 @@ def ray_directions(camera: PinholeCamera, cam_from_world: torch.Tensor) -> torch
     return torch.nn.functional.normalize(d_cam @ R, dim=-1)  # R.T @ d for every pixel
 
 
+def mean_up(cam_from_world: list[np.ndarray]) -> np.ndarray:
+    """The cameras' mean up direction in world space, (3,) unit: the average of each camera's
+    -y axis (OpenCV cameras have y pointing down the image)."""
+    up = -np.mean([np.asarray(p)[1, :3] for p in cam_from_world], axis=0)
+    norm = np.linalg.norm(up)
+    if norm < 1e-6:
+        raise InputError("the cameras' up directions cancel out, so there is no common horizon; "
+                         "train with --no-environment-profile.")
+    return up / norm
+
+
+def profile_bins(focal: float) -> int:
+    """Number of elevation bins over [-90, 90] degrees about one pixel apart at a focal
+    length of ``focal`` pixels."""
+    pixel_angle = math.atan(1.0 / focal)
+    return math.ceil(math.pi / pixel_angle)
+
+
 class Environment(torch.nn.Module):
     """Colour as a function of the ray direction: SH coefficients (1, (degree + 1)^2, 3),
-    initialised to a uniform grey."""
+    initialised to a uniform grey, plus an elevation profile (bins, 3) about ``up``,
+    initialised to zero (``bins`` = 0: SH only)."""
 
-    def __init__(self, degree: int = 3):
+    def __init__(self, degree: int = 3, up: np.ndarray | torch.Tensor | None = None, bins: int = 0):
         super().__init__()
+        if bins and up is None:
+            raise ValueError("an elevation profile needs an up direction")
         self.degree = degree
         self.coeffs = torch.nn.Parameter(torch.zeros(1, num_coeffs(degree), 3))
+        if bins:
+            self.profile = torch.nn.Parameter(torch.zeros(bins, 3))
+            self.register_buffer("up", torch.as_tensor(np.asarray(up, dtype=np.float32)))
+        else:
+            self.profile = None
+
+    def elevation_colour(self, dirs: torch.Tensor) -> torch.Tensor:
+        """The profile at unit directions (N, 3): (N, 3), linear between bin centres."""
+        bins = self.profile.shape[0]
+        elevation = torch.asin((dirs @ self.up).clamp(-1.0, 1.0))
+        x = (elevation / math.pi + 0.5) * bins - 0.5  # bin k's centre at x = k
+        lo = x.floor().clamp(0, bins - 1)
+        w = (x - lo).clamp(0.0, 1.0)[:, None]
+        lo = lo.long()
+        return (1 - w) * self.profile[lo] + w * self.profile[(lo + 1).clamp_max(bins - 1)]
 
     def forward(self, camera: PinholeCamera, cam_from_world: torch.Tensor) -> torch.Tensor:
         """The background image of one camera, (H, W, 3)."""
-        dirs = ray_directions(camera, cam_from_world).to(self.coeffs.device)
-        return eval_sh(self.degree, self.coeffs[0], dirs.reshape(-1, 3)).reshape(camera.height, camera.width, 3)
+        dirs = ray_directions(camera, cam_from_world).to(self.coeffs.device).reshape(-1, 3)
+        colour = eval_sh(self.degree, self.coeffs[0], dirs)
+        if self.profile is not None:
+            colour = colour + self.elevation_colour(dirs)
+        return colour.reshape(camera.height, camera.width, 3)
 
     @classmethod
     def from_state(cls, state: dict[str, torch.Tensor]) -> Environment:
-        env = cls(num_coeffs_to_degree(state["coeffs"].shape[1]))
+        """The environment saved by ``state_dict`` (runs from before the profile have none)."""
+        profile = state.get("profile")
+        env = cls(num_coeffs_to_degree(state["coeffs"].shape[1]), up=state.get("up"),
+                  bins=0 if profile is None else profile.shape[0])
         env.load_state_dict(state)
         return env
 

@@ -1,5 +1,5 @@
-"""The learned environment behind the Gaussians: ray directions, SH colour, compositing,
-training and the run folder."""
+"""The learned environment behind the Gaussians: ray directions, SH colour, the elevation
+profile and its up direction, compositing, training and the run folder."""
 
 from __future__ import annotations
 
@@ -8,7 +8,9 @@ import pytest
 import torch
 
 from dataset_tools.cameras import PinholeCamera
-from gsseg.environment import Environment, background_image, ray_directions
+from dataset_tools.errors import InputError
+from dataset_tools.synth.camera_paths import look_at, orbit
+from gsseg.environment import Environment, background_image, mean_up, profile_bins, ray_directions
 from gsseg.gaussians import Gaussians
 from gsseg.render import render
 from gsseg.sh import C0, C1
@@ -43,6 +45,64 @@ def test_environment_colour_follows_its_sh_coefficients():
     assert torch.allclose(image[..., 1], 0.5 + 0.3 * z, atol=1e-6)
     assert torch.allclose(image[..., 2], torch.full_like(z, 0.1), atol=1e-6)
     assert background_image(None, CAMERA, pose) is None
+
+
+def test_mean_up_is_the_world_up_of_an_orbit_looking_down():
+    poses = orbit(24, 4.0, np.zeros(3))  # every camera pitched 18-34 degrees down
+    assert mean_up(poses) == pytest.approx([0.0, 0.0, 1.0], abs=1e-9)
+    flipped = [np.diag([-1.0, -1.0, 1.0]) @ p for p in poses[:2]]  # rolled upside down
+    with pytest.raises(InputError, match="--no-environment-profile"):
+        mean_up(poses[:2] + flipped)
+
+
+def test_elevation_profile_is_linear_between_bin_centres():
+    """Four bins over [-90, 90] degrees have centres at -67.5, -22.5, 22.5 and 67.5: a ray at
+    0 degrees takes the mean of the middle two, one beyond the outer centres the outer bin."""
+    env = Environment(degree=0, up=np.array([0.0, 0.0, 1.0]), bins=4)
+    with torch.no_grad():
+        env.profile.copy_(torch.tensor([[0.0] * 3, [0.2] * 3, [0.6] * 3, [1.0] * 3]))
+    elevations = torch.deg2rad(torch.tensor([0.0, 22.5, 45.0, -45.0, 80.0, -89.0]))
+    dirs = torch.stack([torch.cos(elevations), torch.zeros_like(elevations), torch.sin(elevations)], -1)
+    expected = torch.tensor([0.4, 0.6, 0.8, 0.1, 1.0, 0.0])
+    assert torch.allclose(env.elevation_colour(dirs), expected[:, None].expand(-1, 3), atol=1e-6)
+    assert profile_bins(1.0 / np.tan(np.pi / 180)) == 180  # one-degree pixels
+
+
+def test_a_sharp_horizon_is_learned_by_the_profile_and_not_by_sh_alone():
+    """An environment that is the sky's gradient above the horizon and a flat ground colour
+    below it, fitted from four views around it: with the profile the mean squared error is
+    under 1e-4 (what is left is the one-bin blur at the step); degree-3 SH alone blurs the
+    step into an error 50 times larger."""
+    camera = PinholeCamera(width=24, height=24, fx=26.0, fy=26.0, cx=12.0, cy=12.0)
+    poses = [torch.as_tensor(look_at(np.zeros(3), np.array([np.cos(a), np.sin(a), -0.1])), dtype=torch.float32)
+             for a in np.linspace(0, 2 * np.pi, 4, endpoint=False)]
+
+    def truth(pose):
+        z = ray_directions(camera, pose)[..., 2:3]
+        return torch.where(z > 0, 0.8 - 0.5 * z, torch.tensor([0.5, 0.45, 0.4]))
+
+    errors = {}
+    for bins in (0, profile_bins(camera.fx)):
+        env = Environment(degree=3, up=np.array([0.0, 0.0, 1.0]), bins=bins)
+        adam = torch.optim.Adam(env.parameters(), lr=0.02)
+        for _ in range(300):
+            loss = sum(((env(camera, p) - truth(p)) ** 2).mean() for p in poses)
+            adam.zero_grad()
+            loss.backward()
+            adam.step()
+        with torch.no_grad():
+            errors[bins > 0] = max(float(((env(camera, p) - truth(p)) ** 2).mean()) for p in poses)
+    assert errors[True] < 1e-4 and errors[False] > 50 * errors[True]
+
+
+def test_environment_state_round_trip_with_and_without_profile():
+    pose = torch.as_tensor(look_at(np.zeros(3), np.array([1.0, 0.0, 0.2])), dtype=torch.float32)
+    for env in (Environment(degree=2), Environment(degree=1, up=np.array([0.0, 0.0, 1.0]), bins=7)):
+        for p in env.parameters():
+            torch.nn.init.normal_(p, generator=torch.Generator().manual_seed(0))
+        copy = Environment.from_state(env.state_dict())
+        assert copy.degree == env.degree and (copy.profile is None) == (env.profile is None)
+        assert torch.equal(copy(CAMERA, pose), env(CAMERA, pose))
 
 
 def test_render_composites_an_image_background_behind_the_gaussians():
@@ -84,7 +144,7 @@ def test_runs_carry_their_environment_to_the_renderers(small_scene, trained, tmp
     from gsseg.run_folder import load_run
 
     run = load_run(trained)
-    assert run.environment is not None and run.environment.degree == 3
+    assert run.environment is not None and run.environment.degree == 3 and run.environment.profile is not None
     out = render_run(trained, small_scene.root, tmp_path / "r", what=("rgb",), backend="cpu", progress=False)
     view = load_scene(small_scene.root).split("test")[0]
     pose = torch.as_tensor(view.cam_from_world, dtype=torch.float32)

@@ -70,6 +70,7 @@ class TrainConfig:
     lambda_dssim: float = 0.2
     sh_degree: int = 3
     environment_degree: int | None = 3  # SH degree of the learned background; None: black
+    environment_profile: bool = True  # the background also has a colour per elevation angle
     num_classes: int = 256
     densify_grad_threshold: float = 2e-4
     percent_dense: float = 0.01
@@ -117,4 +118,5 @@ class TrainConfig:
         names = {f.name for f in fields(cls)}
         data = {k: v for k, v in data.items() if k in names}
         data["lr"] = LearningRates(**data.get("lr", {}))
+        data.setdefault("environment_profile", False)  # runs from before the profile existed
         return cls(**data)

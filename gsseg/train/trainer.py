@@ -14,7 +14,7 @@ from tqdm import tqdm
 
 from dataset_tools.errors import InputError
 from dataset_tools.scene import Scene, load_scene
-from gsseg.environment import Environment, background_image
+from gsseg.environment import Environment, background_image, mean_up, profile_bins
 from gsseg.gaussians import gaussians_from_points, random_points
 from gsseg.ply import write_ply
 from gsseg.render import RenderOutput, backend_device, render, resolve_backend
@@ -117,7 +117,11 @@ def train(scene_dir: Path | str, run: Path | str, cfg: TrainConfig, *, resume: b
     torch.manual_seed(cfg.seed)
     opt = GaussianOptimizer(_initial_gaussians(scene, cfg).to(device), cfg.lr, extent)
     classifier = make_classifier(cfg.num_classes).to(device)
-    environment = Environment(cfg.environment_degree).to(device) if cfg.environment_degree is not None else None
+    environment = None
+    if cfg.environment_degree is not None:
+        bins = profile_bins(max(max(v.camera.fx, v.camera.fy) for v in views)) if cfg.environment_profile else 0
+        environment = Environment(cfg.environment_degree, up=mean_up([v.cam_from_world.cpu().numpy() for v in views]),
+                                  bins=bins).to(device)
     # The classifier and the environment: small modules beside the Gaussians, one Adam.
     groups = [{"params": list(classifier.parameters()), "lr": cfg.lr.classifier}]
     if environment is not None:
