@@ -5,7 +5,7 @@ masks: PSNR only), and gsplat beside cpu where a GPU is present (also on the pap
 schedule with ``--gpu-schedule``). Prints and writes JSON.
 
     python -m benchmarks.train_quality [--out train_quality.json] [--beer ../shared/data/beer]
-        [--backends cpu,gsplat] [--gpu-schedule] [--train-seeds 0,1,2]
+        [--backends cpu,gsplat] [--gpu-schedule] [--train-seeds 0,1,2] [--no-environment-profile]
 
 Held-out PSNR moves by a few tenths of a dB between training runs that differ only in their
 seed or in the last bits of their numerics; ``--train-seeds`` trains the orbit scene once
@@ -58,6 +58,8 @@ def main() -> None:
     parser.add_argument("--gpu-schedule", action="store_true",
                         help="Also train the orbit scene with gsplat on the paper's 30k-iteration schedule.")
     parser.add_argument("--train-seeds", default="0", help="Comma-separated training seeds for the orbit scene.")
+    parser.add_argument("--no-environment-profile", dest="profile", action="store_false",
+                        help="Train without the environment's elevation profile (SH only).")
     args = parser.parse_args()
     train_seeds = [int(x) for x in args.train_seeds.split(",")]
     backends = args.backends.split(",") if args.backends else ["cpu"] + (["gsplat"] if gsplat_available() else [])
@@ -70,19 +72,20 @@ def main() -> None:
             runs = []
             for seed in train_seeds:
                 name = f"orbit_{backend}" + (f"_seed{seed}" if seed else "")
-                cfg = TrainConfig(iters=args.iters, backend=backend, seed=seed)
+                cfg = TrainConfig(iters=args.iters, backend=backend, seed=seed, environment_profile=args.profile)
                 runs.append(results.setdefault(name, train_and_score(synth, work, cfg, name)))
             if len(runs) > 1:
                 results[f"orbit_{backend}_over_seeds"] = {
                     f"{key}_{stat}": fn([r[key] for r in runs]) for key in ("test_psnr", "test_miou", "train_seconds")
                     for stat, fn in (("mean", lambda xs: sum(xs) / len(xs)), ("min", min), ("max", max))}
         if args.gpu_schedule:
-            results["orbit_gsplat_gpu_schedule"] = train_and_score(
-                synth, work, TrainConfig(schedule="gpu", backend="gsplat"), "orbit_gsplat_gpu_schedule")
+            cfg = TrainConfig(schedule="gpu", backend="gsplat", environment_profile=args.profile)
+            results["orbit_gsplat_gpu_schedule"] = train_and_score(synth, work, cfg, "orbit_gsplat_gpu_schedule")
         if args.beer:
             for backend in backends:
                 results[f"beer_{backend}"] = train_and_score(
-                    args.beer, work, TrainConfig(iters=args.iters, backend=backend, images="images_4", masks=None),
+                    args.beer, work, TrainConfig(iters=args.iters, backend=backend, images="images_4", masks=None,
+                                             environment_profile=args.profile),
                     f"beer_{backend}")
     print(json.dumps(results, indent=2))
     Path(args.out).write_text(json.dumps(results, indent=2) + "\n")
