@@ -13,7 +13,7 @@ import torch
 from tqdm import tqdm
 
 from dataset_tools.errors import InputError
-from dataset_tools.scene import Scene, load_scene
+from dataset_tools.scene import Scene, View, load_scene
 from gsseg.environment import Environment, background_image, mean_up, profile_bins
 from gsseg.gaussians import gaussians_from_points, random_points
 from gsseg.ply import write_ply
@@ -117,11 +117,8 @@ def train(scene_dir: Path | str, run: Path | str, cfg: TrainConfig, *, resume: b
     torch.manual_seed(cfg.seed)
     opt = GaussianOptimizer(_initial_gaussians(scene, cfg).to(device), cfg.lr, extent)
     classifier = make_classifier(cfg.num_classes).to(device)
-    environment = None
-    if cfg.environment_degree is not None:
-        bins = profile_bins(max(max(v.camera.fx, v.camera.fy) for v in views)) if cfg.environment_profile else 0
-        environment = Environment(cfg.environment_degree, up=mean_up([v.cam_from_world.cpu().numpy() for v in views]),
-                                  bins=bins).to(device)
+    environment = _environment(cfg, train_views)
+    environment = environment.to(device) if environment is not None else None
     # The classifier and the environment: small modules beside the Gaussians, one Adam.
     groups = [{"params": list(classifier.parameters()), "lr": cfg.lr.classifier}]
     if environment is not None:
@@ -201,6 +198,17 @@ def train(scene_dir: Path | str, run: Path | str, cfg: TrainConfig, *, resume: b
         write_json(run / METRICS, {"train": {"steps": step, "gaussians": len(opt), "history": history}})
     return TrainResult(run=run, step=step, num_gaussians=len(opt),
                        seconds=time.perf_counter() - start_time, finished=finished)
+
+
+def _environment(cfg: TrainConfig, views: list[View]) -> Environment | None:
+    """The untrained background of ``cfg``: None (black), SH only, or SH plus an elevation
+    profile about the cameras' mean up with bins a pixel apart at the finest camera."""
+    if cfg.environment_degree is None:
+        return None
+    if not cfg.environment_profile:
+        return Environment(cfg.environment_degree)
+    return Environment(cfg.environment_degree, up=mean_up([v.cam_from_world for v in views]),
+                       bins=profile_bins(max(max(v.camera.fx, v.camera.fy) for v in views)))
 
 
 def _train_step(opt: GaussianOptimizer, classifier: torch.nn.Linear, environment: Environment | None,
