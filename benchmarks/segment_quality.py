@@ -32,7 +32,8 @@ from eval.metrics import matched_miou
 from eval.report import markdown_table
 from gsseg.render_views import segment_pixels
 from gsseg.run_folder import load_run
-from gsseg.segment.segment_run import segment_run
+from gsseg.segment.reassign import classifier_prior, reassign
+from gsseg.segment.segment_run import mask_contributions
 from gsseg.train import TrainConfig, train
 from hqmask.build import BuildConfig, build_masks
 
@@ -40,14 +41,22 @@ SETTINGS = [("prior", -1.0), ("prior", 0.0), ("prior", 0.2), ("prior", 1.0), ("f
 TRAIN_IMAGES = "images_2"  # training and scoring at half the size the masks are made at
 
 
-def score(run: Path, scene: Path, masks: str, method: str, gamma_p: float) -> float:
-    """mIoU of the test views' segments after one Hungarian matching of IDs over them."""
-    seg = segment_run(run, scene, method=method, gamma_p=gamma_p, masks=masks, backend="cpu", progress=False)
-    model = load_run(run).gaussians
+def scores(run_dir: Path, scene: Path, masks: str, settings: list[tuple[str, float]]) -> list[float]:
+    """mIoU of the test views' segments for each (method, gamma_p) of ``settings``, voting with
+    ``masks``, after one Hungarian matching of IDs over the views. The contribution matrix
+    is computed once for all settings."""
+    run = load_run(run_dir)
+    contributions = mask_contributions(run, scene, masks=masks, backend="cpu", progress=False)
+    prior_labels, prior_probs = classifier_prior(run.gaussians.obj_feat, run.classifier)
     views = load_scene(scene, images=TRAIN_IMAGES).split("test")
-    preds = [segment_pixels(model, seg.labels, v.camera, torch.as_tensor(v.cam_from_world, dtype=torch.float32),
-                            backend="cpu") for v in views]
-    return matched_miou(preds, [v.load_mask() for v in views])
+    targets = [v.load_mask() for v in views]
+    result = []
+    for method, gamma_p in settings:
+        labels = reassign(contributions, prior_labels, prior_probs, method=method, gamma_p=gamma_p).labels
+        preds = [segment_pixels(run.gaussians, labels, v.camera, torch.as_tensor(v.cam_from_world, dtype=torch.float32),
+                                backend="cpu") for v in views]
+        result.append(matched_miou(preds, targets))
+    return result
 
 
 def main() -> None:
@@ -73,9 +82,10 @@ def main() -> None:
                 run = Path(tmp) / f"run_{path}_{train_seed}"
                 train(scene, run, TrainConfig(iters=args.iters, images=TRAIN_IMAGES, masks="assoc", backend="cpu",
                                               seed=train_seed), progress=False)
-                runs[path][train_seed] = {f"{m} {g:g}" if m == "prior" else m: score(run, scene, "assoc", m, g)
-                                          for m, g in SETTINGS}
-                runs[path][train_seed]["flashsplat, exact masks"] = score(run, scene, "object_mask", "flashsplat", 0.0)
+                row = dict(zip((f"{m} {g:g}" if m == "prior" else m for m, g in SETTINGS),
+                               scores(run, scene, "assoc", SETTINGS)))
+                row["flashsplat, exact masks"], = scores(run, scene, "object_mask", [("flashsplat", 0.0)])
+                runs[path][train_seed] = row
                 print(path, train_seed, json.dumps(runs[path][train_seed]))
             table[path] = {c: sum(r[c] for r in runs[path].values()) / len(train_seeds) for c in runs[path][train_seeds[0]]}
     columns = list(next(iter(table.values())))

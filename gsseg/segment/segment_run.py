@@ -7,11 +7,21 @@ from pathlib import Path
 from dataset_tools.errors import InputError
 from dataset_tools.scene import load_scene
 from gsseg.render import resolve_backend
-from gsseg.run_folder import load_run
-from gsseg.segment.contributions import MaskedView, contribution_matrix
+from gsseg.run_folder import Run, load_run
+from gsseg.segment.contributions import Contributions, MaskedView, contribution_matrix
 from gsseg.segment.reassign import Segmentation, classifier_prior, reassign
 
 LABELS = "labels.npz"
+
+
+def mask_contributions(run: Run, scene_dir: Path | str, *, masks: str = "object_mask", split: str = "train",
+                       backend: str = "cpu", progress: bool = True) -> Contributions:
+    """The contribution matrix of a loaded run over the masks of ``split`` (no labels where
+    no view of ``split`` has a mask)."""
+    scene = load_scene(scene_dir, images=run.config.get("images", "images"), masks=masks)
+    views = [MaskedView(v.camera, v.cam_from_world, m) for v in scene.split(split)
+             if (m := v.load_mask()) is not None]
+    return contribution_matrix(run.gaussians, views, backend=backend, progress=progress)
 
 
 def segment_run(run_dir: Path | str, scene_dir: Path | str, *, method: str = "prior", mode: str = "multi",
@@ -20,14 +30,11 @@ def segment_run(run_dir: Path | str, scene_dir: Path | str, *, method: str = "pr
     """Label every Gaussian of a run from the masks of ``split`` (the training views by
     default) and the run's classifier; write ``RUN/labels.npz``."""
     run = load_run(run_dir)
-    backend = resolve_backend(backend)
-    scene = load_scene(scene_dir, images=run.config.get("images", "images"), masks=masks)
-    views = [MaskedView(v.camera, v.cam_from_world, m) for v in scene.split(split)
-             if (m := v.load_mask()) is not None]
-    if not views and method != "classifier":
+    contributions = mask_contributions(run, scene_dir, masks=masks, split=split, backend=resolve_backend(backend),
+                                       progress=progress)
+    if not len(contributions.labels) and method != "classifier":
         raise InputError(f"{Path(scene_dir) / masks} holds no masks for the {split} views; "
                          "build them with `hqmask build` or use --method classifier.")
-    contributions = contribution_matrix(run.gaussians, views, backend=backend, progress=progress)
     prior_labels, prior_probs = classifier_prior(run.gaussians.obj_feat, run.classifier)
     result = reassign(contributions, prior_labels, prior_probs, method=method, mode=mode, gamma_p=gamma_p,
                       slack=slack)
