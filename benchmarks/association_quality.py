@@ -9,7 +9,7 @@ any choice of IDs for those segments can score (a method passes it only by chang
 segments: `tracks` splits a segment whose SfM points belong to two objects, and the
 consensus relabels pixels by the views around them). Prints and writes JSON.
 
-    python -m benchmarks.association_quality [--out association_quality.json] [--res 512] [--severity medium]
+    python -m benchmarks.association_quality [--res 512] [--views 24] [--severity medium] [--seed 0] [--out FILE]
 """
 
 from __future__ import annotations
@@ -22,68 +22,67 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.scenes import corrupted_scene
+from benchmarks import record
 from dataset_tools.corrupt import PERMUTE_ONLY, corrupt_mask
 from dataset_tools.image_files import write_png
-from dataset_tools.label_maps import consistent_fraction, overlap
 from dataset_tools.scene import load_scene
-from hqmask.build import BuildConfig, build_masks, clean_scene_masks
+from eval.metrics import segment_ceiling
+from eval.report import markdown_table
+from hqmask.build import clean_scene_masks
+from pipeline.experiment import SceneSpec, associate_masks, corrupt_masks, mask_scores, synthetic_scene
 
 
-def _masks(scene: Path, name: str) -> list:
+def _masks(scene: Path, name: str) -> list[np.ndarray]:
     return [v.load_mask() for v in load_scene(scene, masks=name).views]
 
 
-def segment_ceiling(preds: list[np.ndarray], gts: list[np.ndarray]) -> float:
-    """Share of ground-truth object pixels that carry their ID when every predicted segment
-    (an ID > 0 of one view) takes the ground-truth ID it overlaps most; background stays."""
-    hit = total = 0
-    for p, g in zip(preds, gts):
-        best = overlap(p, g).argmax(1)
-        best[0] = 0
-        obj = g > 0
-        hit += int(np.count_nonzero(best[p[obj]] == g[obj]))
-        total += int(np.count_nonzero(obj))
-    return hit / max(total, 1)
+def run_path(root: Path, path: str, args: argparse.Namespace) -> dict:
+    scene = synthetic_scene(root / path, SceneSpec(path=path, seed=args.seed, res=args.res, views=args.views))
+    corrupt_masks(scene, "noisy", severity=args.severity, seed=args.seed)
+    truth = _masks(scene, "object_mask")
+    for k, (view, mask) in enumerate(zip(load_scene(scene).views, truth)):
+        write_png(scene / "permuted" / f"{view.stem}.png", corrupt_mask(mask, PERMUTE_ONLY, np.random.default_rng(k)))
+    row = {"input": mask_scores(scene, "noisy")["consistency"]}
+    clean_scene_masks(scene, "noisy", "cleaned", progress=False)
+    row["ceiling_on_cleaned_segments"] = segment_ceiling(_masks(scene, "cleaned"), truth)
+    for method in ("flow", "tracks"):
+        associate_masks(scene, "noisy", f"assoc_{method}_alone", associate=method, consensus=0)
+        row[f"{method}_without_consensus"] = mask_scores(scene, f"assoc_{method}_alone")["consistency"]
+        start = time.perf_counter()
+        associate_masks(scene, "noisy", f"assoc_{method}", associate=method)
+        row[f"{method}_seconds"] = time.perf_counter() - start
+        row[method] = mask_scores(scene, f"assoc_{method}")["consistency"]
+        associate_masks(scene, "permuted", f"permuted_{method}", associate=method)
+        row[f"{method}_on_permuted_exact"] = mask_scores(scene, f"permuted_{method}")["consistency"]
+    print(path, json.dumps(row))
+    return row
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--out", default="association_quality.json")
+    parser.add_argument("--out", default=None, help="JSON file (default: benchmarks/results/association_quality[-seedN].json).")
     parser.add_argument("--res", type=int, default=512)
     parser.add_argument("--views", type=int, default=24)
     parser.add_argument("--severity", default="medium")
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
-    results = {}
     with tempfile.TemporaryDirectory() as tmp:
-        for path in ("orbit", "forward"):
-            scene = corrupted_scene(Path(tmp), path, res=args.res, severity=args.severity, seed=args.seed,
-                                    views=args.views)
-            truth = _masks(scene, "object_mask")
-            for k, (view, mask) in enumerate(zip(load_scene(scene).views, truth)):
-                write_png(scene / "permuted" / f"{view.stem}.png",
-                          corrupt_mask(mask, PERMUTE_ONLY, np.random.default_rng(k)))
-            row = {"input": consistent_fraction(_masks(scene, "noisy"), truth)}
-            clean_scene_masks(scene, "noisy", "cleaned", progress=False)
-            row["ceiling_on_cleaned_segments"] = segment_ceiling(_masks(scene, "cleaned"), truth)
-            for method in ("flow", "tracks"):
-                build_masks(scene, BuildConfig(proposer="existing", from_masks="noisy", associate=method, consensus=0,
-                                               out_masks=f"assoc_{method}_alone"), progress=False)
-                row[f"{method}_without_consensus"] = consistent_fraction(_masks(scene, f"assoc_{method}_alone"), truth)
-                start = time.perf_counter()
-                build_masks(scene, BuildConfig(proposer="existing", from_masks="noisy", associate=method,
-                                               out_masks=f"assoc_{method}"), progress=False)
-                row[method] = consistent_fraction(_masks(scene, f"assoc_{method}"), truth)
-                row[f"{method}_seconds"] = time.perf_counter() - start
-                build_masks(scene, BuildConfig(proposer="existing", from_masks="permuted", associate=method,
-                                               out_masks=f"permuted_{method}"), progress=False)
-                row[f"{method}_on_permuted_exact"] = consistent_fraction(_masks(scene, f"permuted_{method}"), truth)
-            results[path] = row
-            print(path, json.dumps(row))
+        results = {path: run_path(Path(tmp), path, args) for path in ("orbit", "forward")}
     results["setup"] = vars(args)
-    print(json.dumps(results, indent=2))
-    Path(args.out).write_text(json.dumps(results, indent=2) + "\n")
+    print(report(results)[1])
+    record.save("association_quality", results, tag=f"seed{args.seed}" if args.seed else "", out=args.out)
+
+
+def report(r: dict) -> tuple[str, str]:
+    paths = [p for p in r if p != "setup"]
+    headline = ", ".join(f"{p}: tracks {r[p]['tracks']:.3f}, flow {r[p]['flow']:.3f} "
+                         f"(ceiling {r[p]['ceiling_on_cleaned_segments']:.3f})" for p in paths)
+    columns = ["input", "ceiling_on_cleaned_segments", "tracks", "tracks_without_consensus", "flow",
+               "flow_without_consensus", "tracks_on_permuted_exact", "flow_on_permuted_exact"]
+    s = r["setup"]
+    table = markdown_table(["path", *columns], [[p, *(f"{r[p][c]:.3f}" for c in columns)] for p in paths])
+    return headline, (f"{s['views']} views at {s['res']}², masks corrupted at `{s['severity']}`, scene seed "
+                      f"{s['seed']}; share of object pixels with their ID after one matching per scene.\n\n{table}")
 
 
 if __name__ == "__main__":

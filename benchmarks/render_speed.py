@@ -18,8 +18,8 @@ import torch
 
 from dataset_tools.cameras import PinholeCamera
 from gsseg.gaussians import Gaussians
-from gsseg.render import backend_device, render
-from gsseg.render.gsplat_blend import gsplat_available
+from benchmarks import record
+from gsseg.render import BACKENDS, get_backend, render
 
 
 def scene(n: int, seed: int = 0) -> tuple[Gaussians, PinholeCamera, torch.Tensor]:
@@ -39,7 +39,7 @@ def scene(n: int, seed: int = 0) -> tuple[Gaussians, PinholeCamera, torch.Tensor
 def time_step(g: Gaussians, cam: PinholeCamera, pose: torch.Tensor, backend: str, features: bool,
               repeats: int) -> float:
     """Median seconds of render + backward of a loss on every output."""
-    device = backend_device(backend)
+    device = get_backend(backend).device
     times = []
     for _ in range(repeats + 1):  # the first call compiles / warms up
         params = Gaussians(**{k: v.to(device).requires_grad_(True) for k, v in g.tensors().items()})
@@ -60,7 +60,7 @@ def peak_rss_mb() -> float:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--out", default="render_speed.json")
+    parser.add_argument("--out", default=None, help="JSON file (default: benchmarks/results/render_speed.json).")
     parser.add_argument("--gaussians", type=int, default=30_000)
     parser.add_argument("--repeats", type=int, default=5)
     args = parser.parse_args()
@@ -75,12 +75,24 @@ def main() -> None:
     result["torch_peak_rss_mb"] = peak_rss_mb()
     result["torch_over_cpu"] = result["torch_s"] / result["cpu_s"]
     result["features_over_rgb_only"] = result["cpu_s"] / result["cpu_rgb_only_s"]
-    if gsplat_available():
+    if BACKENDS["gsplat"].available():
         result["gsplat_s"] = time_step(g, cam, pose, "gsplat", True, args.repeats)
         result["gpu_peak_mb"] = torch.cuda.max_memory_allocated() / 2**20
     print(json.dumps(result, indent=2))
-    with open(args.out, "w") as f:
-        json.dump(result, f, indent=2)
+    record.save("render_speed", result, out=args.out)
+
+
+def report(r: dict) -> tuple[str, str]:
+    headline = f"cpu {r['cpu_s']:.3f} s, torch {r['torch_s']:.2f} s ({r['torch_over_cpu']:.1f}x)"
+    rows = [("cpu, colour + object features", f"{r['cpu_s']:.3f} s"),
+            ("cpu, colour only", f"{r['cpu_rgb_only_s']:.3f} s (features cost {r['features_over_rgb_only']:.2f}x)"),
+            ("torch reference", f"{r['torch_s']:.2f} s ({r['torch_over_cpu']:.1f}x cpu)"),
+            ("peak RSS", f"cpu {r['cpu_peak_rss_mb'] / 1024:.2f} GB, torch {r['torch_peak_rss_mb'] / 1024:.2f} GB")]
+    if "gsplat_s" in r:
+        rows.append(("gsplat", f"{r['gsplat_s']:.4f} s, {r['gpu_peak_mb']:.0f} MB GPU"))
+    table = "\n".join(["| forward + backward | seconds |", "| --- | --- |"] + [f"| {a} | {b} |" for a, b in rows])
+    return headline, (f"{r['gaussians']} Gaussians at {r['size'][0]}x{r['size'][1]}, {r['channels']}, "
+                      f"{r['threads']} threads, median of repeats.\n\n{table}")
 
 
 if __name__ == "__main__":

@@ -1,11 +1,11 @@
-"""Benchmark: the SAM-HQ ONNX runtime on CPU with the stand-in model of the tests (the real
+"""Benchmark: the SAM-HQ ONNX runtime on CPU with the stand-in model (`hqmask.sam_hq.standin`) (the real
 SAM-HQ networks are far heavier; this measures the runtime around them). Prints and writes JSON.
 
 Encoder latency, decoder prompts/s batched (64 per call) and one per call, and the automatic
 generator (32x32 grid) with the share of its time spent outside ONNX Runtime, in the
 pre- and post-processing (target: under 15%).
 
-    python -m benchmarks.sam_hq_speed [--res 768] [--out sam_hq_speed.json]
+    python -m benchmarks.sam_hq_speed [--res 768] [--out FILE]
 """
 
 from __future__ import annotations
@@ -19,10 +19,11 @@ from pathlib import Path
 
 import numpy as np
 
+from benchmarks import record
 from dataset_tools.scene import load_scene
 from dataset_tools.synth import SynthConfig, generate_scene
 from hqmask.sam_hq import AutomaticMaskGenerator, GeneratorConfig, SamHQ
-from tests.sam_plumbing import export_plumbing_model
+from hqmask.sam_hq.standin import export_standin_model
 
 
 class RunTimer:
@@ -53,12 +54,12 @@ def mean_seconds(fn, repeats: int) -> float:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--res", type=int, default=768, help="side of the square synthetic test image")
-    ap.add_argument("--out", default="sam_hq_speed.json")
+    ap.add_argument("--out", default=None, help="JSON file (default: benchmarks/results/sam_hq_speed.json).")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         scene = generate_scene(SynthConfig(views=2, res=args.res, objects=6, seed=0), Path(tmp) / "scene", progress=False)
         image = load_scene(scene.root).views[0].load_image()
-        model = SamHQ(export_plumbing_model(Path(tmp) / "model"), device="cpu")
+        model = SamHQ(export_standin_model(Path(tmp) / "model"), device="cpu")
         model.encoder, model.decoder = RunTimer(model.encoder), RunTimer(model.decoder)
 
         encode = mean_seconds(lambda: model.encode(image), 5)
@@ -78,7 +79,7 @@ def main() -> None:
         total = time.perf_counter() - t
         in_runtime = model.encoder.seconds + model.decoder.seconds
     result = {
-        "model": "stand-in with SAM-HQ's inputs/outputs (tests/sam_plumbing.py), CPU execution provider",
+        "model": "stand-in with SAM-HQ's inputs/outputs (hqmask.sam_hq.standin), CPU execution provider",
         "image": f"{args.res}x{args.res} synthetic view",
         "cpu_count": os.cpu_count(),
         "encoder_ms": round(1000 * encode, 1),
@@ -91,8 +92,19 @@ def main() -> None:
         "generator_share_outside_runtime": round(1 - in_runtime / total, 3),
     }
     print(json.dumps(result, indent=2))
-    with open(args.out, "w") as f:
-        json.dump(result, f, indent=2)
+    record.save("sam_hq_speed", result, out=args.out)
+
+
+def report(r: dict) -> tuple[str, str]:
+    headline = (f"generator {r['generator_s']:.1f} s for {r['generator_points']} points, "
+                f"{100 * r['generator_share_outside_runtime']:.1f}% outside ONNX Runtime")
+    rows = [("encoder", f"{r['encoder_ms']} ms"),
+            ("decoder, 64 prompts a call", f"{r['decoder_prompts_per_s_batched']} prompts/s"),
+            ("decoder, one prompt a call", f"{r['decoder_prompts_per_s_single']} prompts/s"),
+            (f"automatic generator, {r['generator_points']} points", f"{r['generator_s']} s, {r['generator_masks']} masks"),
+            ("share of the generator's time outside ONNX Runtime", f"{100 * r['generator_share_outside_runtime']:.1f}%")]
+    table = "\n".join(["| what | result |", "| --- | --- |"] + [f"| {a} | {b} |" for a, b in rows])
+    return headline, f"{r['model']}; {r['image']}; {r['cpu_count']} CPUs.\n\n{table}"
 
 
 if __name__ == "__main__":

@@ -1,19 +1,20 @@
-"""Benchmark: segmentation quality of the reassignment methods on synthetic scenes trained
-on corrupted masks. For each path (orbit, forward): masks made and corrupted at a severity
-at ``--res`` (512x512), made consistent by `hqmask build --proposer existing --associate
-tracks` (noise removal at its default 500 px), 3D-GS trained on the half-size images with
-them, then every method (and gamma_p in {-1, 0, 0.2, 1} for `prior`) scored on the test
-views with the occlusion-aware protocol (pixel label = label with the largest blended
-weight) against the exact masks, IDs matched once per scene. The last column votes with the
-exact masks of the training views instead of the associated ones: the score a
-reassignment could reach if it undid every error the masks still carry, so its distance to
-`flashsplat` bounds what the prior can gain. With several
+"""Benchmark: segmentation quality of the reassignment methods on synthetic scenes trained on
+corrupted masks.
+
+For each path (orbit, forward): masks made and corrupted at a severity at ``--res`` (512x512),
+made consistent by ``hqmask build --proposer existing --associate tracks``, 3D-GS trained on
+the half-size images with them, then every method (and gamma_p in {-1, 0, 0.2, 1} for
+``prior``) scored on the test views with the occlusion-aware protocol (pixel label = label
+with the largest blended weight) against the exact masks, IDs matched once per scene. The
+last column votes with the exact masks of the training views instead of the associated
+ones: the score a reassignment could reach if it undid every error the masks still carry,
+so its distance to ``flashsplat`` bounds what the prior can gain. With several
 ``--train-seeds`` each scene is trained once per seed on the same masks and the table gives
 the mean (the differences between methods are of the order of the spread between training
 runs). Prints markdown tables and writes JSON.
 
-    python -m benchmarks.segment_quality [--out segment_quality.json] [--iters N] [--res 512]
-        [--train-seeds 0,1,2]
+    python -m benchmarks.segment_quality [--iters N] [--res 512] [--severity medium]
+        [--train-seeds 0,1,2] [--out FILE]
 """
 
 from __future__ import annotations
@@ -23,45 +24,41 @@ import json
 import tempfile
 from pathlib import Path
 
-import torch
-
-from benchmarks.scenes import corrupted_scene
-from dataset_tools.image_files import write_downsampled
-from dataset_tools.scene import load_scene
-from eval.metrics import matched_miou
+from benchmarks import record
 from eval.report import markdown_table
-from gsseg.render_views import segment_pixels
-from gsseg.run_folder import load_run
-from gsseg.segment.reassign import classifier_prior, reassign
-from gsseg.segment.segment_run import mask_contributions
-from gsseg.train import TrainConfig, train
-from hqmask.build import BuildConfig, build_masks
+from gsseg.train import TrainConfig
+from pipeline.experiment import SceneSpec, associate_masks, corrupt_masks, segmentation_scores, synthetic_scene, train_run
 
 SETTINGS = [("prior", -1.0), ("prior", 0.0), ("prior", 0.2), ("prior", 1.0), ("flashsplat", 0.0), ("classifier", 0.0)]
+EXACT = "flashsplat, exact masks"
 TRAIN_IMAGES = "images_2"  # training and scoring at half the size the masks are made at
 
 
-def scores(run_dir: Path, scene: Path, masks: str, settings: list[tuple[str, float]]) -> list[float]:
-    """mIoU of the test views' segments for each (method, gamma_p) of ``settings``, voting with
-    ``masks``, after one Hungarian matching of IDs over the views. The contribution matrix
-    is computed once for all settings."""
-    run = load_run(run_dir)
-    contributions = mask_contributions(run, scene, masks=masks, backend="cpu", progress=False)
-    prior_labels, prior_probs = classifier_prior(run.gaussians.obj_feat, run.classifier)
-    views = load_scene(scene, images=TRAIN_IMAGES).split("test")
-    targets = [v.load_mask() for v in views]
-    result = []
-    for method, gamma_p in settings:
-        labels = reassign(contributions, prior_labels, prior_probs, method=method, gamma_p=gamma_p).labels
-        preds = [segment_pixels(run.gaussians, labels, v.camera, torch.as_tensor(v.cam_from_world, dtype=torch.float32),
-                                backend="cpu") for v in views]
-        result.append(matched_miou(preds, targets))
-    return result
+def _column(method: str, gamma_p: float) -> str:
+    return f"prior {gamma_p:g}" if method == "prior" else method
+
+
+def run_scene(work: Path, path: str, args: argparse.Namespace, train_seeds: list[int]) -> dict[int, dict]:
+    """The scores of every setting on one scene, per training seed."""
+    scene = synthetic_scene(work / path, SceneSpec(path=path, seed=args.seed, res=args.res), downsample=(2,))
+    corrupt_masks(scene, "noisy", severity=args.severity, seed=args.seed)
+    associate_masks(scene, "noisy", "assoc", associate="tracks")
+    runs = {}
+    for train_seed in train_seeds:
+        run = work / f"run_{path}_{train_seed}"
+        train_run(scene, run, TrainConfig(iters=args.iters, images=TRAIN_IMAGES, masks="assoc", backend="cpu",
+                                          seed=train_seed))
+        summaries = segmentation_scores(run, scene, "assoc", SETTINGS)
+        row = {_column(m, g): s["visible"]["miou"] for (m, g), s in zip(SETTINGS, summaries)}
+        row[EXACT] = segmentation_scores(run, scene, "object_mask", [("flashsplat", 0.0)])[0]["visible"]["miou"]
+        runs[train_seed] = row
+        print(path, train_seed, json.dumps(row))
+    return runs
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--out", default="segment_quality.json")
+    parser.add_argument("--out", default=None, help="JSON file (default: benchmarks/results/segment_quality[-SEVERITY].json).")
     parser.add_argument("--iters", type=int, default=None, help="Training iterations (default: the CPU schedule).")
     parser.add_argument("--res", type=int, default=512,
                         help="Size the masks are made, corrupted and associated at; training uses half of it.")
@@ -70,31 +67,31 @@ def main() -> None:
     parser.add_argument("--train-seeds", default="0", help="Comma-separated training seeds; the table is their mean.")
     args = parser.parse_args()
     train_seeds = [int(x) for x in args.train_seeds.split(",")]
-    table, runs = {}, {}
     with tempfile.TemporaryDirectory() as tmp:
-        for path in ("orbit", "forward"):
-            scene = corrupted_scene(Path(tmp), path, res=args.res, severity=args.severity, seed=args.seed)
-            write_downsampled(scene / "images", scene / TRAIN_IMAGES, 2)
-            build_masks(scene, BuildConfig(proposer="existing", from_masks="noisy", associate="tracks",
-                                           out_masks="assoc"), progress=False)
-            runs[path] = {}
-            for train_seed in train_seeds:
-                run = Path(tmp) / f"run_{path}_{train_seed}"
-                train(scene, run, TrainConfig(iters=args.iters, images=TRAIN_IMAGES, masks="assoc", backend="cpu",
-                                              seed=train_seed), progress=False)
-                row = dict(zip((f"{m} {g:g}" if m == "prior" else m for m, g in SETTINGS),
-                               scores(run, scene, "assoc", SETTINGS)))
-                row["flashsplat, exact masks"], = scores(run, scene, "object_mask", [("flashsplat", 0.0)])
-                runs[path][train_seed] = row
-                print(path, train_seed, json.dumps(runs[path][train_seed]))
-            table[path] = {c: sum(r[c] for r in runs[path].values()) / len(train_seeds) for c in runs[path][train_seeds[0]]}
-    columns = list(next(iter(table.values())))
-    print(markdown_table(["scene", *columns], [[path, *(f"{row[c]:.4f}" for c in columns)] for path, row in table.items()]))
-    if len(train_seeds) > 1:
-        print(markdown_table(["scene", "training seed", *columns],
-                             [[path, str(seed), *(f"{row[c]:.4f}" for c in columns)]
-                              for path, by_seed in runs.items() for seed, row in by_seed.items()]))
-    Path(args.out).write_text(json.dumps({"mIoU": table, "per_training_seed": runs, "setup": vars(args)}, indent=2) + "\n")
+        runs = {path: run_scene(Path(tmp), path, args, train_seeds) for path in ("orbit", "forward")}
+    means = {path: {c: sum(r[c] for r in by_seed.values()) / len(by_seed) for c in next(iter(by_seed.values()))}
+             for path, by_seed in runs.items()}
+    results = {"mIoU": means, "per_training_seed": runs, "setup": vars(args)}
+    print(report(results)[1])
+    record.save("segment_quality", results, tag="" if args.severity == "medium" else args.severity, out=args.out)
+
+
+def report(r: dict) -> tuple[str, str]:
+    means, setup = r["mIoU"], r["setup"]
+    columns = list(next(iter(means.values())))
+    headline = ", ".join(f"{path}: prior 0.2 {row['prior 0.2']:.3f} / flashsplat {row['flashsplat']:.3f} / "
+                         f"exact-mask vote {row[EXACT]:.3f}" for path, row in means.items())
+    n = len(next(iter(r["per_training_seed"].values())))
+    details = [f"Severity `{setup['severity']}`, masks at {setup['res']}², training on the half-size copies "
+               f"({setup['iters'] or 'CPU schedule'} iterations); test-view mIoU (visible protocol), mean of {n} "
+               "training seed(s):", "",
+               markdown_table(["scene", *columns], [[p, *(f"{row[c]:.4f}" for c in columns)] for p, row in means.items()])]
+    if n > 1:
+        details += ["", "Per training seed:", "", markdown_table(
+            ["scene", "training seed", *columns],
+            [[p, str(seed), *(f"{row[c]:.4f}" for c in columns)]
+             for p, by_seed in r["per_training_seed"].items() for seed, row in by_seed.items()])]
+    return headline, "\n".join(details)
 
 
 if __name__ == "__main__":

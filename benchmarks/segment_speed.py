@@ -16,10 +16,11 @@ import time
 import numpy as np
 import torch
 
+from benchmarks import record
 from benchmarks.render_speed import scene
-from gsseg.render import backend_device, render
-from gsseg.render.gsplat_blend import gsplat_available
-from gsseg.segment import Contributions, MaskedView, contribution_matrix, reassign
+from gsseg.render import BACKENDS, get_backend, render
+from gsseg.render.contributions import Contributions, MaskedView, contribution_matrix
+from gsseg.segment import reassign
 
 
 def seed_style_binary(weights: torch.Tensor, labels: np.ndarray, prior_labels: torch.Tensor,
@@ -59,7 +60,7 @@ def contribution_vs_rgb(backend: str) -> dict:
     rng = np.random.default_rng(0)
     mask = np.kron(rng.integers(0, 8, (8, 8)), np.ones((32, 32), int)).astype(np.uint8)
     views = [MaskedView(cam, pose.numpy(), mask)] * 4
-    device = backend_device(backend)
+    device = get_backend(backend).device
     on_device, pose_on_device = g.to(device), pose.to(device)
     with torch.no_grad():
         t_rgb, _ = timed(lambda: [render(on_device, cam, pose_on_device, with_features=False, backend=backend)
@@ -71,14 +72,14 @@ def contribution_vs_rgb(backend: str) -> dict:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--out", default="segment_speed.json")
+    parser.add_argument("--out", default=None, help="JSON file (default: benchmarks/results/segment_speed.json).")
     parser.add_argument("--gaussians", type=int, default=1_000_000)
     parser.add_argument("--labels", type=int, default=64)
     args = parser.parse_args()
     out = {}
 
     out["contribution"] = contribution_vs_rgb("cpu")
-    if gsplat_available():
+    if BACKENDS["gsplat"].available():
         out["contribution_gsplat"] = contribution_vs_rgb("gsplat")
 
     # (2) reassignment at scale
@@ -97,8 +98,25 @@ def main() -> None:
                            "seed_style_loop_s": t_loop, "loop_over_binary": t_loop / t_binary,
                            "binary_equals_loop": agree}
     print(json.dumps(out, indent=2))
-    with open(args.out, "w") as f:
-        json.dump(out, f, indent=2)
+    record.save("segment_speed", out, out=args.out)
+
+
+def report(r: dict) -> tuple[str, str]:
+    c, a = r["contribution"], r["reassignment"]
+    headline = (f"contribution pass {c['ratio']:.2f}x an RGB render; binary reassignment of {a['gaussians']:,} "
+                f"Gaussians {a['binary_s']:.2f} s ({a['loop_over_binary']:.1f}x the per-label loop)")
+    rows = [(f"contribution pass / RGB forward, {c['gaussians']} Gaussians, {c['views']} views at "
+             f"{c['size'][0]}x{c['size'][1]}", f"{c['contribution_s']:.3f} s / {c['rgb_forward_s']:.3f} s = "
+             f"{c['ratio']:.2f}x")]
+    if "contribution_gsplat" in r:
+        g = r["contribution_gsplat"]
+        rows.append(("the same on gsplat", f"{g['contribution_s'] * 1000:.1f} ms / {g['rgb_forward_s'] * 1000:.1f} ms "
+                                           f"= {g['ratio']:.2f}x"))
+    rows += [(f"reassignment, {a['gaussians']:,} Gaussians x {a['labels']} labels, multi", f"{a['multi_s']:.2f} s"),
+             ("binary", f"{a['binary_s']:.2f} s"),
+             ("binary, a per-label Python loop", f"{a['seed_style_loop_s']:.1f} s ({a['loop_over_binary']:.1f}x); "
+                                                  f"same selections: {a['binary_equals_loop']}")]
+    return headline, "\n".join(["| what | result |", "| --- | --- |"] + [f"| {x} | {y} |" for x, y in rows])
 
 
 if __name__ == "__main__":

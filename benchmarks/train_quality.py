@@ -1,11 +1,11 @@
 """Benchmark: train on a synthetic orbit scene (256x256, 24 views, LLFF hold-out) with the
-CPU default schedule and score the test views: PSNR of the renders and mIoU of the rendered
-label argmax against the exact masks. Optionally the beer capture (images at 1/4 size, no
-masks: PSNR only), and gsplat beside cpu where a GPU is present (also on the paper's 30k GPU
-schedule with ``--gpu-schedule``). Prints and writes JSON.
+CPU default schedule and score the test views: PSNR and SSIM of the renders and mIoU of the
+rendered label argmax against the exact masks. Optionally the beer capture (images at 1/4
+size, no masks: image scores only), and gsplat beside cpu where a GPU is present (also on
+the paper's 30k GPU schedule with ``--gpu-schedule``). Prints and writes JSON.
 
-    python -m benchmarks.train_quality [--out train_quality.json] [--beer ../shared/data/beer]
-        [--backends cpu,gsplat] [--gpu-schedule] [--train-seeds 0,1,2] [--no-environment-profile]
+    python -m benchmarks.train_quality [--beer ../shared/data/beer] [--backends cpu,gsplat]
+        [--gpu-schedule] [--train-seeds 0,1,2] [--no-environment-profile] [--iters N] [--out FILE]
 
 Held-out PSNR moves by a few tenths of a dB between training runs that differ only in their
 seed or in the last bits of their numerics; ``--train-seeds`` trains the orbit scene once
@@ -17,40 +17,29 @@ from __future__ import annotations
 import argparse
 import json
 import tempfile
-import time
 from pathlib import Path
 
-from dataset_tools.image_files import read_image, read_mask
-from dataset_tools.scene import load_scene
-from dataset_tools.synth import SynthConfig, generate_scene
-from eval.metrics import mean_iou, psnr
-from gsseg.render.gsplat_blend import gsplat_available
-from gsseg.render_views import render_run
-from gsseg.train import TrainConfig, train
+from benchmarks import record
+from eval.report import markdown_table
+from gsseg.render import BACKENDS
+from gsseg.run_folder import RunFolder
+from gsseg.train import TrainConfig
+from pipeline.experiment import SceneSpec, synthetic_scene, test_view_scores, train_run
 
 
-def train_and_score(scene: Path, work: Path, cfg: TrainConfig, name: str) -> dict:
+def train_and_score(scene: Path, run: Path, cfg: TrainConfig) -> dict:
     """Train ``cfg`` on ``scene`` and score its test views."""
-    start = time.perf_counter()
-    result = train(scene, work / f"run_{name}", cfg)
-    seconds = time.perf_counter() - start
-    what = ("rgb", "labels") if cfg.masks else ("rgb",)
-    renders = render_run(result.run, scene, work / f"test_{name}", split="test", what=what,
-                         backend=cfg.backend, progress=False)
-    views = load_scene(scene, images=cfg.images, masks=cfg.masks).split("test")
-    out = {"train_seconds": seconds, "iterations": result.step, "gaussians": result.num_gaussians,
-           "test_views": len(views),
-           "test_psnr": sum(psnr(read_image(renders / "rgb" / f"{v.stem}.png"), v.load_image()) for v in views) / len(views)}
-    if "labels" in what and all(v.mask_path for v in views):
-        out["test_miou"] = mean_iou([read_mask(renders / "labels" / f"{v.stem}.png") for v in views],
-                                    [v.load_mask() for v in views])
-    print(name, json.dumps(out))
+    seconds = train_run(scene, run, cfg, progress=True)
+    metrics = json.loads(RunFolder(run).metrics.read_text())["train"]
+    out = {"train_seconds": seconds, "iterations": metrics["steps"], "gaussians": metrics["gaussians"],
+           **test_view_scores(run, scene, backend=cfg.backend)}
+    print(run.name, json.dumps(out))
     return out
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--out", default="train_quality.json")
+    parser.add_argument("--out", default=None, help="JSON file (default: benchmarks/results/train_quality.json).")
     parser.add_argument("--iters", type=int, default=None, help="Override the schedule's length.")
     parser.add_argument("--beer", type=Path, default=None, help="Also train the beer capture found here.")
     parser.add_argument("--backends", default=None,
@@ -60,35 +49,56 @@ def main() -> None:
     parser.add_argument("--train-seeds", default="0", help="Comma-separated training seeds for the orbit scene.")
     parser.add_argument("--no-environment-profile", dest="profile", action="store_false",
                         help="Train without the environment's elevation profile (SH only).")
+    parser.add_argument("--tag", default="", help="Suffix of the default JSON file name.")
     args = parser.parse_args()
     train_seeds = [int(x) for x in args.train_seeds.split(",")]
-    backends = args.backends.split(",") if args.backends else ["cpu"] + (["gsplat"] if gsplat_available() else [])
+    backends = args.backends.split(",") if args.backends else ["cpu"] + (["gsplat"] if BACKENDS["gsplat"].available() else [])
 
     results = {}
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(tmp)
-        synth = generate_scene(SynthConfig(views=24, res=256, path="orbit", seed=0), work / "orbit").root
+        synth = synthetic_scene(work / "orbit", SceneSpec(path="orbit", seed=0, res=256, views=24))
         for backend in backends:
             runs = []
             for seed in train_seeds:
                 name = f"orbit_{backend}" + (f"_seed{seed}" if seed else "")
                 cfg = TrainConfig(iters=args.iters, backend=backend, seed=seed, environment_profile=args.profile)
-                runs.append(results.setdefault(name, train_and_score(synth, work, cfg, name)))
+                runs.append(results.setdefault(name, train_and_score(synth, work / name, cfg)))
             if len(runs) > 1:
                 results[f"orbit_{backend}_over_seeds"] = {
                     f"{key}_{stat}": fn([r[key] for r in runs]) for key in ("test_psnr", "test_miou", "train_seconds")
                     for stat, fn in (("mean", lambda xs: sum(xs) / len(xs)), ("min", min), ("max", max))}
         if args.gpu_schedule:
             cfg = TrainConfig(schedule="gpu", backend="gsplat", environment_profile=args.profile)
-            results["orbit_gsplat_gpu_schedule"] = train_and_score(synth, work, cfg, "orbit_gsplat_gpu_schedule")
+            results["orbit_gsplat_gpu_schedule"] = train_and_score(synth, work / "orbit_gpu", cfg)
         if args.beer:
             for backend in backends:
-                results[f"beer_{backend}"] = train_and_score(
-                    args.beer, work, TrainConfig(iters=args.iters, backend=backend, images="images_4", masks=None,
-                                             environment_profile=args.profile),
-                    f"beer_{backend}")
-    print(json.dumps(results, indent=2))
-    Path(args.out).write_text(json.dumps(results, indent=2) + "\n")
+                cfg = TrainConfig(iters=args.iters, backend=backend, images="images_4", masks=None,
+                                  environment_profile=args.profile)
+                results[f"beer_{backend}"] = train_and_score(args.beer, work / f"beer_{backend}", cfg)
+    results = {"runs": results, "setup": {k: str(v) if isinstance(v, Path) else v for k, v in vars(args).items()}}
+    print(report(results)[1])
+    record.save("train_quality", results, tag=args.tag, out=args.out)
+
+
+def report(r: dict) -> tuple[str, str]:
+    runs = {k: v for k, v in r["runs"].items() if not k.endswith("_over_seeds")}
+    orbit = [v for k, v in runs.items() if k.startswith("orbit_cpu")]
+    headline = ", ".join(f"{k}: {v['test_psnr']:.2f} dB" + (f", mIoU {v['test_miou']:.3f}" if "test_miou" in v else "")
+                         + (f", {v['train_seconds']:.0f} s" if v["train_seconds"] else "")
+                         for k, v in runs.items())
+    if len(orbit) > 1:
+        headline = (f"orbit cpu over {len(orbit)} seeds: {min(v['test_psnr'] for v in orbit):.2f}-"
+                    f"{max(v['test_psnr'] for v in orbit):.2f} dB; " + ", ".join(
+                        f"{k}: {v['test_psnr']:.2f} dB" for k, v in runs.items() if not k.startswith("orbit_cpu")))
+    rows = [[k, str(v["iterations"]), str(v["gaussians"]), f"{v['test_psnr']:.2f}", f"{v['test_ssim']:.3f}",
+             f"{v['test_miou']:.3f}" if "test_miou" in v else "n/a",
+             f"{v['train_seconds']:.0f}" if v["train_seconds"] else "reused"] for k, v in runs.items()]
+    table = markdown_table(["run", "iterations", "Gaussians", "test PSNR (dB)", "test SSIM", "test mIoU", "seconds"],
+                           rows)
+    profile = "with" if r["setup"]["profile"] else "without"
+    return headline, (f"Orbit: 24 views at 256², 3 LLFF test views, {profile} the environment's elevation profile; "
+                      f"beer: 71 views at 1/4 size, 9 test views, no masks.\n\n{table}")
 
 
 if __name__ == "__main__":

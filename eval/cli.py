@@ -60,8 +60,8 @@ def compare(runs: tuple[Path, ...], out: Path | None) -> None:
 def paper_tables(out: Path, quick: bool, backend: str) -> None:
     """The analogs of the paper's tables on synthetic scenes (markdown and JSON); rerunning
     reuses the finished work in OUT/work."""
-    from eval.paper_tables import SETUPS
-    from eval.paper_tables import paper_tables as run_tables
+    from pipeline.paper_tables import SETUPS
+    from pipeline.paper_tables import paper_tables as run_tables
 
     path = run_tables(out, setup=SETUPS["quick" if quick else "full"], backend=backend)
     click.echo(path.read_text())

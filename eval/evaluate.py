@@ -24,14 +24,13 @@ from tqdm import tqdm
 from dataset_tools.atomic import write_bytes_atomic
 from dataset_tools.errors import InputError
 from dataset_tools.label_maps import match_ids, overlap
-from dataset_tools.scene import View, load_scene
+from dataset_tools.scene import View
 from eval.lpips import LPIPS
 from eval.metrics import binary_scores, psnr, ssim
 from eval.renders import ViewRenders, render_view
-from gsseg.render import backend_device, resolve_backend
-from gsseg.run_folder import Run, load_run
+from gsseg.render import Backend, get_backend
+from gsseg.run import Run, load_run
 from gsseg.segment.reassign import Segmentation
-from gsseg.segment.segment_run import LABELS
 
 PROTOCOLS = ("visible", "extracted")
 LPIPS_NA = "n/a: weights not available"
@@ -119,24 +118,22 @@ def score_views(renders: list[ViewRenders], *, run: str, scene: str, split: str,
 def load_inputs(run_dir: Path, scene_dir: Path, gt_masks: str | None, split: str) -> tuple[Run, Segmentation, list[View]]:
     """The run, its labels and the scene's ``split`` views, refusing what cannot be evaluated."""
     run = load_run(run_dir)
-    segmentation = Segmentation.load(run_dir / LABELS)
+    segmentation = Segmentation.load(run.folder.labels)
     if gt_masks is not None and not (scene_dir / gt_masks).is_dir():
         raise InputError(f"{scene_dir / gt_masks}: no ground-truth masks for the metrics; "
                          "pass --gt-masks NAME, the scene's ground-truth mask folder.")
-    views = load_scene(scene_dir, images=run.config.get("images", "images"), masks=gt_masks).split(split)
+    views = run.scene(scene_dir, masks=gt_masks).split(split)
     if not views:
         raise InputError(f"{scene_dir}: the scene has no {split} views to evaluate.")
     return run, segmentation, views
 
 
 def evaluate(run: Run, segmentation: Segmentation, views: list[View], *, with_truth: bool, scene: str, split: str,
-             backend: str, lpips: LPIPS | None = None, progress: bool = True) -> tuple[Evaluation, list[ViewRenders]]:
+             backend: str | Backend, lpips: LPIPS | None = None,
+             progress: bool = True) -> tuple[Evaluation, list[ViewRenders]]:
     """Render ``views`` with the segmented run and score them (against their masks when
-    ``with_truth``; by ``lpips`` when given). ``backend`` must be resolved. Returns the scores
-    and the renders."""
-    gaussians = run.gaussians.to(backend_device(backend))
-    renders = [render_view(gaussians, segmentation, v, sh_degree=run.config.get("sh_degree", 3), backend=backend,
-                           truth=v.load_mask() if with_truth else None, environment=run.environment)
+    ``with_truth``; by ``lpips`` when given). Returns the scores and the renders."""
+    renders = [render_view(run, segmentation, v, backend=backend, truth=v.load_mask() if with_truth else None)
                for v in tqdm(views, desc="evaluating", unit="view", disable=not progress)]
     return score_views(renders, run=str(run.root), scene=scene, split=split, lpips=lpips), renders
 
@@ -149,5 +146,5 @@ def evaluate_run(run_dir: Path | str, scene_dir: Path | str, *, gt_masks: str | 
     is reported as not available). Returns the scores and the renders."""
     run, segmentation, views = load_inputs(Path(run_dir), Path(scene_dir), gt_masks, split)
     return evaluate(run, segmentation, views, with_truth=gt_masks is not None, scene=str(scene_dir), split=split,
-                    backend=resolve_backend(backend), lpips=LPIPS(lpips) if lpips is not None else None,
+                    backend=get_backend(backend), lpips=LPIPS(lpips) if lpips is not None else None,
                     progress=progress)

@@ -50,3 +50,17 @@ def matched_miou(preds: list[np.ndarray], targets: list[np.ndarray]) -> float:
     pixel overlap summed over all views (unmatched predicted IDs count as wrong everywhere)."""
     mapping = match_ids(sum(overlap(p, t) for p, t in zip(preds, targets)))
     return mean_iou([np.where(mapping[p] >= 0, mapping[p], 255).astype(np.uint8) for p in preds], targets)
+
+
+def segment_ceiling(preds: list[np.ndarray], gts: list[np.ndarray]) -> float:
+    """The best ID consistency any choice of IDs for the segments of ``preds`` can reach: the
+    share of ground-truth object pixels that carry their ID when every predicted segment (an
+    ID > 0 of one view) takes the ground-truth ID it overlaps most; background stays."""
+    hit = total = 0
+    for p, g in zip(preds, gts):
+        best = overlap(p, g).argmax(1)
+        best[0] = 0
+        obj = g > 0
+        hit += int(np.count_nonzero(best[p[obj]] == g[obj]))
+        total += int(np.count_nonzero(obj))
+    return hit / max(total, 1)

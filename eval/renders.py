@@ -8,10 +8,9 @@ import numpy as np
 import torch
 
 from dataset_tools.scene import View
-from gsseg.environment import Environment, background_image
-from gsseg.gaussians import Gaussians
-from gsseg.render import backend_device, render, to_uint8
+from gsseg.render import Backend, get_backend
 from gsseg.render_views import segment_pixels
+from gsseg.run import Run
 from gsseg.segment.reassign import Segmentation
 
 MIN_ALPHA = 0.5
@@ -36,17 +35,16 @@ class ViewRenders:
 
 
 @torch.no_grad()
-def render_view(gaussians: Gaussians, segmentation: Segmentation, view: View, *, sh_degree: int, backend: str,
-                truth: np.ndarray | None, environment: Environment | None = None) -> ViewRenders:
-    """The renders of one view (``gaussians`` on ``backend``'s device, the colour over ``environment``)."""
-    pose = torch.as_tensor(view.cam_from_world, dtype=torch.float32, device=backend_device(backend))
-    rgb = to_uint8(render(gaussians, view.camera, pose, sh_degree=sh_degree,
-                          background=background_image(environment, view.camera, pose),
-                          with_features=False, backend=backend).rgb)
+def render_view(run: Run, segmentation: Segmentation, view: View, *, backend: str | Backend,
+                truth: np.ndarray | None) -> ViewRenders:
+    """The renders of one view by a segmented run."""
+    backend = get_backend(backend)
+    gaussians = run.gaussians_on(backend.device)
+    pose = torch.as_tensor(view.cam_from_world, dtype=torch.float32, device=backend.device)
     visible = segment_pixels(gaussians, segmentation.labels, view.camera, pose, backend=backend, min_alpha=MIN_ALPHA)
     extracted = {}
     for label in segmentation.objects:
-        alone = gaussians.select(torch.as_tensor(segmentation.selection(int(label)), device=gaussians.means.device))
-        alpha = render(alone, view.camera, pose, sh_degree=0, with_features=False, backend=backend).alpha
+        alone = gaussians.select(torch.as_tensor(segmentation.selection(int(label)), device=backend.device))
+        alpha = run.render(view, gaussians=alone, background="black", sh_degree=0, backend=backend).alpha
         extracted[int(label)] = alpha.cpu().numpy() >= MIN_ALPHA
-    return ViewRenders(view.stem, view.load_image(), truth, rgb, visible, extracted)
+    return ViewRenders(view.stem, view.load_image(), truth, run.render_rgb(view, backend=backend), visible, extracted)

@@ -14,7 +14,6 @@ import json
 from pathlib import Path
 
 import numpy as np
-import torch
 
 from dataset_tools.atomic import atomic_directory, write_bytes_atomic
 from dataset_tools.errors import InputError
@@ -24,13 +23,12 @@ from eval.evaluate import PROTOCOLS, Evaluation, evaluate, load_inputs
 from eval.lpips import LPIPS
 from eval.renders import ViewRenders
 from gsseg.edits import apply_edit
-from gsseg.environment import background_image
-from gsseg.render import backend_device, render, resolve_backend, to_uint8
-from gsseg.run_folder import METRICS, Run
+from gsseg.render import Backend, get_backend
+from gsseg.run import Run
+from gsseg.run_folder import RunFolder
 from gsseg.segment.reassign import Segmentation
 
 PANELS = ("photo", "ground truth", "predicted (visible)", "removal", "extraction", "recolour")
-EVALUATION = "evaluation.json"  # written into the run folder too, for `gseval compare`
 
 
 def _fmt(x: float | None, digits: int = 3) -> str:
@@ -44,22 +42,16 @@ def default_object(segmentation: Segmentation) -> int:
     return int(segmentation.objects[np.argmax(segmentation.selections.sum(axis=1))])
 
 
-@torch.no_grad()
 def edit_panels(run: Run, segmentation: Segmentation, views: list[View], label: int, color: tuple[int, int, int],
-                backend: str) -> dict[str, list[np.ndarray]]:
+                backend: str | Backend) -> dict[str, list[np.ndarray]]:
     """Renders of ``views`` after removing, extracting (on white) and recolouring ``label``."""
     selected = segmentation.selection(label)
-    device = backend_device(backend)
+    backend = get_backend(backend)
     out: dict[str, list[np.ndarray]] = {}
     for op in ("remove", "extract", "recolor"):
-        edited = apply_edit(run.gaussians, selected, op, tuple(c / 255 for c in color)).to(device)
-        out[op] = []
-        for v in views:
-            pose = torch.as_tensor(v.cam_from_world, dtype=torch.float32, device=device)
-            background = (torch.ones(3, device=device) if op == "extract"
-                          else background_image(run.environment, v.camera, pose))
-            out[op].append(to_uint8(render(edited, v.camera, pose, sh_degree=run.config.get("sh_degree", 3),
-                                           background=background, with_features=False, backend=backend).rgb))
+        edited = apply_edit(run.gaussians, selected, op, tuple(c / 255 for c in color)).to(backend.device)
+        background = "white" if op == "extract" else "environment"
+        out[op] = [run.render_rgb(v, gaussians=edited, background=background, backend=backend) for v in views]
     return out
 
 
@@ -182,18 +174,18 @@ def report_run(run_dir: Path | str, scene_dir: Path | str, out_dir: Path | str, 
     run_dir, scene_dir, out_dir = Path(run_dir), Path(scene_dir), Path(out_dir)
     if out_dir.exists() and not overwrite:
         raise InputError(f"{out_dir}: already exists; pass --force to replace it.")
-    backend = resolve_backend(backend)
+    backend = get_backend(backend)
     lpips_net = LPIPS(lpips) if lpips is not None else None  # a bad file fails before any rendering
     run, segmentation, views = load_inputs(run_dir, scene_dir, gt_masks, split)
     ev, renders = evaluate(run, segmentation, views, with_truth=gt_masks is not None, scene=str(scene_dir), split=split,
                            backend=backend, lpips=lpips_net, progress=progress)
     selected = default_object(segmentation) if object_id is None else int(object_id)
     edits = edit_panels(run, segmentation, views, selected, color, backend)
-    metrics = run_dir / METRICS
+    metrics = run.folder.metrics
     history = json.loads(metrics.read_text()).get("train", {}).get("history", []) if metrics.is_file() else []
     write_report(ev, renders, edits, history, out_dir, selected=selected, title=f"gsseg report: {run_dir.name}",
                  overwrite=overwrite)
-    ev.save(run_dir / EVALUATION)
+    ev.save(run.folder.evaluation)
     return ev
 
 
@@ -202,7 +194,7 @@ def compare_runs(run_dirs: list[Path]) -> str:
     head = ["run", "scene", "mIoU visible", "mAcc visible", "mIoU extracted", "mAcc extracted", "PSNR", "SSIM"]
     rows = []
     for run in run_dirs:
-        path = Path(run) / EVALUATION
+        path = RunFolder(run).evaluation
         if not path.is_file():
             raise InputError(f"{path}: missing; run `gseval report {run} --scene SCENE --out DIR` first.")
         ev = Evaluation.from_json(json.loads(path.read_text()))

@@ -37,11 +37,11 @@ def cli() -> None:
 @click.option("--stop-after", type=int, default=None, help="Checkpoint and stop at this step; continue with --resume.")
 def train(scene: Path, run: Path, schedule: str, resume: bool, stop_after: int | None, **options) -> None:
     """Train 3D-GS jointly with 16-d object features on SCENE."""
-    from gsseg.render import resolve_backend
+    from gsseg.render import get_backend
     from gsseg.train import TrainConfig, train as run_training
 
     if schedule == "auto":
-        schedule = "gpu" if resolve_backend(options["backend"]) == "gsplat" else "cpu"
+        schedule = get_backend(options["backend"]).default_schedule
     result = run_training(scene, run, TrainConfig(schedule=schedule, **options), resume=resume, stop_after=stop_after)
     state = "finished" if result.finished else f"stopped at step {result.step}; continue with --resume"
     click.echo(f"{result.run}: {state}, {result.num_gaussians} Gaussians, {result.seconds:.0f} s")
@@ -113,7 +113,7 @@ def edit(run: Path, point, click_, scene, force: bool, **options) -> None:
 @click.option("--force", is_flag=True, help="Replace the outputs in --out.")
 def demo(out: Path, scene: Path | None, images: str, iters: int, max_gaussians: int, backend: str, force: bool) -> None:
     """The whole pipeline: scene, masks, training, segmentation, a 3D-point edit, the report."""
-    from gsseg.demo import run_demo
+    from pipeline.demo import run_demo
 
     result = run_demo(out, scene=scene, images=images, iters=iters, max_gaussians=max_gaussians, backend=backend,
                       overwrite=force)

@@ -13,15 +13,12 @@ from tqdm import tqdm
 from dataset_tools.atomic import atomic_directory
 from dataset_tools.errors import InputError
 from dataset_tools.image_files import write_png
-from dataset_tools.scene import load_scene
-from gsseg.environment import background_image
 from gsseg.gaussians import Gaussians
 from gsseg.ply import write_ply
-from gsseg.render import backend_device, render, resolve_backend, to_uint8
-from gsseg.run_folder import load_run
+from gsseg.render import Backend, get_backend
+from gsseg.run import load_run
 from gsseg.segment.prompts import pick_object, point_from_click
 from gsseg.segment.reassign import Segmentation
-from gsseg.segment.segment_run import LABELS
 from gsseg.sh import C0, rgb_to_sh_dc
 
 OPS = ("remove", "extract", "recolor")
@@ -60,43 +57,36 @@ def apply_edit(g: Gaussians, selected: np.ndarray, op: str, rgb: tuple[float, fl
 
 def edit_run(run_dir: Path | str, op: str, *, point=None, click=None, object_id: int | None = None,
              color: tuple[int, int, int] | None = None, name: str | None = None, scene_dir: Path | str | None = None,
-             split: str = "test", k: int = 20, fps: int = 8, backend: str = "auto", overwrite: bool = False,
+             split: str = "test", k: int = 20, fps: int = 8, backend: str | Backend = "auto", overwrite: bool = False,
              progress: bool = True) -> Path:
     """Select an object (a 3D ``point``, a ``click`` = (view, u, v) or an ``object_id``), apply
     ``op`` and write ``RUN/edits/NAME/``: ``gaussians.ply``, ``renders/<view>.png`` of the
     scene's ``split`` views, ``video.mp4`` of those renders, and ``edit.json``."""
-    run_dir = Path(run_dir)
-    segmentation = Segmentation.load(run_dir / LABELS)
-    run = load_run(run_dir)
-    backend = resolve_backend(backend)
-    scene = load_scene(scene_dir or run.config["scene"], images=run.config.get("images", "images"), masks=None)
     if sum(x is not None for x in (point, click, object_id)) != 1:
         raise InputError("give exactly one of --point, --click or --object-id.")
+    run = load_run(run_dir)
+    segmentation = Segmentation.load(run.folder.labels)
+    backend = get_backend(backend)
+    scene = run.scene(scene_dir)
     if click is not None:
         view = scene.view(str(click[0]))
         point = point_from_click(run.gaussians, view.camera, view.cam_from_world, float(click[1]), float(click[2]),
-                                 backend="cpu" if backend == "gsplat" else backend)
+                                 backend=backend)
     if point is not None:
         object_id = pick_object(run.gaussians.means.numpy(), segmentation.labels, np.asarray(point), k)
     selected = segmentation.selection(int(object_id))
     rgb = tuple(c / 255 for c in color) if color is not None else None
     edited = apply_edit(run.gaussians, selected, op, rgb)
-    out = run_dir / "edits" / (name or f"{op}_{object_id}")
+    out = run.folder.edit(name or f"{op}_{object_id}")
     if out.exists() and not overwrite:
         raise InputError(f"{out} exists; pass --force or choose another --name.")
-    device = backend_device(backend)
     with atomic_directory(out, overwrite=overwrite) as tmp:
         write_ply(edited, tmp / "gaussians.ply")
         frames = []
-        with torch.no_grad():
-            for view in tqdm(scene.split(split), desc="rendering edit", unit="view", disable=not progress):
-                pose = torch.as_tensor(view.cam_from_world, dtype=torch.float32, device=device)
-                rgb_img = render(edited.to(device), view.camera, pose, sh_degree=run.config.get("sh_degree", 3),
-                                 background=background_image(run.environment, view.camera, pose),
-                                 with_features=False, backend=backend).rgb
-                frame = to_uint8(rgb_img)
-                write_png(tmp / "renders" / f"{view.stem}.png", frame)
-                frames.append(frame)
+        for view in tqdm(scene.split(split), desc="rendering edit", unit="view", disable=not progress):
+            frame = run.render_rgb(view, gaussians=edited, backend=backend)
+            write_png(tmp / "renders" / f"{view.stem}.png", frame)
+            frames.append(frame)
         _write_video(tmp / "video.mp4", frames, fps)
         (tmp / "edit.json").write_text(json.dumps({
             "op": op, "object_id": int(object_id), "point": None if point is None else np.asarray(point).tolist(),
@@ -106,10 +96,17 @@ def edit_run(run_dir: Path | str, op: str, *, point=None, click=None, object_id:
 
 
 def _write_video(path: Path, frames: list[np.ndarray], fps: int) -> None:
+    """An MP4 of ``frames`` (H, W, 3) uint8; frames of other sizes (the undistorted views of one
+    capture differ by a few pixels) are padded with black to the largest."""
     if not frames:
         return
-    h, w = frames[0].shape[:2]
+    h = max(f.shape[0] for f in frames)
+    w = max(f.shape[1] for f in frames)
     writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), fps, (w, h))
+    if not writer.isOpened():
+        raise InputError(f"{path}: OpenCV cannot write an mp4v video here; install an OpenCV build with video I/O.")
     for f in frames:
-        writer.write(cv2.cvtColor(f, cv2.COLOR_RGB2BGR))
+        padded = np.zeros((h, w, 3), np.uint8)
+        padded[: f.shape[0], : f.shape[1]] = f
+        writer.write(cv2.cvtColor(padded, cv2.COLOR_RGB2BGR))
     writer.release()

@@ -13,6 +13,11 @@ from gsseg.sh import MAX_DEGREE, num_coeffs, rgb_to_sh_dc
 OBJ_FEAT_DIM = 16
 
 
+
+def make_classifier(num_classes: int = 256) -> torch.nn.Linear:
+    """The linear layer from object features to class logits."""
+    return torch.nn.Linear(OBJ_FEAT_DIM, num_classes)
+
 @dataclass
 class Gaussians:
     """N anisotropic 3D Gaussians in their optimisation parameterisation (as 3D-GS stores them).

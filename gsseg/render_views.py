@@ -11,13 +11,10 @@ from tqdm import tqdm
 from dataset_tools.atomic import atomic_directory
 from dataset_tools.errors import InputError
 from dataset_tools.image_files import colorize_labels, write_png
-from dataset_tools.scene import load_scene
-from gsseg.environment import background_image
 from gsseg.gaussians import Gaussians
-from gsseg.render import backend_device, render, resolve_backend, to_uint8
-from gsseg.run_folder import load_run
+from gsseg.render import Backend, get_backend, render, to_uint8
+from gsseg.run import load_run
 from gsseg.segment.reassign import Segmentation
-from gsseg.segment.segment_run import LABELS
 
 PRODUCTS = ("rgb", "labels", "segments")
 
@@ -28,7 +25,7 @@ def classify_pixels(features: torch.Tensor, classifier: torch.nn.Linear) -> torc
 
 
 def segment_pixels(gaussians: Gaussians, labels: np.ndarray, camera, cam_from_world: torch.Tensor, *,
-                   backend: str, min_alpha: float = 0.5) -> np.ndarray:
+                   backend: str | Backend, min_alpha: float = 0.5) -> np.ndarray:
     """(H, W) uint8: each pixel takes the Gaussian label with the largest blended weight
     (labels (N,) uint8), 0 where the accumulated alpha is below ``min_alpha``."""
     present = np.unique(labels)
@@ -43,14 +40,14 @@ def segment_pixels(gaussians: Gaussians, labels: np.ndarray, camera, cam_from_wo
 @torch.no_grad()
 def render_run(
     run_dir: Path | str,
-    scene_dir: Path | str,
+    scene_dir: Path | str | None,
     out: Path | str,
     *,
     split: str = "test",
     what: tuple[str, ...] = ("rgb", "labels"),
     colorize: bool = False,
     images: str | None = None,
-    backend: str = "auto",
+    backend: str | Backend = "auto",
     overwrite: bool = False,
     progress: bool = True,
 ) -> Path:
@@ -65,25 +62,22 @@ def render_run(
     if out.exists() and not overwrite:
         raise InputError(f"{out} exists; pass --force to replace it or choose another --out.")
     run = load_run(run_dir)
-    segmentation = Segmentation.load(Path(run_dir) / LABELS) if "segments" in what else None
-    backend = resolve_backend(backend)
-    device = backend_device(backend)
-    scene = load_scene(scene_dir, images=images or run.config.get("images", "images"), masks=None)
-    gaussians, classifier = run.gaussians.to(device), run.classifier.to(device)
-    sh_degree = run.config.get("sh_degree", 3)
+    segmentation = Segmentation.load(run.folder.labels) if "segments" in what else None
+    backend = get_backend(backend)
+    classifier = run.classifier.to(backend.device)
     with atomic_directory(out, overwrite=overwrite) as tmp:
-        for view in tqdm(scene.split(split), desc="rendering", unit="view", disable=not progress):
-            pose = torch.as_tensor(view.cam_from_world, dtype=torch.float32, device=device)
-            result = render(gaussians, view.camera, pose, sh_degree=sh_degree,
-                            background=background_image(run.environment, view.camera, pose),
-                            with_features="labels" in what, backend=backend)
+        for view in tqdm(run.scene(scene_dir, images=images).split(split), desc="rendering", unit="view",
+                         disable=not progress):
+            result = run.render(view, with_features="labels" in what, backend=backend)
             if "rgb" in what:
                 write_png(tmp / "rgb" / f"{view.stem}.png", to_uint8(result.rgb))
             maps = {}
             if "labels" in what:
                 maps["labels"] = classify_pixels(result.features, classifier).cpu().numpy().astype(np.uint8)
             if segmentation is not None:
-                maps["segments"] = segment_pixels(gaussians, segmentation.labels, view.camera, pose, backend=backend)
+                pose = torch.as_tensor(view.cam_from_world, dtype=torch.float32, device=backend.device)
+                maps["segments"] = segment_pixels(run.gaussians_on(backend.device), segmentation.labels, view.camera,
+                                                  pose, backend=backend)
             for kind, ids in maps.items():
                 write_png(tmp / kind / f"{view.stem}.png", ids)
                 if colorize:

@@ -1,19 +1,27 @@
-"""The run folder of DESIGN.md: what training writes and what segmenting, editing and
-rendering read.
+"""The run folder, the contract between training, segmentation, editing and evaluation: every
+file of a run is named here and nowhere else.
 
     run/
-      config.json      every option of the run
-      gaussians.ply    3D-GS PLY + obj_feat_0..15
-      classifier.pt    the 16 -> num_classes linear layer
-      environment.pt   the learned background (SH of the ray direction), when the run has one
-      checkpoints/     resumable state
-      metrics.json     the training curve
+      config.json       every option of the run and what it was trained on (RunRecord)
+      gaussians.ply     3D-GS PLY + obj_feat_0..15
+      classifier.pt     the 16 -> num_classes linear layer
+      environment.pt    the learned background, when the run has one
+      checkpoints/      resumable training state, step_NNNNNNN.pt
+      metrics.json      the training curve
+      labels.npz        per-Gaussian labels (`gsseg segment`)
+      evaluation.json   the scores of `gseval report`, for `gseval compare`
+      edits/NAME/       one edit: gaussians.ply, renders/, video.mp4, edit.json
+      .lock             held by the command writing the run (an OS file lock)
 """
 
 from __future__ import annotations
 
+import contextlib
+import fcntl
 import io
 import json
+import os
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -21,56 +29,105 @@ import torch
 
 from dataset_tools.atomic import write_bytes_atomic
 from dataset_tools.errors import InputError
-from gsseg.environment import Environment
-from gsseg.gaussians import OBJ_FEAT_DIM, Gaussians
-from gsseg.ply import read_ply
-
-CONFIG = "config.json"
-GAUSSIANS = "gaussians.ply"
-CLASSIFIER = "classifier.pt"
-ENVIRONMENT = "environment.pt"
-CHECKPOINTS = "checkpoints"
-METRICS = "metrics.json"
 
 
-def make_classifier(num_classes: int = 256) -> torch.nn.Linear:
-    """The linear layer from object features to class logits."""
-    return torch.nn.Linear(OBJ_FEAT_DIM, num_classes)
+@dataclass(frozen=True)
+class RunFolder:
+    """The paths of one run folder (nothing is read or checked on construction)."""
+
+    root: Path
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "root", Path(self.root))
+
+    @property
+    def config(self) -> Path:
+        return self.root / "config.json"
+
+    @property
+    def gaussians(self) -> Path:
+        return self.root / "gaussians.ply"
+
+    @property
+    def classifier(self) -> Path:
+        return self.root / "classifier.pt"
+
+    @property
+    def environment(self) -> Path:
+        return self.root / "environment.pt"
+
+    @property
+    def checkpoints(self) -> Path:
+        return self.root / "checkpoints"
+
+    @property
+    def metrics(self) -> Path:
+        return self.root / "metrics.json"
+
+    @property
+    def labels(self) -> Path:
+        return self.root / "labels.npz"
+
+    @property
+    def evaluation(self) -> Path:
+        return self.root / "evaluation.json"
+
+    @property
+    def edits(self) -> Path:
+        return self.root / "edits"
+
+    def edit(self, name: str) -> Path:
+        """The folder of the edit called ``name``, which must be a plain folder name (an edit
+        never reaches outside ``edits/``)."""
+        if not name or name in (".", "..") or name.startswith(".") or any(c in name for c in "/\\\0"):
+            raise InputError(f"--name {name!r}: give a plain folder name (letters, digits, -, _), not a path.")
+        return self.edits / name
+
+    def checkpoint(self, step: int) -> Path:
+        return self.checkpoints / f"step_{step:07d}.pt"
+
+    def checkpoint_files(self) -> list[Path]:
+        """The checkpoints, oldest first."""
+        return sorted(self.checkpoints.glob("step_*.pt"))
+
+    @property
+    def finished(self) -> bool:
+        """Whether training wrote the model files."""
+        return all(p.is_file() for p in (self.config, self.gaussians, self.classifier))
+
+    @contextlib.contextmanager
+    def lock(self) -> Iterator[None]:
+        """Hold the run's lock (an OS file lock, released when the process ends however it
+        ends) while writing the run; a second writer is refused in one sentence."""
+        self.root.mkdir(parents=True, exist_ok=True)
+        fd = os.open(self.root / ".lock", os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                holder = os.pread(fd, 32, 0).decode(errors="replace").strip() or "another process"
+                raise InputError(f"{self.root}: another command ({holder}) is writing this run; wait for it to "
+                                 "finish or choose another folder.") from None
+            os.ftruncate(fd, 0)
+            os.pwrite(fd, f"pid {os.getpid()}".encode(), 0)
+            yield
+        finally:
+            os.close(fd)
+
+    def require_finished(self) -> None:
+        for path in (self.config, self.gaussians, self.classifier):
+            if not path.is_file():
+                raise InputError(f"{self.root} has no {path.name}; point to the --out folder of a finished "
+                                 "`gsseg train`.")
 
 
 def write_json(path: Path, data: dict) -> None:
+    """Write ``data`` as indented JSON, atomically."""
     write_bytes_atomic(path, (json.dumps(data, indent=2) + "\n").encode())
 
 
 def write_torch(path: Path, obj) -> None:
+    """``torch.save`` to ``path``, atomically."""
     buf = io.BytesIO()
     torch.save(obj, buf)
     write_bytes_atomic(path, buf.getvalue())
-
-
-@dataclass
-class Run:
-    """A trained run, loaded."""
-
-    root: Path
-    config: dict
-    gaussians: Gaussians
-    classifier: torch.nn.Linear
-    environment: Environment | None = None  # None: the run renders on black
-
-
-def load_run(root: Path | str) -> Run:
-    """Load the model of a finished (or checkpointed and exported) training run."""
-    root = Path(root)
-    for name in (CONFIG, GAUSSIANS, CLASSIFIER):
-        if not (root / name).is_file():
-            raise InputError(f"{root} has no {name}; point to the --out folder of a finished `gsseg train`.")
-    config = json.loads((root / CONFIG).read_text())
-    state = torch.load(root / CLASSIFIER, map_location="cpu", weights_only=True)
-    classifier = make_classifier(state["weight"].shape[0])
-    classifier.load_state_dict(state)
-    environment = None
-    if (root / ENVIRONMENT).is_file():
-        environment = Environment.from_state(torch.load(root / ENVIRONMENT, map_location="cpu", weights_only=True))
-    return Run(root=root, config=config, gaussians=read_ply(root / GAUSSIANS), classifier=classifier,
-               environment=environment)

@@ -1,20 +1,10 @@
 """The command-line front ends: help, the dataset_tools commands end to end, and user errors."""
 
-import subprocess
 import sys
-from pathlib import Path
 
 import cv2
 import pytest
-
-
-def run(*args):
-    return subprocess.run(args, capture_output=True, text=True)
-
-
-def script(name: str) -> str:
-    """A console script installed beside this interpreter (works without an activated venv)."""
-    return str(Path(sys.executable).parent / name)
+from helpers import run, script
 
 
 @pytest.mark.parametrize(

@@ -141,7 +141,7 @@ def test_runs_carry_their_environment_to_the_renderers(small_scene, trained, tmp
     from dataset_tools.image_files import read_image
     from gsseg.render import to_uint8
     from gsseg.render_views import render_run
-    from gsseg.run_folder import load_run
+    from gsseg.run import load_run
 
     run = load_run(trained)
     assert run.environment is not None and run.environment.degree == 3 and run.environment.profile is not None

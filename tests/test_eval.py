@@ -20,9 +20,12 @@ from dataset_tools.scene import load_scene
 from eval.evaluate import score_views
 from eval.metrics import binary_scores, psnr, ssim
 from eval.renders import ViewRenders, render_view
-from gsseg.gaussians import Gaussians
+from gsseg.gaussians import Gaussians, make_classifier
 from gsseg.render_views import render_run, segment_pixels
+from gsseg.run import Run
+from gsseg.run_folder import RunFolder
 from gsseg.segment.reassign import Segmentation
+from gsseg.train.config import RunRecord, TrainConfig
 
 
 def script(name: str) -> str:
@@ -109,7 +112,9 @@ def test_visible_and_extracted_differ_only_for_the_occluded_object():
     g, seg, view = two_walls()
     pose = torch.as_tensor(view.cam_from_world, dtype=torch.float32)
     truth = segment_pixels(g, seg.labels, view.camera, pose, backend="cpu")  # what the camera sees
-    r = render_view(g, seg, view, sh_degree=0, backend="cpu", truth=truth)
+    record = RunRecord(TrainConfig(sh_degree=0), "scene", "cpu", 1.0, None, ())
+    run = Run(RunFolder("unused"), record, g, make_classifier(), environment=None)
+    r = render_view(run, seg, view, backend="cpu", truth=truth)
     ev = score_views([r], run="r", scene="s", split="test")
     per = ev.per_object()
     assert per[1]["visible_iou"] == 1.0 and per[2]["visible_iou"] == 1.0
@@ -244,7 +249,7 @@ def test_matched_miou_renames_before_scoring():
 def test_paper_tables_plumbing_writes_every_table_and_reuses_its_work(tmp_path):
     """Plumbing only (a tiny scene and 30 iterations): every table is produced, the JSON holds
     every number the markdown shows, and a second run retrains nothing."""
-    from eval.paper_tables import GAMMAS, METHODS, TRAINING_MASKS, TableSetup, paper_tables
+    from pipeline.paper_tables import GAMMAS, METHODS, TRAINING_MASKS, TableSetup, paper_tables
 
     setup = TableSetup(paths=("orbit",), seeds=(3,), res=128, views=8, objects=2, iters=30, images="images_4",
                        min_area=20)

@@ -9,7 +9,7 @@ from plyfile import PlyData, PlyElement
 
 from dataset_tools.errors import InputError
 from gsseg.ply import read_ply, write_ply
-from tests.render_scenes import random_gaussians
+from helpers import random_gaussians
 
 
 def test_round_trip_is_exact(tmp_path):

@@ -11,9 +11,8 @@ import torch
 
 from dataset_tools.cameras import PinholeCamera
 from gsseg.gaussians import Gaussians
-from gsseg.render import cpu_kernels, render, resolve_backend
-from gsseg.render.gsplat_blend import gsplat_available
-from tests.render_scenes import look_down_z, output_weights, random_gaussians, weighted_sum
+from gsseg.render import BACKENDS, cpu_kernels, get_backend, render
+from helpers import look_down_z, output_weights, random_gaussians, weighted_sum
 
 OUTPUTS = ("rgb", "features", "alpha", "depth")
 
@@ -127,11 +126,12 @@ def test_unknown_backend_is_refused():
     from dataset_tools.errors import InputError
 
     with pytest.raises(InputError, match="unknown backend"):
-        resolve_backend("opengl")
-    assert resolve_backend("auto") == ("gsplat" if gsplat_available() else "cpu")
+        get_backend("opengl")
+    assert get_backend("auto").name == ("gsplat" if BACKENDS["gsplat"].available() else "cpu")
+    assert get_backend(get_backend("torch")) is BACKENDS["torch"]
 
 
-@pytest.mark.skipif(not gsplat_available(), reason="the gsplat backend needs gsplat and a CUDA GPU")
+@pytest.mark.skipif(not BACKENDS["gsplat"].available(), reason="the gsplat backend needs gsplat and a CUDA GPU")
 @pytest.mark.parametrize("seed, n, size, scales", [(0, 150, (40, 32), (0.04, 0.24)), (3, 400, (90, 70), (0.005, 0.08))])
 def test_gsplat_backend_matches_torch_reference(seed, n, size, scales):
     """To the tolerances of the cpu backend, on opacities below 0.99: gsplat clamps one

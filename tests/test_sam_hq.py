@@ -25,7 +25,7 @@ from hqmask.sam_hq.mask_ops import (
     stability_score,
 )
 from hqmask.sam_hq.transforms import preprocess, resized_shape, transform_coords
-from tests.sam_plumbing import export_plumbing_model
+from hqmask.sam_hq.standin import export_standin_model
 
 MEAN = np.array([123.675, 116.28, 103.53], np.float32)
 STD = np.array([58.395, 57.12, 57.375], np.float32)
@@ -33,7 +33,7 @@ STD = np.array([58.395, 57.12, 57.375], np.float32)
 
 @pytest.fixture(scope="module")
 def plumbing_model(tmp_path_factory) -> Path:
-    return export_plumbing_model(tmp_path_factory.mktemp("sam") / "plumbing")
+    return export_standin_model(tmp_path_factory.mktemp("sam") / "plumbing")
 
 
 def squares_image(h: int = 200, w: int = 320) -> tuple[np.ndarray, list[tuple[int, int, int, int]]]:

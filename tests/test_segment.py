@@ -14,8 +14,9 @@ from gsseg.edits import apply_edit
 from gsseg.gaussians import Gaussians
 from gsseg.ply import read_ply
 from gsseg.render import render
-from gsseg.render.gsplat_blend import gsplat_available
-from gsseg.segment import (Contributions, MaskedView, contribution_matrix, object_at_point, reassign)
+from gsseg.render import BACKENDS
+from gsseg.render.contributions import Contributions, MaskedView, contribution_matrix
+from gsseg.segment import object_at_point, reassign
 
 F, SIZE = 20.0, 16
 
@@ -49,7 +50,7 @@ def _hand_alphas(g: Gaussians) -> np.ndarray:
 
 
 @pytest.mark.parametrize("backend", ["cpu", "torch", pytest.param("gsplat", marks=pytest.mark.skipif(
-    not gsplat_available(), reason="the gsplat backend needs gsplat and a CUDA GPU"))])
+    not BACKENDS["gsplat"].available(), reason="the gsplat backend needs gsplat and a CUDA GPU"))])
 def test_contribution_matrix_equals_hand_computed_alpha_t_sums(backend):
     g = _two_gaussians()
     cam, pose = _camera()
@@ -153,7 +154,7 @@ def test_segment_edit_and_render_segments_from_the_command_line(trained, small_s
     from dataset_tools.image_files import read_image, read_mask
     from dataset_tools.scene import load_scene
     from gsseg.segment.reassign import Segmentation
-    from tests.test_cli import script
+    from helpers import script
 
     run = tmp_path / "run"
     shutil.copytree(trained, run)

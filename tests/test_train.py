@@ -17,9 +17,9 @@ from gsseg.render_views import render_run
 from gsseg.train import TrainConfig, TrainingDiverged, train
 from gsseg.train import trainer as trainer_module
 from gsseg.train.config import LearningRates
-from gsseg.train.densify import DensifyOptions, DensifyStats, densify_and_prune
+from gsseg.train.strategy import DensifyOptions, DensifyStats, densify_and_prune
 from gsseg.train.optim import GaussianOptimizer
-from tests.render_scenes import random_gaussians
+from helpers import random_gaussians
 
 
 def _history(run):

@@ -1,8 +1,9 @@
-"""One rasterize entry point with interchangeable backends.
+"""Rendering: one entry point, :func:`render`, over interchangeable backends.
 
-``cpu``    numba kernels (default without a GPU),
-``torch``  plain PyTorch, the reference the others are tested against,
-``gsplat`` gsplat on CUDA (chosen automatically when it is installed and a GPU is present).
+``render`` evaluates the Gaussians' SH colours for the camera, has a backend
+(:mod:`gsseg.render.backends`) project and blend them with their object features, and
+composites the result over a background. The contribution pass of FlashSplat lives beside
+it (:mod:`gsseg.render.contributions`).
 """
 
 from __future__ import annotations
@@ -13,16 +14,11 @@ import numpy as np
 import torch
 
 from dataset_tools.cameras import PinholeCamera
-from dataset_tools.errors import InputError
 from gsseg.gaussians import Gaussians
-from gsseg.render.cpu_blend import blend_cpu
-from gsseg.render.gsplat_blend import gsplat_available, rasterize_gsplat
-from gsseg.render.projection import project_gaussians
-from gsseg.render.torch_blend import blend_torch
+from gsseg.render.backends import BACKENDS, Backend, get_backend
 from gsseg.sh import eval_sh
 
-BACKENDS = ("cpu", "torch", "gsplat")
-_BLENDERS = {"cpu": blend_cpu, "torch": blend_torch}
+__all__ = ["BACKENDS", "Backend", "RenderOutput", "get_backend", "render", "to_uint8"]
 
 
 @dataclass
@@ -47,22 +43,6 @@ class RenderOutput:
     radii: torch.Tensor
 
 
-def resolve_backend(name: str = "auto") -> str:
-    """``auto`` -> ``gsplat`` where it can run, else ``cpu``; other names are checked."""
-    if name == "auto":
-        return "gsplat" if gsplat_available() else "cpu"
-    if name not in BACKENDS:
-        raise InputError(f"unknown backend {name!r}; choose one of auto, {', '.join(BACKENDS)}.")
-    if name == "gsplat" and not gsplat_available():
-        raise InputError("the gsplat backend needs a CUDA GPU and `pip install gsplat`; use --backend cpu.")
-    return name
-
-
-def backend_device(backend: str) -> str:
-    """The torch device a resolved backend renders on."""
-    return "cuda" if backend == "gsplat" else "cpu"
-
-
 def to_uint8(rgb: torch.Tensor) -> np.ndarray:
     """(H, W, 3) colour in [0, 1] -> (H, W, 3) uint8 array, rounded."""
     return (rgb.detach().clamp(0, 1) * 255 + 0.5).to(torch.uint8).cpu().numpy()
@@ -76,19 +56,20 @@ def render(
     sh_degree: int = 3,
     background: torch.Tensor | None = None,
     with_features: bool = True,
-    backend: str = "cpu",
+    backend: str | Backend = "cpu",
 ) -> RenderOutput:
     """Render colour, object features, alpha and depth of ``gaussians`` in one camera.
 
     Args:
-        gaussians: the model (any dtype; float32 in training, float64 in gradient tests).
+        gaussians: the model (any dtype; float32 in training, float64 in gradient tests), on
+            the backend's device.
         camera: pinhole intrinsics and image size.
         cam_from_world: (3, 4) or (4, 4) world-to-camera transform.
         sh_degree: SH bands used for colour, 0..3.
         background: what lies behind the Gaussians, a (3,) colour or an (H, W, 3) image (e.g.
             a learned :class:`gsseg.environment.Environment`); black when None.
         with_features: also blend the 16-d object features.
-        backend: ``cpu``, ``torch`` or ``gsplat`` (see :func:`resolve_backend`).
+        backend: a :class:`Backend` or its name (see :func:`get_backend`).
 
     Returns:
         A :class:`RenderOutput`, differentiable in every Gaussian parameter.
@@ -99,23 +80,9 @@ def render(
     dirs = torch.nn.functional.normalize(g.means + (R.T @ t), dim=-1)  # centre - camera centre
     colors = eval_sh(sh_degree, g.sh, dirs)
     values = torch.cat([colors, g.obj_feat], dim=1) if with_features else colors
-
-    if backend == "gsplat":
-        image, alpha, means2d, radii = rasterize_gsplat(
-            g.means, g.quats, g.scales, g.opacities, values, cam_from_world, camera)
-    elif backend in _BLENDERS:
-        proj = project_gaussians(g.means, g.quats, g.scales, cam_from_world, camera, g.opacities)
-        means2d, radii = proj.means2d, proj.radii
-        if means2d.requires_grad:
-            means2d.retain_grad()
-        image, alpha = _BLENDERS[backend](
-            means2d, proj.conics, g.opacities, torch.cat([values, proj.depths[:, None]], dim=1),
-            proj.depths, radii, camera.width, camera.height)
-    else:
-        raise InputError(f"unknown backend {backend!r}; choose one of {', '.join(BACKENDS)}.")
-
-    rgb = image[..., :3]
+    raster = get_backend(backend).rasterize(g.means, g.quats, g.scales, g.opacities, values, cam_from_world, camera)
+    rgb = raster.image[..., :3]
     if background is not None:
-        rgb = rgb + (1 - alpha[..., None]) * background.to(rgb)
-    return RenderOutput(rgb=rgb, features=image[..., 3:-1], alpha=alpha, depth=image[..., -1],
-                        means2d=means2d, radii=radii)
+        rgb = rgb + (1 - raster.alpha[..., None]) * background.to(rgb)
+    return RenderOutput(rgb=rgb, features=raster.image[..., 3:], alpha=raster.alpha, depth=raster.depth,
+                        means2d=raster.means2d, radii=raster.radii)

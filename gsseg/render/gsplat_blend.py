@@ -12,6 +12,8 @@ import torch
 from dataset_tools.cameras import PinholeCamera
 from gsseg.render.projection import EPS_2D, TILE_SIZE
 
+GSPLAT_ALPHA_MAX = 0.999  # gsplat's clamp of one Gaussian's alpha at one pixel
+
 
 def gsplat_available() -> bool:
     """True where gsplat imports and a CUDA device is present."""

@@ -9,7 +9,7 @@ from scipy.spatial import cKDTree
 from dataset_tools.cameras import PinholeCamera
 from dataset_tools.errors import InputError
 from gsseg.gaussians import Gaussians
-from gsseg.render import render
+from gsseg.render import Backend, get_backend, render
 
 
 def object_at_point(means: np.ndarray, labels: np.ndarray, point: np.ndarray, k: int = 20) -> int:
@@ -43,12 +43,14 @@ def pick_object(means: np.ndarray, labels: np.ndarray, point: np.ndarray, k: int
 
 @torch.no_grad()
 def point_from_click(gaussians: Gaussians, camera: PinholeCamera, cam_from_world: np.ndarray,
-                     u: float, v: float, *, backend: str = "cpu") -> np.ndarray:
+                     u: float, v: float, *, backend: str | Backend = "cpu") -> np.ndarray:
     """The 3D point seen at pixel (u, v) of a view: its rendered depth (alpha-normalised) lifted
     through the camera. (3,) float64 world coordinates."""
     if not (0 <= u < camera.width and 0 <= v < camera.height):
         raise InputError(f"click ({u}, {v}) is outside the {camera.width}x{camera.height} view; click inside it.")
-    out = render(gaussians, camera, torch.as_tensor(cam_from_world, dtype=torch.float32),
+    backend = get_backend(backend)
+    out = render(gaussians.to(backend.device), camera,
+                 torch.as_tensor(cam_from_world, dtype=torch.float32, device=backend.device),
                  with_features=False, backend=backend)
     row, col = int(v), int(u)
     alpha = float(out.alpha[row, col])

@@ -20,7 +20,7 @@ import torch
 
 from dataset_tools.atomic import write_bytes_atomic
 from dataset_tools.errors import InputError
-from gsseg.segment.contributions import Contributions
+from gsseg.render.contributions import Contributions
 
 METHODS = ("prior", "flashsplat", "classifier")
 MODES = ("multi", "binary")

@@ -120,3 +120,34 @@ class TrainConfig:
         data["lr"] = LearningRates(**data.get("lr", {}))
         data.setdefault("environment_profile", False)  # runs from before the profile existed
         return cls(**data)
+
+
+@dataclass(frozen=True)
+class RunRecord:
+    """What a run's config.json holds: its options and what it was trained on.
+
+    Attributes:
+        config: the options.
+        scene: the absolute path of the scene folder it was trained on.
+        backend_used: the backend ``config.backend`` resolved to.
+        extent: 3D-GS's scene scale (1.1 x the largest camera distance from their mean).
+        near_plane: the scene's near plane, or None for runs from before it was recorded.
+        train_views: the names of the views it was trained on.
+    """
+
+    config: TrainConfig
+    scene: str
+    backend_used: str
+    extent: float
+    near_plane: float | None
+    train_views: tuple[str, ...]
+
+    def to_json(self) -> dict:
+        return {**self.config.to_json(), "scene": self.scene, "backend_used": self.backend_used,
+                "extent": self.extent, "near_plane": self.near_plane, "train_views": list(self.train_views)}
+
+    @classmethod
+    def from_json(cls, data: dict) -> RunRecord:
+        return cls(config=TrainConfig.from_json(data), scene=data["scene"], backend_used=data["backend_used"],
+                   extent=float(data["extent"]), near_plane=data.get("near_plane"),
+                   train_views=tuple(data.get("train_views", ())))

@@ -1,10 +1,18 @@
-"""The training loop: photometric + object loss, densification, checkpoints, resume."""
+"""The training loop: photometric + object loss, densification, checkpoints, resume.
+
+A run folder goes through three states: new (nothing, or a config.json without any
+checkpoint: a start that never got far, which a new start replaces), in progress
+(checkpoints) and finished (the model files). Checkpoints hold the state at the end of a
+step; Ctrl-C and SIGTERM stop after the step in progress and write one, so that
+``--resume`` continues exactly where the run stopped.
+"""
 
 from __future__ import annotations
 
 import json
 import math
 import time
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -13,20 +21,21 @@ import torch
 from tqdm import tqdm
 
 from dataset_tools.errors import InputError
+from dataset_tools.interrupts import Interrupted, stop_requests
 from dataset_tools.scene import Scene, View, load_scene
 from gsseg.environment import Environment, background_image, mean_up, profile_bins
-from gsseg.gaussians import gaussians_from_points, random_points
+from gsseg.gaussians import gaussians_from_points, make_classifier, random_points
 from gsseg.ply import write_ply
-from gsseg.render import RenderOutput, backend_device, render, resolve_backend
-from gsseg.run_folder import (CHECKPOINTS, CLASSIFIER, CONFIG, ENVIRONMENT, GAUSSIANS, METRICS, make_classifier,
-                              write_json, write_torch)
-from gsseg.train.config import TrainConfig
-from gsseg.train.densify import DensifyOptions, DensifyStats, densify_and_prune
+from gsseg.render import Backend, RenderOutput, get_backend, render
+from gsseg.run_folder import RunFolder, write_json, write_torch
+from gsseg.train.config import RunRecord, TrainConfig
 from gsseg.train.losses import object_loss, photometric_loss, psnr
 from gsseg.train.optim import GaussianOptimizer
+from gsseg.train.strategy import DensifyOptions, DensifyStrategy
 from gsseg.train.views import TrainView, camera_extent, load_views
 
 LOG_EVERY = 10
+KEEP_CHECKPOINTS = 2
 
 
 class TrainingDiverged(InputError):
@@ -40,6 +49,35 @@ class TrainResult:
     num_gaussians: int
     seconds: float
     finished: bool
+
+
+@dataclass
+class _State:
+    """Everything a checkpoint holds: the step reached and what was learned up to it."""
+
+    step: int
+    gaussians: GaussianOptimizer
+    classifier: torch.nn.Linear
+    environment: Environment | None
+    small_adam: torch.optim.Adam  # the classifier's and the environment's parameters
+    strategy: DensifyStrategy
+    history: list[dict]
+
+    def state_dict(self) -> dict:
+        return {"step": self.step, "gaussians": self.gaussians.state_dict(),
+                "classifier": self.classifier.state_dict(),
+                "environment": self.environment.state_dict() if self.environment is not None else None,
+                "classifier_adam": self.small_adam.state_dict(), "densify": self.strategy.state_dict(),
+                "history": self.history}
+
+    def load_state_dict(self, ckpt: dict) -> None:
+        self.gaussians.load_state_dict(ckpt["gaussians"])
+        self.classifier.load_state_dict(ckpt["classifier"])
+        if self.environment is not None:
+            self.environment.load_state_dict(ckpt["environment"])
+        self.small_adam.load_state_dict(ckpt["classifier_adam"])
+        self.strategy.load_state_dict(ckpt["densify"])
+        self.history, self.step = ckpt["history"], ckpt["step"]
 
 
 def _view_at(step: int, n_views: int, seed: int) -> int:
@@ -65,25 +103,119 @@ def _initial_gaussians(scene: Scene, cfg: TrainConfig):
     return gaussians_from_points(xyz, rgb, initial_opacity=cfg.initial_opacity, seed=cfg.seed)
 
 
-def _latest_checkpoint(run: Path) -> Path | None:
-    found = sorted((run / CHECKPOINTS).glob("step_*.pt"))
-    return found[-1] if found else None
+def _environment(cfg: TrainConfig, views: list[View]) -> Environment | None:
+    """The untrained background of ``cfg``: None (black), SH only, or SH plus an elevation
+    profile about the cameras' mean up with bins a pixel apart at the finest camera."""
+    if cfg.environment_degree is None:
+        return None
+    if not cfg.environment_profile:
+        return Environment(cfg.environment_degree)
+    return Environment(cfg.environment_degree, up=mean_up([v.cam_from_world for v in views]),
+                       bins=profile_bins(max(max(v.camera.fx, v.camera.fy) for v in views)))
 
 
-def _prepare_run_folder(run: Path, cfg: TrainConfig, resume: bool) -> TrainConfig:
-    """Check the folder and return the config to use: the saved one when resuming (with
-    ``iters`` taken from ``cfg`` if it changes)."""
-    config_path = run / CONFIG
+def _settled_config(folder: RunFolder, cfg: TrainConfig, resume: bool) -> tuple[TrainConfig, bool]:
+    """The config to train with and whether to resume: the saved one when resuming (with
+    ``iters`` taken from ``cfg`` if it changes). A folder whose start never reached a
+    checkpoint is started afresh either way."""
+    started = folder.config.is_file()
+    has_checkpoint = bool(folder.checkpoint_files())
     if resume:
-        if not config_path.is_file() or _latest_checkpoint(run) is None:
-            raise InputError(f"{run} holds no checkpoint to resume; start it without --resume.")
-        saved = TrainConfig.from_json(json.loads(config_path.read_text()))
-        return saved if cfg.iters in (None, saved.iters) else TrainConfig.from_json(
-            {**saved.to_json(), "iters": cfg.iters})
-    if config_path.exists():
-        raise InputError(f"{run} already holds a run; continue it with --resume or choose another --out.")
-    run.mkdir(parents=True, exist_ok=True)
-    return cfg
+        if not started:
+            raise InputError(f"{folder.root} holds no run to resume; start it without --resume.")
+        saved = TrainConfig.from_json(json.loads(folder.config.read_text()))
+        if cfg.iters not in (None, saved.iters):
+            saved = TrainConfig.from_json({**saved.to_json(), "iters": cfg.iters})
+        return saved, has_checkpoint
+    if started and (has_checkpoint or folder.finished):
+        raise InputError(f"{folder.root} already holds a run; continue it with --resume or choose another --out.")
+    return cfg, False
+
+
+def _latest_good_checkpoint(folder: RunFolder, device: str) -> dict:
+    """The newest checkpoint that loads; a damaged newest one falls back to the one before."""
+    candidates = folder.checkpoint_files()[::-1]
+    for k, path in enumerate(candidates):
+        try:
+            ckpt = torch.load(path, map_location=device, weights_only=True)
+        except Exception as e:  # a truncated or foreign file: torch raises several types
+            if k + 1 < len(candidates):
+                warnings.warn(f"{path}: damaged checkpoint ({type(e).__name__}); resuming from {candidates[k + 1].name}.",
+                              stacklevel=2)
+                continue
+            raise InputError(f"{path}: damaged checkpoint and none older to fall back on; start the run again "
+                             "in a new --out.") from None
+        return ckpt
+    raise InputError(f"{folder.root} holds no checkpoint to resume; start it without --resume.")
+
+
+def _new_state(scene: Scene, cfg: TrainConfig, train_views: list[View], extent: float, device: str) -> _State:
+    timing = cfg.timing
+    torch.manual_seed(cfg.seed)
+    gaussians = GaussianOptimizer(_initial_gaussians(scene, cfg).to(device), cfg.lr, extent)
+    classifier = make_classifier(cfg.num_classes).to(device)
+    environment = _environment(cfg, train_views)
+    environment = environment.to(device) if environment is not None else None
+    groups = [{"params": list(classifier.parameters()), "lr": cfg.lr.classifier}]
+    if environment is not None:
+        groups.append({"params": list(environment.parameters()), "lr": cfg.lr.environment})
+    strategy = DensifyStrategy(timing, DensifyOptions(cfg.densify_grad_threshold, cfg.percent_dense,
+                                                      cfg.prune_opacity, extent, timing.max_gaussians), cfg.seed)
+    strategy.start(len(gaussians), device)
+    return _State(0, gaussians, classifier, environment, torch.optim.Adam(groups, eps=1e-15), strategy, [])
+
+
+def _save_checkpoint(folder: RunFolder, state: _State) -> Path:
+    path = folder.checkpoint(state.step)
+    write_torch(path, state.state_dict())
+    for old in folder.checkpoint_files()[:-KEEP_CHECKPOINTS]:
+        old.unlink()
+    return path
+
+
+def _export(folder: RunFolder, state: _State) -> None:
+    """Write the finished model: gaussians.ply, classifier.pt, environment.pt, metrics.json."""
+    write_ply(state.gaussians.gaussians.detach().to("cpu"), folder.gaussians)
+    write_torch(folder.classifier, {k: v.cpu() for k, v in state.classifier.state_dict().items()})
+    if state.environment is not None:
+        write_torch(folder.environment, {k: v.cpu() for k, v in state.environment.state_dict().items()})
+    write_json(folder.metrics, {"train": {"steps": state.step, "gaussians": len(state.gaussians),
+                                          "history": state.history}})
+
+
+def _train_step(state: _State, view: TrainView, cfg: TrainConfig, backend: Backend, step: int) -> dict:
+    """Train ``step`` on ``view``: render, loss, backward, densification statistics, optimiser
+    steps and densification. Returns the loss terms; the state is unchanged if the loss is not
+    finite."""
+    timing = cfg.timing
+    state.gaussians.set_lr("means", _means_lr(step, cfg, timing.iters, state.strategy.options.extent))
+    generator = torch.Generator(backend.device).manual_seed(cfg.seed * 7919 + step)
+    losses, out = _loss_and_backward(state, view, cfg, backend, min(cfg.sh_degree, step // timing.sh_increase_every),
+                                     timing.object_loss_pixels, generator)
+    if not math.isfinite(losses["loss"]):
+        return losses
+    state.strategy.after_backward(step, out, view.camera.width, view.camera.height)
+    state.gaussians.step()
+    state.small_adam.step()
+    state.small_adam.zero_grad(set_to_none=True)
+    state.strategy.after_step(step, state.gaussians)
+    return losses
+
+
+def _loss_and_backward(state: _State, view: TrainView, cfg: TrainConfig, backend: Backend, sh_degree: int,
+                       obj_pixels: int, generator: torch.Generator) -> tuple[dict, RenderOutput]:
+    """Render one view, compute the loss and back-propagate it (unless it is not finite)."""
+    use_mask = view.mask is not None and cfg.gamma_obj != 0
+    out = render(state.gaussians.gaussians, view.camera, view.cam_from_world, sh_degree=sh_degree,
+                 background=background_image(state.environment, view.camera, view.cam_from_world),
+                 with_features=use_mask, backend=backend)
+    rgb_loss = photometric_loss(out.rgb, view.image, cfg.lambda_dssim)
+    obj = (object_loss(out.features, view.mask, state.classifier, obj_pixels, generator) if use_mask
+           else torch.zeros((), device=rgb_loss.device))
+    loss = rgb_loss + cfg.gamma_obj * obj
+    if torch.isfinite(loss):
+        loss.backward()
+    return {"loss": loss.item(), "rgb": rgb_loss.item(), "obj": obj.item(), "psnr": psnr(out.rgb, view.image)}, out
 
 
 def train(scene_dir: Path | str, run: Path | str, cfg: TrainConfig, *, resume: bool = False,
@@ -100,129 +232,55 @@ def train(scene_dir: Path | str, run: Path | str, cfg: TrainConfig, *, resume: b
 
     Raises:
         TrainingDiverged: the loss became NaN or infinite; the last good checkpoint is kept.
+        Interrupted: Ctrl-C or SIGTERM; a checkpoint of the last finished step was written.
     """
-    run = Path(run)
-    cfg = _prepare_run_folder(run, cfg, resume)
+    folder = RunFolder(run)
+    if stop_after is not None and stop_after < 1:
+        raise InputError(f"--stop-after {stop_after}: give a step of 1 or more.")
+    with folder.lock():
+        cfg, restore = _settled_config(folder, cfg, resume)
+        backend = get_backend(cfg.backend)
+        scene = load_scene(scene_dir, images=cfg.images, masks=cfg.masks)
+        train_views = scene.split("train") or scene.views
+        extent = camera_extent(scene.views)
+        views = load_views(train_views, progress=progress, device=backend.device)
+        write_json(folder.config, RunRecord(cfg, str(Path(scene_dir).resolve()), backend.name, extent,
+                                            scene.views[0].camera.near, tuple(v.name for v in views)).to_json())
+        state = _new_state(scene, cfg, train_views, extent, backend.device)
+        if restore:
+            state.load_state_dict(_latest_good_checkpoint(folder, backend.device))
+        return _loop(folder, state, views, cfg, backend, stop_after, progress)
+
+
+def _loop(folder: RunFolder, state: _State, views: list[TrainView], cfg: TrainConfig, backend: Backend,
+          stop_after: int | None, progress: bool) -> TrainResult:
     timing = cfg.timing
-    backend = resolve_backend(cfg.backend)
-    device = backend_device(backend)
-    scene = load_scene(scene_dir, images=cfg.images, masks=cfg.masks)
-    train_views = scene.split("train") or scene.views
-    extent = camera_extent(scene.views)
-    views = load_views(train_views, progress=progress, device=device)
-    write_json(run / CONFIG, {**cfg.to_json(), "scene": str(Path(scene_dir).resolve()), "backend_used": backend,
-                              "extent": extent, "near_plane": scene.views[0].camera.near,
-                              "train_views": [v.name for v in views]})
-
-    torch.manual_seed(cfg.seed)
-    opt = GaussianOptimizer(_initial_gaussians(scene, cfg).to(device), cfg.lr, extent)
-    classifier = make_classifier(cfg.num_classes).to(device)
-    environment = _environment(cfg, train_views)
-    environment = environment.to(device) if environment is not None else None
-    # The classifier and the environment: small modules beside the Gaussians, one Adam.
-    groups = [{"params": list(classifier.parameters()), "lr": cfg.lr.classifier}]
-    if environment is not None:
-        groups.append({"params": list(environment.parameters()), "lr": cfg.lr.environment})
-    cls_opt = torch.optim.Adam(groups, eps=1e-15)
-    stats = DensifyStats.zeros(len(opt), device)
-    history: list[dict] = []
-    step = 0
-    if resume:
-        ckpt = torch.load(_latest_checkpoint(run), map_location=device, weights_only=False)
-        opt.load_state_dict(ckpt["gaussians"])
-        classifier.load_state_dict(ckpt["classifier"])
-        if environment is not None:
-            environment.load_state_dict(ckpt["environment"])
-        cls_opt.load_state_dict(ckpt["classifier_adam"])
-        stats = DensifyStats(**ckpt["densify"])
-        history, step = ckpt["history"], ckpt["step"]
-
-    def save_checkpoint() -> None:
-        write_torch(run / CHECKPOINTS / f"step_{step:07d}.pt", {
-            "step": step, "gaussians": opt.state_dict(), "classifier": classifier.state_dict(),
-            "environment": environment.state_dict() if environment is not None else None,
-            "classifier_adam": cls_opt.state_dict(), "densify": vars(stats), "history": history})
-        for old in sorted((run / CHECKPOINTS).glob("step_*.pt"))[:-2]:
-            old.unlink()
-
-    densify = DensifyOptions(cfg.densify_grad_threshold, cfg.percent_dense, cfg.prune_opacity, extent,
-                             timing.max_gaussians)
     last = min(timing.iters, stop_after) if stop_after is not None else timing.iters
     start_time = time.perf_counter()
-    bar = tqdm(total=timing.iters, initial=step, desc="training", unit="it", disable=not progress,
-               dynamic_ncols=True)
-    try:
-        while step < last:
-            step += 1
-            opt.set_lr("means", _means_lr(step, cfg, timing.iters, extent))
-            view = views[_view_at(step, len(views), cfg.seed)]
-            losses, out = _train_step(opt, classifier, environment, view, cfg, backend,
-                                      sh_degree=min(cfg.sh_degree, step // timing.sh_increase_every),
-                                      obj_pixels=timing.object_loss_pixels,
-                                      generator=torch.Generator(device).manual_seed(cfg.seed * 7919 + step))
+    with stop_requests() as stop, tqdm(total=timing.iters, initial=state.step, desc="training", unit="it",
+                                       disable=not progress, dynamic_ncols=True) as bar:
+        while state.step < last:
+            step = state.step + 1
+            losses = _train_step(state, views[_view_at(step, len(views), cfg.seed)], cfg, backend, step)
             if not math.isfinite(losses["loss"]):
-                kept = _latest_checkpoint(run)
+                kept = folder.checkpoint_files()
                 raise TrainingDiverged(
                     f"training diverged at step {step} (loss {losses['loss']}); "
-                    + (f"the last good checkpoint is {kept}; " if kept else "no checkpoint was written yet; ")
+                    + (f"the last good checkpoint is {kept[-1]}; " if kept else "no checkpoint was written yet; ")
                     + "lower the learning rates and --resume, or start again.")
-            if step < timing.densify_until and out.means2d.grad is not None:
-                with torch.no_grad():
-                    stats.update(out.means2d.grad, out.radii, view.camera.width, view.camera.height)
-            opt.step()
-            cls_opt.step()
-            cls_opt.zero_grad(set_to_none=True)
-            if timing.densify_from < step < timing.densify_until and step % timing.densify_every == 0:
-                gen = torch.Generator(device).manual_seed(cfg.seed * 1_000_003 + step)
-                densify_and_prune(opt, stats, densify, step > timing.opacity_reset_every, gen)
-            if step < timing.densify_until and step % timing.opacity_reset_every == 0:
-                opacities = torch.clamp_max(opt.gaussians.opacities.detach(), 0.01)
-                opt.reset("opacity_logits", torch.logit(opacities))
+            state.step = step
             if step % LOG_EVERY == 0 or step == timing.iters:
-                history.append({"step": step, **losses, "gaussians": len(opt)})
-                bar.set_postfix(loss=f"{losses['loss']:.4f}", psnr=f"{losses['psnr']:.2f}", n=len(opt))
+                state.history.append({"step": step, **losses, "gaussians": len(state.gaussians)})
+                bar.set_postfix(loss=f"{losses['loss']:.4f}", psnr=f"{losses['psnr']:.2f}", n=len(state.gaussians))
             bar.update(1)
-            if step % timing.checkpoint_every == 0 or step == last:
-                save_checkpoint()
-    except KeyboardInterrupt:
-        bar.close()
-        save_checkpoint()
-        raise
-    bar.close()
-    finished = step >= timing.iters
+            if step % timing.checkpoint_every == 0 or step == last or stop.requested:
+                path = _save_checkpoint(folder, state)
+            if stop.requested and step < last:
+                bar.close()
+                raise Interrupted(f"{stop.signal_name} at step {step} of {timing.iters}: checkpoint {path} written; "
+                                  f"continue with `gsseg train SCENE --out {folder.root} --resume`.")
+    finished = state.step >= timing.iters
     if finished:
-        write_ply(opt.gaussians.detach().to("cpu"), run / GAUSSIANS)
-        write_torch(run / CLASSIFIER, {k: v.cpu() for k, v in classifier.state_dict().items()})
-        if environment is not None:
-            write_torch(run / ENVIRONMENT, {k: v.cpu() for k, v in environment.state_dict().items()})
-        write_json(run / METRICS, {"train": {"steps": step, "gaussians": len(opt), "history": history}})
-    return TrainResult(run=run, step=step, num_gaussians=len(opt),
+        _export(folder, state)
+    return TrainResult(run=folder.root, step=state.step, num_gaussians=len(state.gaussians),
                        seconds=time.perf_counter() - start_time, finished=finished)
-
-
-def _environment(cfg: TrainConfig, views: list[View]) -> Environment | None:
-    """The untrained background of ``cfg``: None (black), SH only, or SH plus an elevation
-    profile about the cameras' mean up with bins a pixel apart at the finest camera."""
-    if cfg.environment_degree is None:
-        return None
-    if not cfg.environment_profile:
-        return Environment(cfg.environment_degree)
-    return Environment(cfg.environment_degree, up=mean_up([v.cam_from_world for v in views]),
-                       bins=profile_bins(max(max(v.camera.fx, v.camera.fy) for v in views)))
-
-
-def _train_step(opt: GaussianOptimizer, classifier: torch.nn.Linear, environment: Environment | None,
-                view: TrainView, cfg: TrainConfig, backend: str, sh_degree: int, obj_pixels: int = 0,
-                generator: torch.Generator | None = None) -> tuple[dict, RenderOutput]:
-    """Render one view, compute the loss and back-propagate it (unless it is not finite).
-    Returns the loss terms and the render."""
-    use_mask = view.mask is not None and cfg.gamma_obj != 0
-    out = render(opt.gaussians, view.camera, view.cam_from_world, sh_degree=sh_degree,
-                 background=background_image(environment, view.camera, view.cam_from_world),
-                 with_features=use_mask, backend=backend)
-    rgb_loss = photometric_loss(out.rgb, view.image, cfg.lambda_dssim)
-    obj = object_loss(out.features, view.mask, classifier, obj_pixels, generator) if use_mask else torch.zeros((), device=rgb_loss.device)
-    loss = rgb_loss + cfg.gamma_obj * obj
-    if torch.isfinite(loss):
-        loss.backward()
-    return {"loss": loss.item(), "rgb": rgb_loss.item(), "obj": obj.item(), "psnr": psnr(out.rgb, view.image)}, out

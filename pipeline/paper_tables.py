@@ -37,24 +37,18 @@ import numpy as np
 from tqdm import tqdm
 
 from dataset_tools.atomic import write_bytes_atomic
-from dataset_tools.corrupt import corrupt_scene
-from dataset_tools.image_files import write_downsampled
-from dataset_tools.label_maps import consistent_fraction
-from dataset_tools.scene import load_scene
-from dataset_tools.synth import SynthConfig, generate_scene
-from eval.evaluate import evaluate
-from eval.metrics import matched_miou
 from eval.report import markdown_table
-from gsseg.render import resolve_backend
-from gsseg.run_folder import GAUSSIANS, load_run
-from gsseg.segment.segment_run import segment_run
-from gsseg.train import TrainConfig, train
-from hqmask.build import BuildConfig, build_masks, clean_scene_masks
+from gsseg.render import Backend, get_backend
+from gsseg.train import TrainConfig
+from hqmask.build import clean_scene_masks
+from pipeline.experiment import (SceneSpec, associate_masks, corrupt_masks, mask_scores, segmentation_scores,
+                                 synthetic_scene, train_run)
 
 TRAINING_MASKS = ("exact", "coarse", "noisy", "hqmask")
 MASK_FOLDERS = {"exact": "object_mask", "coarse": "coarse_hqmask", "noisy": "noisy", "hqmask": "noisy_hqmask"}
 METHODS = (("flashsplat", 0.0), ("classifier", 0.0), ("prior", 0.2))
 GAMMAS = (-1.0, 0.0, 0.2, 1.0)
+MASK_SCORES = ("noisy", "noisy_cleaned", "noisy_hqmask", "coarse", "coarse_hqmask")  # Table 2's rows
 
 
 @dataclass(frozen=True)
@@ -90,79 +84,48 @@ SETUPS = {
 def _prepare_scene(root: Path, path: str, seed: int, setup: TableSetup) -> Path:
     """The synthetic scene with every mask folder of :data:`MASK_FOLDERS` (and the
     noise-removal-only masks), made once and reused."""
-    scene = root / "scene"
-    if not (scene / "noisy_hqmask").is_dir():
-        cfg = SynthConfig(views=setup.views, res=setup.res, objects=setup.objects, path=path, seed=seed)
-        generate_scene(cfg, scene, overwrite=True, progress=False)
-        if setup.images != "images":
-            write_downsampled(scene / "images", scene / setup.images, int(setup.images.rsplit("_", 1)[1]))
-        corrupt_scene(scene, "coarse", "low", coarse=True, seed=seed, overwrite=True, progress=False)
-        corrupt_scene(scene, "noisy", setup.severity, seed=seed, overwrite=True, progress=False)
-        clean_scene_masks(scene, "noisy", "noisy_cleaned", min_area=setup.min_area, force=True, progress=False)
-        for src in ("coarse", "noisy"):
-            build_masks(scene, BuildConfig(proposer="existing", from_masks=src, associate="tracks",
-                                           min_area=setup.min_area, out_masks=f"{src}_hqmask", force=True),
-                        progress=False)
+    factor = () if setup.images == "images" else (int(setup.images.rsplit("_", 1)[1]),)
+    spec = SceneSpec(path=path, seed=seed, res=setup.res, views=setup.views, objects=setup.objects)
+    scene = synthetic_scene(root / "scene", spec, downsample=factor)
+    corrupt_masks(scene, "coarse", severity="low", coarse=True, seed=seed)
+    corrupt_masks(scene, "noisy", severity=setup.severity, seed=seed)
+    if not (scene / "noisy_cleaned").is_dir():
+        clean_scene_masks(scene, "noisy", "noisy_cleaned", min_area=setup.min_area, progress=False)
+    for src in ("coarse", "noisy"):
+        associate_masks(scene, src, f"{src}_hqmask", associate="tracks", min_area=setup.min_area)
     return scene
 
 
-def _train_once(scene: Path, run: Path, masks: str, setup: TableSetup, backend: str) -> float | None:
-    """Train on ``masks`` unless ``run`` is finished already (resuming one that was
-    interrupted). Returns the seconds spent, None when the run was reused."""
-    if (run / GAUSSIANS).is_file():
-        return None
-    start = time.perf_counter()
-    train(scene, run, TrainConfig(iters=setup.iters, images=setup.images, masks=masks, backend=backend,
-                                  max_gaussians=setup.max_gaussians),
-          resume=(run / "checkpoints").is_dir(), progress=False)
-    return time.perf_counter() - start
+def _train(scene: Path, run: Path, masks: str, setup: TableSetup, backend: Backend) -> float | None:
+    return train_run(scene, run, TrainConfig(iters=setup.iters, images=setup.images, masks=masks,
+                                             backend=backend.name, max_gaussians=setup.max_gaussians))
 
 
-def _mask_scores(scene: Path) -> dict[str, dict[str, float]]:
-    """Table 2: each mask kind against the exact masks."""
-    truth = [v.load_mask() for v in load_scene(scene).views]
-    out = {}
-    for name in ("noisy", "noisy_cleaned", "noisy_hqmask", "coarse", "coarse_hqmask"):
-        masks = [v.load_mask() for v in load_scene(scene, masks=name).views]
-        out[name] = {"consistency": consistent_fraction(masks, truth), "miou": matched_miou(masks, truth)}
-    return out
-
-
-def _segment_and_score(run: Path, scene: Path, setup: TableSetup, masks: str, method: str, gamma_p: float,
-                       backend: str) -> dict:
-    segmentation = segment_run(run, scene, method=method, gamma_p=gamma_p, masks=masks, backend=backend,
-                               progress=False)
-    views = load_scene(scene, images=setup.images).split("test")
-    evaluation, _ = evaluate(load_run(run), segmentation, views, with_truth=True, scene=str(scene), split="test",
-                             backend=backend, progress=False)
-    return evaluation.summary()
-
-
-def scene_tables(root: Path, path: str, seed: int, setup: TableSetup, backend: str, bar: tqdm) -> dict:
+def scene_tables(root: Path, path: str, seed: int, setup: TableSetup, backend: Backend, bar: tqdm) -> dict:
     """Every number of one scene; each step advances ``bar``."""
     bar.set_postfix_str(f"{path}-{seed}: scene and masks")
     scene = _prepare_scene(root, path, seed, setup)
     bar.update(1)
-    result: dict = {"masks": _mask_scores(scene), "training": {}, "methods": {}, "gamma_p": {}}
+    masks = {name: mask_scores(scene, name) for name in MASK_SCORES}
+    result: dict = {"masks": masks, "training": {}, "methods": {}, "gamma_p": {}}
     for kind in TRAINING_MASKS:
         bar.set_postfix_str(f"{path}-{seed}: training on {kind} masks")
         run = root / f"run_{kind}"
-        seconds = _train_once(scene, run, MASK_FOLDERS[kind], setup, backend)
+        seconds = _train(scene, run, MASK_FOLDERS[kind], setup, backend)
         # The pipeline segments with the masks it trained on; `noisy` ones cannot be voted
         # with (their IDs differ per view), so that run is segmented by its classifier alone.
         method = ("classifier", 0.0) if kind == "noisy" else ("prior", 0.2)
-        summary = _segment_and_score(run, scene, setup, MASK_FOLDERS[kind], *method, backend)
+        summary, = segmentation_scores(run, scene, MASK_FOLDERS[kind], [method], backend=backend)
         result["training"][kind] = {"psnr": summary["psnr"], "ssim": summary["ssim"],
                                     "miou": summary["visible"]["miou"], "method": method[0],
                                     "train_seconds": seconds}
         bar.update(1)
     bar.set_postfix_str(f"{path}-{seed}: reassignment methods")
-    run = root / "run_hqmask"
-    for method, gamma_p in METHODS:
-        s = _segment_and_score(run, scene, setup, MASK_FOLDERS["hqmask"], method, gamma_p, backend)
+    settings = list(METHODS) + [("prior", g) for g in GAMMAS]
+    summaries = segmentation_scores(root / "run_hqmask", scene, MASK_FOLDERS["hqmask"], settings, backend=backend)
+    for (method, _), s in zip(METHODS, summaries):
         result["methods"][method] = {p: s[p] for p in ("visible", "extracted")}
-    for gamma_p in GAMMAS:
-        s = _segment_and_score(run, scene, setup, MASK_FOLDERS["hqmask"], "prior", gamma_p, backend)
+    for gamma_p, s in zip(GAMMAS, summaries[len(METHODS):]):
         result["gamma_p"][f"{gamma_p:g}"] = {p: s[p] for p in ("visible", "extracted")}
     bar.update(1)
     return result
@@ -221,13 +184,13 @@ def render_tables(scenes: dict[str, dict], setup: TableSetup) -> str:
     return "\n\n".join(parts) + "\n"
 
 
-def paper_tables(out: Path | str, *, setup: TableSetup = SETUPS["full"], backend: str = "auto",
+def paper_tables(out: Path | str, *, setup: TableSetup = SETUPS["full"], backend: str | Backend = "auto",
                  progress: bool = True) -> Path:
     """Run the tables' experiments on ``setup`` (one of :data:`SETUPS` or your own), reusing
     finished work in ``out/work``, and write ``out/paper_tables.md`` and
     ``out/paper_tables.json``. Returns the markdown path."""
     out = Path(out)
-    backend = resolve_backend(backend)
+    backend = get_backend(backend)
     steps_per_scene = 2 + len(TRAINING_MASKS)
     start = time.perf_counter()
     scenes = {}
@@ -238,7 +201,7 @@ def paper_tables(out: Path | str, *, setup: TableSetup = SETUPS["full"], backend
             scenes[name] = scene_tables(out / "work" / name, path, seed, setup, backend, bar)
     markdown = "## Paper tables\n\n" + render_tables(scenes, setup)
     write_bytes_atomic(out / "paper_tables.md", markdown.encode())
-    data = {"setup": {**asdict(setup), "backend": backend},
+    data = {"setup": {**asdict(setup), "backend": backend.name},
             "seconds": time.perf_counter() - start, "scenes": scenes}
     write_bytes_atomic(out / "paper_tables.json", (json.dumps(data, indent=2) + "\n").encode())
     return out / "paper_tables.md"

@@ -1,14 +1,18 @@
-"""Adaptive density control of 3D-GS: clone small Gaussians and split large ones where the
-view-space positional gradient is high; prune transparent and oversized ones."""
+"""Adaptive density control of 3D-GS as a strategy beside the trainer (as gsplat's
+``DefaultStrategy``): between steps it gathers the view-space positional gradient of every
+Gaussian; on its schedule it clones small Gaussians and splits large ones where that
+gradient is high, prunes transparent and oversized ones, and resets the opacities."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import torch
 
 from gsseg.gaussians import Gaussians
+from gsseg.render import RenderOutput
 from gsseg.render.projection import quat_to_rotmat
+from gsseg.train.config import Schedule
 from gsseg.train.optim import GaussianOptimizer
 
 
@@ -37,6 +41,9 @@ class DensifyStats:
 
 @dataclass(frozen=True)
 class DensifyOptions:
+    """The thresholds of 3D-GS: positional gradient, the size (share of ``extent``) that tells
+    a clone from a split, the opacity under which a Gaussian is pruned, and the cap."""
+
     grad_threshold: float
     percent_dense: float
     prune_opacity: float
@@ -83,3 +90,43 @@ def densify_and_prune(opt: GaussianOptimizer, stats: DensifyStats, options: Dens
     opt.keep(~prune)
     fresh = DensifyStats.zeros(len(opt), stats.count.device)
     stats.grad_sum, stats.count, stats.max_radii = fresh.grad_sum, fresh.count, fresh.max_radii
+
+
+@dataclass
+class DensifyStrategy:
+    """When densification, pruning and opacity resets happen, and the statistics they use.
+
+    The trainer calls :meth:`after_backward` once the loss of a step has been
+    back-propagated and :meth:`after_step` once the optimisers have stepped.
+    """
+
+    schedule: Schedule
+    options: DensifyOptions
+    seed: int
+    stats: DensifyStats = field(default=None)  # type: ignore[assignment]
+
+    def start(self, n: int, device: torch.device | str) -> None:
+        """Empty statistics for ``n`` Gaussians."""
+        self.stats = DensifyStats.zeros(n, device)
+
+    def after_backward(self, step: int, out: RenderOutput, width: int, height: int) -> None:
+        """Gather the statistics of the view just rendered at ``step``."""
+        if step < self.schedule.densify_until and out.means2d.grad is not None:
+            with torch.no_grad():
+                self.stats.update(out.means2d.grad, out.radii, width, height)
+
+    def after_step(self, step: int, opt: GaussianOptimizer) -> None:
+        """Densify and prune, then reset opacities, when ``step`` is due."""
+        s = self.schedule
+        if s.densify_from < step < s.densify_until and step % s.densify_every == 0:
+            gen = torch.Generator(self.stats.count.device).manual_seed(self.seed * 1_000_003 + step)
+            densify_and_prune(opt, self.stats, self.options, step > s.opacity_reset_every, gen)
+        if step < s.densify_until and step % s.opacity_reset_every == 0:
+            opacities = torch.clamp_max(opt.gaussians.opacities.detach(), 0.01)
+            opt.reset("opacity_logits", torch.logit(opacities))
+
+    def state_dict(self) -> dict:
+        return {"grad_sum": self.stats.grad_sum, "count": self.stats.count, "max_radii": self.stats.max_radii}
+
+    def load_state_dict(self, state: dict) -> None:
+        self.stats = DensifyStats(state["grad_sum"], state["count"], state["max_radii"])

@@ -1,12 +1,26 @@
-"""Small random Gaussian scenes for the renderer tests."""
+"""What several test modules share: command-line runners and small random Gaussian scenes."""
 
 from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import torch
 
 from dataset_tools.cameras import PinholeCamera
 from gsseg.gaussians import Gaussians
+
+
+def run(*args: str, **kwargs) -> subprocess.CompletedProcess:
+    """Run a command, capturing its text output."""
+    return subprocess.run(args, capture_output=True, text=True, **kwargs)
+
+
+def script(name: str) -> str:
+    """A console script installed beside this interpreter (works without an activated venv)."""
+    return str(Path(sys.executable).parent / name)
 
 
 def random_gaussians(n: int, seed: int, dtype: torch.dtype = torch.float32,

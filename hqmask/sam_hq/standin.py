@@ -1,5 +1,7 @@
-"""A stand-in for SAM-HQ with the official input/output names, shapes and dtypes, for plumbing
-tests and the runtime benchmark. It is not a segmentation model.
+"""A stand-in for SAM-HQ with the official input/output names, shapes and dtypes: a model
+folder that exercises the whole ONNX runtime (``SamHQ``, the automatic generator,
+``hqmask build --proposer sam-hq``) where the real checkpoints are not at hand, for the
+plumbing tests and the runtime benchmark. It is not a segmentation model.
 
 Encoder: the mean normalised colour of each 16x16 patch, mapped isometrically to 256
 channels (image_embeddings), and four linear maps of it as the "early ViT features"
@@ -26,7 +28,7 @@ from hqmask.sam_hq.model import ModelInfo
 IMAGE_SIZE, GRID, K, C = 1024, 64, 4, 32
 
 
-class PlumbingEncoder(nn.Module):
+class StandinEncoder(nn.Module):
     def __init__(self):
         super().__init__()
         g = torch.Generator().manual_seed(0)
@@ -43,7 +45,7 @@ class PlumbingEncoder(nn.Module):
         return embeddings, interm
 
 
-class PlumbingDecoder(nn.Module):
+class StandinDecoder(nn.Module):
     def __init__(self, radius: float = 0.5, sharpness: float = 100.0):
         super().__init__()
         self.radius, self.sharpness = radius, sharpness
@@ -70,7 +72,7 @@ class PlumbingDecoder(nn.Module):
         return masks, iou, low_res
 
 
-def export_plumbing_model(out_dir: Path) -> Path:
+def export_standin_model(out_dir: Path) -> Path:
     """Write the stand-in model folder (encoder.onnx, decoder.onnx, model.json) to ``out_dir``."""
-    info = ModelInfo(model_type="plumbing", image_size=IMAGE_SIZE)
-    return export_modules(PlumbingEncoder(), PlumbingDecoder(), info, out_dir)
+    info = ModelInfo(model_type="standin", image_size=IMAGE_SIZE)
+    return export_modules(StandinEncoder(), StandinDecoder(), info, out_dir)

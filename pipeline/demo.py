@@ -25,11 +25,11 @@ import torch
 
 from dataset_tools.errors import InputError
 from dataset_tools.image_files import write_downsampled
-from dataset_tools.scene import load_scene
 from dataset_tools.synth import SynthConfig, generate_scene
+from eval.report import report_run
 from gsseg.edits import edit_run
-from gsseg.render import resolve_backend
-from gsseg.run_folder import Run, load_run
+from gsseg.render import Backend, get_backend
+from gsseg.run import Run, load_run
 from gsseg.segment.prompts import pick_object, point_from_click
 from gsseg.segment.segment_run import segment_run
 from gsseg.train import TrainConfig, train
@@ -54,25 +54,23 @@ class DemoResult:
     seconds: float
 
 
-def _prompt_point(scene_dir: Path, run: Run, synth_point: np.ndarray | None, backend: str) -> np.ndarray:
+def _prompt_point(scene_dir: Path, run: Run, synth_point: np.ndarray | None, backend: Backend) -> np.ndarray:
     if synth_point is not None:
         return synth_point
-    view = load_scene(scene_dir, images=run.config.get("images", "images"), masks=None).split("test")[0]
+    view = run.scene(scene_dir).split("test")[0]
     return point_from_click(run.gaussians, view.camera, view.cam_from_world, view.camera.width / 2,
-                            view.camera.height / 2, backend="cpu" if backend == "gsplat" else backend)
+                            view.camera.height / 2, backend=backend)
 
 
 def run_demo(out: Path | str, *, scene: Path | str | None = None, images: str = "images", iters: int = DEMO_ITERS,
              max_gaussians: int = DEMO_MAX_GAUSSIANS, backend: str = "auto", overwrite: bool = False,
              progress: bool = True) -> DemoResult:
     """Run the pipeline into ``out`` (``out/scene`` when synthetic, ``out/run``, ``out/report``)."""
-    from eval.report import report_run
-
     start = time.perf_counter()
     out = Path(out)
     if out.exists() and any(out.iterdir()) and not overwrite:
         raise InputError(f"{out}: already exists and is not empty; pass --force or choose another --out.")
-    backend = resolve_backend(backend)
+    backend = get_backend(backend)
     synth_point = None
     if scene is None:
         result = generate_scene(DEMO_SCENE, out / "scene", overwrite=overwrite, progress=progress)
@@ -86,7 +84,7 @@ def run_demo(out: Path | str, *, scene: Path | str | None = None, images: str = 
     build_masks(scene_dir, BuildConfig(proposer="graph", associate="tracks", out_masks=MASKS,
                                        images="images" if scene is None else images, force=overwrite), progress=progress)
     run_dir = out / "run"
-    train(scene_dir, run_dir, TrainConfig(iters=iters, masks=MASKS, images=images, backend=backend,
+    train(scene_dir, run_dir, TrainConfig(iters=iters, masks=MASKS, images=images, backend=backend.name,
                                           max_gaussians=max_gaussians), progress=progress)
     segmentation = segment_run(run_dir, scene_dir, masks=MASKS, backend=backend, progress=progress)
     run = load_run(run_dir)
