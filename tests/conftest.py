@@ -1,4 +1,6 @@
-"""Shared fixtures: small synthetic scenes made once per test session."""
+"""Shared fixtures: small synthetic scenes made once per test session. Tests that need a trained
+run are marked ``slow`` (the run takes tens of seconds); ``python -m pytest -m "not slow"``
+leaves them out."""
 
 from __future__ import annotations
 
@@ -10,6 +12,13 @@ import pytest
 from dataset_tools.synth import SynthConfig, SynthResult, generate_scene
 
 BEER = Path(__file__).resolve().parents[2] / "shared" / "data" / "beer"
+SLOW_FIXTURES = {"trained", "segmented"}
+
+
+def pytest_collection_modifyitems(items) -> None:
+    for item in items:
+        if SLOW_FIXTURES & set(getattr(item, "fixturenames", ())):
+            item.add_marker(pytest.mark.slow)
 
 
 @pytest.fixture(scope="session")

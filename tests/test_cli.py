@@ -22,6 +22,7 @@ def test_console_scripts_list_their_subcommands(command, subcommands):
         assert sub in result.stdout
 
 
+@pytest.mark.slow
 def test_synth_corrupt_inspect(tmp_path):
     py = [sys.executable, "-m", "dataset_tools"]
     scene = tmp_path / "scene"

@@ -68,6 +68,7 @@ def test_elevation_profile_is_linear_between_bin_centres():
     assert profile_bins(1.0 / np.tan(np.pi / 180)) == 180  # one-degree pixels
 
 
+@pytest.mark.slow
 def test_a_sharp_horizon_is_learned_by_the_profile_and_not_by_sh_alone():
     """An environment that is the sky's gradient above the horizon and a flat ground colour
     below it, fitted from four views around it: with the profile the mean squared error is

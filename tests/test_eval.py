@@ -221,6 +221,7 @@ def test_unusable_lpips_file_is_one_sentence(segmented, small_scene, tmp_path):
     assert len(r.stderr.strip().splitlines()) == 1 and not (tmp_path / "out").exists()
 
 
+@pytest.mark.slow
 def test_demo_plumbing_runs_every_stage_with_few_iterations(tmp_path):
     """Plumbing only: 20 training iterations, so the scores mean nothing; every stage runs and
     the report is where the demo says."""
@@ -246,6 +247,7 @@ def test_matched_miou_renames_before_scoring():
     assert matched_miou([pred], [truth]) == pytest.approx((8 / 9 + 3 / 4) / 2)
 
 
+@pytest.mark.slow
 def test_paper_tables_plumbing_writes_every_table_and_reuses_its_work(tmp_path):
     """Plumbing only (a tiny scene and 30 iterations): every table is produced, the JSON holds
     every number the markdown shows, and a second run retrains nothing."""

@@ -53,6 +53,7 @@ def test_cpu_exponential_matches_math_exp():
     assert np.abs(approx / exact - 1).max() < 3e-7
 
 
+@pytest.mark.slow
 def test_torch_reference_matches_finite_differences():
     cam, pose = look_down_z(12, 10)
     g = random_gaussians(6, 1, torch.float64)

@@ -159,6 +159,7 @@ def test_plumbing_batched_decoding_equals_one_prompt_at_a_time(plumbing_model):
         np.testing.assert_allclose(one.logits[0], batch.logits[i], atol=1e-4)
 
 
+@pytest.mark.slow
 def test_plumbing_generator_thresholds_nms_and_painting(plumbing_model):
     """The 16x16 grid hits every region many times; NMS leaves one mask per region, with the
     region's exact box. The stand-in rates the grey background (merged with the zero padding)
@@ -186,6 +187,7 @@ def test_plumbing_generator_thresholds_nms_and_painting(plumbing_model):
     assert np.all(seg[:15] == seg[0, 0]) and seg[0, 0] > 0
 
 
+@pytest.mark.slow
 def test_plumbing_generator_with_crop_layers_and_small_region_removal(plumbing_model):
     image, boxes = squares_image()
     # squares fill more of a crop's frame, which the stand-in rates lower: a looser IoU threshold
@@ -210,6 +212,7 @@ def test_embedding_cache_returns_the_stored_embedding(plumbing_model, tmp_path):
     np.testing.assert_array_equal(first.interm_embeddings, second.interm_embeddings)
 
 
+@pytest.mark.slow
 def test_plumbing_hqmask_build_with_sam_hq(plumbing_model, scene_copy):
     result = build_masks(
         scene_copy,

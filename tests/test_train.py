@@ -40,6 +40,7 @@ def test_training_fits_colour_and_objects(trained, small_scene, tmp_path):
     assert np.mean(agree) > 0.8
 
 
+@pytest.mark.slow
 def test_resume_continues_the_same_loss_curve(small_scene, tmp_path):
     cfg = TrainConfig(iters=40, backend="cpu")
     train(small_scene.root, tmp_path / "straight", cfg, progress=False)
@@ -51,6 +52,7 @@ def test_resume_continues_the_same_loss_curve(small_scene, tmp_path):
     assert all(torch.equal(x, y) for x, y in zip(a.tensors().values(), b.tensors().values()))
 
 
+@pytest.mark.slow
 def test_max_gaussians_caps_densification(small_scene, tmp_path):
     free = _history(train(small_scene.root, tmp_path / "free", TrainConfig(iters=60, backend="cpu"),
                           progress=False).run)
