@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks import record
-from dataset_tools.corrupt import PERMUTE_ONLY, corrupt_mask
+from dataset_tools.corruption import PERMUTE_ONLY, corrupt_mask
 from dataset_tools.image_files import write_png
 from dataset_tools.scene import load_scene
 from eval.metrics import segment_ceiling

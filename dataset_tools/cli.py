@@ -37,15 +37,20 @@ def synth(out: Path, seed: int, views: int, res: int, objects: int, path_kind: s
 @click.option("--scene", type=click.Path(path_type=Path), required=True, help="Scene folder with exact masks.")
 @click.option("--out-masks", required=True, help="Name of the mask folder to write inside the scene.")
 @click.option("--severity", type=click.Choice(["low", "medium", "high"]), default="medium", show_default=True)
-@click.option("--coarse", is_flag=True, help="Low-resolution boundaries, like SAM against SAM-HQ.")
+@click.option("--model", type=click.Choice(["blobs", "proposer"]), default="blobs", show_default=True,
+              help="blobs: errors drawn in every view independently; proposer: parts, merges and misses over runs "
+                   "of views, shadow and background fragments, bleeding boundaries.")
+@click.option("--coarse", is_flag=True, help="Low-resolution boundaries, like SAM against SAM-HQ (--model blobs).")
 @click.option("--seed", type=int, default=0, show_default=True)
 @click.option("--masks", default="object_mask", show_default=True, help="Exact mask folder to corrupt.")
 @click.option("--force", is_flag=True, help="Replace --out-masks if it exists.")
-def corrupt(scene: Path, out_masks: str, severity: str, coarse: bool, seed: int, masks: str, force: bool) -> None:
+def corrupt(scene: Path, out_masks: str, severity: str, model: str, coarse: bool, seed: int, masks: str,
+            force: bool) -> None:
     """Write realistic imperfect copies of a scene's masks to SCENE/OUT_MASKS/."""
-    from dataset_tools.corrupt import corrupt_scene
+    from dataset_tools.corruption import corrupt_scene
 
-    report = corrupt_scene(scene, out_masks, severity, coarse=coarse, seed=seed, masks=masks, overwrite=force)
+    report = corrupt_scene(scene, out_masks, severity, model=model, coarse=coarse, seed=seed, masks=masks,
+                           overwrite=force)
     click.echo(f"wrote {scene / out_masks}: {len(report['error_per_view'])} masks, "
                f"{100 * report['mean_error']:.2f}% of pixels wrong after ID matching")
 

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from dataset_tools.corrupt import corrupt_scene
+from dataset_tools.corruption import corrupt_scene
 from dataset_tools.image_files import write_downsampled
 from dataset_tools.label_maps import consistent_fraction
 from dataset_tools.scene import load_scene
@@ -64,11 +64,12 @@ def synthetic_scene(root: Path, spec: SceneSpec, *, downsample: tuple[int, ...] 
     return root
 
 
-def corrupt_masks(scene: Path, out_masks: str, *, severity: str = "medium", seed: int = 0,
+def corrupt_masks(scene: Path, out_masks: str, *, severity: str = "medium", model: str = "blobs", seed: int = 0,
                   coarse: bool = False) -> str:
-    """``scene/out_masks``: the exact masks corrupted at ``severity``; made once."""
+    """``scene/out_masks``: the exact masks corrupted at ``severity`` by the error family
+    ``model``; made once."""
     if not (Path(scene) / out_masks).is_dir():
-        corrupt_scene(scene, out_masks, severity, coarse=coarse, seed=seed, progress=False)
+        corrupt_scene(scene, out_masks, severity, model=model, coarse=coarse, seed=seed, progress=False)
     return out_masks
 
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from dataset_tools import InputError, load_scene
-from dataset_tools.corrupt import PERMUTE_ONLY, corrupt_mask
+from dataset_tools.corruption import PERMUTE_ONLY, corrupt_mask
 from dataset_tools.image_files import write_png
 from dataset_tools.label_maps import consistent_fraction, match_ids, overlap
 from dataset_tools.synth import SynthConfig, generate_scene

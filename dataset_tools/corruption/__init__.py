@@ -1,0 +1,95 @@
+"""Realistic imperfect masks from exact ones, deterministic by seed, in two independent
+families of errors at three severities each:
+
+- ``blobs`` (:mod:`dataset_tools.corruption.blobs`): errors drawn independently in every
+  view: merges, splits, misses, boundary jitter, speckles, holes and large wrong blobs;
+- ``proposer`` (:mod:`dataset_tools.corruption.proposer`): what an automatic proposer does
+  over a capture, errors persisting over runs of consecutive views: objects given as parts,
+  merged with a neighbour or missed for a run of views, shadows and background patches
+  proposed as objects, boundaries bleeding into the background.
+
+Both permute the IDs of every view. A method tuned on one family is checked on the other.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from dataset_tools.atomic import atomic_directory, write_bytes_atomic
+from dataset_tools.corruption import blobs, proposer
+from dataset_tools.corruption.blobs import PERMUTE_ONLY, BlobModel, corrupt_mask
+from dataset_tools.corruption.ops import coarsen
+from dataset_tools.errors import InputError
+from dataset_tools.image_files import encode_png
+from dataset_tools.label_maps import matched_error
+from dataset_tools.scene import load_scene
+
+FAMILIES = ("blobs", "proposer")
+RUNS_STREAM = 2**31  # the seed stream of the proposer family's runs, apart from every view's
+SEVERITY_NAMES = ("low", "medium", "high")
+
+__all__ = ["FAMILIES", "PERMUTE_ONLY", "SEVERITY_NAMES", "BlobModel", "coarsen", "corrupt_mask", "corrupt_scene"]
+
+
+def _check(family: str, severity: str, coarse: bool) -> None:
+    if family not in FAMILIES:
+        raise InputError(f"--model {family}: use {' or '.join(FAMILIES)}.")
+    if severity not in SEVERITY_NAMES:
+        raise InputError(f"--severity {severity}: use low, medium or high.")
+    if coarse and family != "blobs":
+        raise InputError("--coarse belongs to --model blobs; leave it out or use --model blobs.")
+
+
+def corrupt_scene(
+    scene_dir: Path | str,
+    out_masks: str,
+    severity: str = "medium",
+    *,
+    model: str = "blobs",
+    coarse: bool = False,
+    seed: int = 0,
+    masks: str = "object_mask",
+    overwrite: bool = False,
+    progress: bool = True,
+) -> dict:
+    """Write corrupted copies of a scene's exact masks to ``scene_dir/out_masks/*.png``.
+
+    Also writes ``corruption.json`` there (the family, its parameters and the measured error
+    of every view) and returns it. The measured error is the fraction of pixels that disagree
+    with the exact mask after the best renaming of IDs (see ``label_maps.matched_error``).
+    View k is corrupted with the random generator seeded by ``[seed, k]``; the runs of the
+    ``proposer`` family by ``[seed, RUNS_STREAM]``.
+    """
+    scene_dir = Path(scene_dir)
+    _check(model, severity, coarse)
+    if out_masks == masks:
+        raise InputError(f"--out-masks {out_masks}: would overwrite the exact masks; choose another name.")
+    scene = load_scene(scene_dir, masks=masks)
+    if scene.mask_dir is None:
+        raise InputError(f"{scene_dir / masks}: no masks to corrupt; generate the scene with `python -m dataset_tools synth`.")
+    target = scene_dir / out_masks
+    if target.exists() and not overwrite:
+        raise InputError(f"{target}: already exists; choose another --out-masks or pass --force.")
+    views = [(v, m) for v in scene.views if (m := v.load_mask()) is not None]
+    if model == "blobs":
+        params = BlobModel(**{**asdict(blobs.SEVERITIES[severity]), "coarse": coarse})
+    else:
+        params = proposer.SEVERITIES[severity]
+        labels = sorted({int(l) for _, m in views for l in np.unique(m) if l > 0})
+        runs = proposer.plan_runs(labels, len(views), params, np.random.default_rng([seed, RUNS_STREAM]))
+    errors = {}
+    with atomic_directory(target, overwrite=overwrite) as tmp:
+        for k, (view, gt) in enumerate(tqdm(views, desc=f"corrupting ({model}, {severity})", disable=not progress)):
+            rng = np.random.default_rng([seed, k])
+            noisy = corrupt_mask(gt, params, rng) if model == "blobs" else proposer.corrupt_view(gt, k, runs, params, rng)
+            write_bytes_atomic(tmp / f"{view.stem}.png", encode_png(noisy))
+            errors[view.stem] = matched_error(noisy, gt)
+        report = {"model": model, "severity": severity, "seed": seed, "parameters": asdict(params),
+                  "mean_error": float(np.mean(list(errors.values()))), "error_per_view": errors}
+        write_bytes_atomic(tmp / "corruption.json", json.dumps(report, indent=2, sort_keys=True).encode())
+    return report
