@@ -47,3 +47,17 @@ class SourceCamera:
     width: int
     height: int
     params: tuple[float, ...]
+
+
+@dataclass(frozen=True)
+class CameraPose:
+    """A pinhole camera placed in the world: ``cam_from_world`` (3, 4) float64, COLMAP axes
+    (x right, y down, z forward). Scene views have the same two attributes."""
+
+    camera: PinholeCamera
+    cam_from_world: np.ndarray
+
+    @property
+    def center(self) -> np.ndarray:
+        """Camera centre in world coordinates, (3,)."""
+        return -self.cam_from_world[:, :3].T @ self.cam_from_world[:, 3]

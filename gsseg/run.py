@@ -29,14 +29,6 @@ class Posed(Protocol):
     cam_from_world: np.ndarray
 
 
-@dataclass(frozen=True)
-class CameraPose:
-    """A camera placed in the world: ``cam_from_world`` (3, 4) float64."""
-
-    camera: PinholeCamera
-    cam_from_world: np.ndarray
-
-
 @dataclass
 class Run:
     """The model of a finished run and the record of how it was trained."""

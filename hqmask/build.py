@@ -20,11 +20,13 @@ from dataset_tools.errors import InputError
 from dataset_tools.image_files import encode_png, read_mask
 from dataset_tools.scene import Scene, load_scene
 from hqmask.association import associate_flow, associate_tracks
+from hqmask.association.anchors import sighting, triangulate
 from hqmask.cleanup import clean_mask
 from hqmask.consensus import multiview_consensus
+from hqmask.depth_prior import depth_from_anchors, depth_from_points
 from hqmask.proposers import Proposer, make_proposer
 
-ASSOCIATIONS = ("flow", "tracks")
+ASSOCIATIONS = ("auto", "flow", "tracks")
 CACHE = ".hqmask_cache"
 
 
@@ -35,9 +37,9 @@ class BuildConfig:
     proposer: str = "graph"
     from_masks: str | None = None
     model: str | None = None
-    associate: str = "flow"
+    associate: str = "auto"  # tracks where the scene has SfM observations, flow otherwise
     consensus: int = 4  # neighbouring views that vote on each view's labels; 0: off
-    min_area: int = 500
+    min_area: int | None = None  # None: the paper's 500 px at 1008x756, scaled to each view
     out_masks: str = "object_mask"
     images: str = "images"
     dataset: str | None = None
@@ -53,6 +55,14 @@ class BuildResult:
     out_dir: Path
     n_objects: int
     views: int
+    associate: str  # the association used (``auto`` resolved)
+
+
+def association_for(scene: Scene, associate: str) -> str:
+    """``auto`` -> ``tracks`` where the views observe SfM points, else ``flow``."""
+    if associate != "auto":
+        return associate
+    return "tracks" if len(scene.points) and any(len(v.point_ids) for v in scene.views) else "flow"
 
 
 def _segments(
@@ -76,11 +86,26 @@ def _segments(
     return out
 
 
+def depth_priors(scene: Scene, ids: list[np.ndarray], associate: str) -> list[np.ndarray | None]:
+    """A rough depth of every view to start the consensus' flow from: from the SfM points
+    each view observes (``tracks``), or from where the associated objects stand (``flow``)."""
+    if associate == "tracks":
+        return [depth_from_points(v, v.uv, scene.points.xyz[v.point_ids], m) for v, m in zip(scene.views, ids)]
+    sightings: dict[int, list] = {}
+    for k, (v, m) in enumerate(zip(scene.views, ids)):
+        for label in np.unique(m[m > 0]):
+            sightings.setdefault(int(label), []).append(sighting(k, m == label, v.camera, v.cam_from_world))
+    anchors = {label: a for label, s in sightings.items() if (a := triangulate(s)) is not None}
+    return [depth_from_anchors(v, m, anchors) for v, m in zip(scene.views, ids)]
+
+
 def build_masks(scene_dir: Path | str, cfg: BuildConfig, *, progress: bool = True) -> BuildResult:
     """Write consistent, cleaned object-ID maps of every view to ``scene_dir/cfg.out_masks``."""
     scene_dir = Path(scene_dir)
     if cfg.associate not in ASSOCIATIONS:
-        raise InputError(f"--associate {cfg.associate}: use flow or tracks.")
+        raise InputError(f"--associate {cfg.associate}: use auto, flow or tracks.")
+    if cfg.min_area is not None and cfg.min_area < 1:
+        raise InputError(f"--min-area {cfg.min_area}: give a number of pixels of 1 or more (or leave it out).")
     if cfg.consensus < 0:
         raise InputError(f"--consensus {cfg.consensus}: use 0 (off) or a number of neighbouring views.")
     if cfg.proposer == "existing" and not cfg.from_masks:
@@ -103,13 +128,14 @@ def build_masks(scene_dir: Path | str, cfg: BuildConfig, *, progress: bool = Tru
         raise InputError(f"{scene_dir / cfg.from_masks}: mask folder not found; check --from-masks.")
     images = [v.load_image() for v in tqdm(scene.views, desc="loading images", disable=not progress)]
     segments = [s.astype(np.int32) for s in _segments(scene, proposer, cfg, images, progress)]
-    centers = np.stack([v.center for v in scene.views])
-    if cfg.associate == "flow":
-        ids = associate_flow(images, segments, centers)
+    associate = association_for(scene, cfg.associate)
+    if associate == "flow":
+        ids = associate_flow(images, segments, scene.views)
     else:
         ids = associate_tracks(scene.views, segments, len(scene.points))
     if cfg.consensus:
-        ids = multiview_consensus(images, ids, centers, neighbours=cfg.consensus, progress=progress)
+        ids = multiview_consensus(images, ids, scene.views, depths=depth_priors(scene, ids, associate),
+                                  neighbours=cfg.consensus, progress=progress)
     n_objects = 0
     with atomic_directory(out_dir, overwrite=cfg.force) as tmp:
         for view, m in zip(tqdm(scene.views, desc="writing masks", disable=not progress), ids):
@@ -120,11 +146,12 @@ def build_masks(scene_dir: Path | str, cfg: BuildConfig, *, progress: bool = Tru
         from dataset_tools.hf_dataset import export_dataset
 
         export_dataset(load_scene(scene_dir, images=cfg.images, masks=cfg.out_masks), Path(cfg.dataset), overwrite=cfg.force)
-    return BuildResult(out_dir, n_objects, len(scene.views))
+    return BuildResult(out_dir, n_objects, len(scene.views), associate)
 
 
 def clean_scene_masks(
-    scene_dir: Path | str, masks: str, out_masks: str, *, min_area: int = 500, force: bool = False, progress: bool = True
+    scene_dir: Path | str, masks: str, out_masks: str, *, min_area: int | None = None, force: bool = False,
+    progress: bool = True
 ) -> Path:
     """Noise removal alone: ``scene_dir/masks`` -> ``scene_dir/out_masks``."""
     scene_dir = Path(scene_dir)

@@ -19,10 +19,14 @@ def cli() -> None:
 @click.option("--proposer", default="graph", show_default=True, help="graph, sam-hq or existing.")
 @click.option("--from-masks", default=None, help="Mask folder read by --proposer existing.")
 @click.option("--model", default=None, help="SAM-HQ ONNX model folder (--proposer sam-hq).")
-@click.option("--associate", default="flow", show_default=True, help="flow (sequences) or tracks (SfM points).")
+@click.option("--associate", type=click.Choice(["auto", "flow", "tracks"]), default="auto", show_default=True,
+              help="tracks (through SfM points), flow (optical flow and camera poses); auto: tracks where the scene "
+                   "has SfM observations, flow otherwise.")
 @click.option("--consensus", type=int, default=4, show_default=True,
               help="Nearest views whose ID maps, carried by optical flow, vote on each view's labels (0: off).")
-@click.option("--min-area", type=int, default=500, show_default=True, help="Components under this many pixels are reassigned.")
+@click.option("--min-area", type=int, default=None,
+              help="Components under this many pixels are reassigned (default: the paper's 500 px at 1008x756, "
+                   "scaled to each view's size).")
 @click.option("--out-masks", default="object_mask", show_default=True, help="Mask folder to write inside SCENE.")
 @click.option("--images", default="images", show_default=True, help="Image folder (images or images_N).")
 @click.option("--dataset", default=None, help="Also write a Hugging Face dataset (with parquet shards) here.")
@@ -37,14 +41,16 @@ def build(scene: Path, **options) -> None:
     from hqmask.build import BuildConfig, build_masks
 
     result = build_masks(scene, BuildConfig(**options))
-    click.echo(f"wrote {result.out_dir}: {result.views} views, {result.n_objects} objects")
+    click.echo(f"wrote {result.out_dir}: {result.views} views, {result.n_objects} objects (associated by "
+               f"{result.associate})")
 
 
 @cli.command()
 @click.argument("scene", type=click.Path(path_type=Path))
 @click.option("--masks", required=True, help="Mask folder to clean.")
 @click.option("--out-masks", required=True, help="Mask folder to write.")
-@click.option("--min-area", type=int, default=500, show_default=True)
+@click.option("--min-area", type=int, default=None,
+              help="Components under this many pixels are reassigned (default: 500 px at 1008x756, scaled).")
 @click.option("--force", is_flag=True, help="Replace --out-masks if it exists.")
 def clean(scene: Path, masks: str, out_masks: str, min_area: int, force: bool) -> None:
     """Noise removal alone: 3x3 closing and small-component reassignment."""

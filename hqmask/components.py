@@ -66,16 +66,19 @@ def label_components(ids: np.ndarray) -> tuple[np.ndarray, int]:
 
 
 @numba.njit(cache=True)
-def ring_votes(comp: np.ndarray, ids: np.ndarray, small: np.ndarray) -> np.ndarray:
-    """The ID covering most of the boundary ring of each small component.
+def ring_votes(comp: np.ndarray, ids: np.ndarray, small: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The ID covering most of the boundary ring of each small component, and whether it is
+    the only one.
 
     Args:
         comp: (H, W) int32 component labels. ids: (H, W) uint8 IDs. small: (n,) bool, the
             components to vote for.
 
     Returns:
-        (n,) int64: the winning ID (ties to the smaller ID), -1 for components that are not
-        small or have no ring. Each ring pixel (8-connected, outside the component) counts once.
+        winner (n,) int64: the winning ID (ties to the smaller ID), -1 for components that are
+        not small or have no ring; alone (n,) bool: the winner covers the whole ring and the
+        component does not touch the image border (it lies inside that one region). Each ring
+        pixel (8-connected, outside the component) counts once.
     """
     H, W = ids.shape
     n = small.shape[0]
@@ -95,14 +98,17 @@ def ring_votes(comp: np.ndarray, ids: np.ndarray, small: np.ndarray) -> np.ndarr
                 pixels[cursor[c]] = i * W + j
                 cursor[c] += 1
     winner = np.full(n, -1, np.int64)
+    alone = np.zeros(n, np.bool_)
     stamp = np.full(H * W, -1, np.int64)  # the last component that counted this ring pixel
     votes = np.zeros(256, np.int64)
     for c in range(n):
         if offsets[c] == offsets[c + 1]:
             continue
         votes[:] = 0
+        border = False
         for k in range(offsets[c], offsets[c + 1]):
             i, j = pixels[k] // W, pixels[k] % W
+            border = border or i == 0 or j == 0 or i == H - 1 or j == W - 1
             for di in range(-1, 2):
                 for dj in range(-1, 2):
                     ni, nj = i + di, j + dj
@@ -112,12 +118,14 @@ def ring_votes(comp: np.ndarray, ids: np.ndarray, small: np.ndarray) -> np.ndarr
                     if comp[ni, nj] != c and stamp[q] != c:
                         stamp[q] = c
                         votes[ids[ni, nj]] += 1
-        best = -1
+        best, total = -1, 0
         for v in range(256):
+            total += votes[v]
             if votes[v] > 0 and (best < 0 or votes[v] > votes[best]):
                 best = v
         winner[c] = best
-    return winner
+        alone[c] = best >= 0 and votes[best] == total and not border
+    return winner, alone
 
 
 @numba.njit(cache=True)

@@ -11,8 +11,9 @@ experiment resumes:
 
 from __future__ import annotations
 
+import shutil
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -20,7 +21,7 @@ import numpy as np
 from dataset_tools.corruption import corrupt_scene
 from dataset_tools.image_files import write_downsampled
 from dataset_tools.label_maps import consistent_fraction
-from dataset_tools.scene import load_scene
+from dataset_tools.scene import load_scene, save_scene
 from dataset_tools.synth import SynthConfig, generate_scene
 from eval.evaluate import evaluate
 from eval.metrics import matched_miou, mean_iou, psnr, ssim
@@ -62,6 +63,29 @@ def synthetic_scene(root: Path, spec: SceneSpec, *, downsample: tuple[int, ...] 
         if not (root / f"images_{factor}").is_dir():
             write_downsampled(root / "images", root / f"images_{factor}", factor)
     return root
+
+
+def shuffled_copy(scene: Path, out: Path, *, seed: int = 0) -> Path:
+    """A copy of ``scene`` at ``out`` whose views carry their files under shuffled names (as a
+    phone's burst or a merged folder names them), with every mask folder renamed alike and
+    the same views held out; made once."""
+    out = Path(out)
+    if (out / "sparse").is_dir():
+        return out
+    source = load_scene(scene, masks=None)
+    order = np.random.default_rng(seed).permutation(len(source.views))
+    name_of = {v.name: f"{order[k]:04d}{Path(v.name).suffix}" for k, v in enumerate(source.views)}
+    renamed = replace(source, views=[replace(v, name=name_of[v.name]) for v in source.views],
+                      test_names=frozenset(name_of[n] for n in source.test_names))
+    save_scene(renamed, out)
+    folders = [p for p in Path(scene).iterdir() if p.is_dir() and not p.name.startswith(".")]
+    for folder in (p for p in folders if p.name not in ("images", "sparse")):
+        for view in source.views:
+            mask = folder / f"{Path(view.name).stem}.png"
+            if mask.is_file():
+                (out / folder.name).mkdir(exist_ok=True)
+                shutil.copyfile(mask, out / folder.name / f"{Path(name_of[view.name]).stem}.png")
+    return out
 
 
 def corrupt_masks(scene: Path, out_masks: str, *, severity: str = "medium", model: str = "blobs", seed: int = 0,

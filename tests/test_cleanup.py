@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from skimage import measure
 
-from hqmask.cleanup import clean_mask, close_labels, remove_small_components
+from hqmask.cleanup import clean_mask, close_labels, default_min_area, remove_small_components
 from hqmask.components import label_components
 
 
@@ -36,12 +36,33 @@ def test_small_speck_in_object_takes_the_object_label():
     assert np.array_equal(out, two_touching_objects())
 
 
-def test_speck_in_background_becomes_background_and_holes_are_filled():
+def test_speck_of_an_object_in_background_becomes_background_and_holes_are_filled():
     ids = two_touching_objects()
-    ids[0:4, 0:4] = 3  # speck surrounded by background
+    ids[0:4, 0:4] = 2  # a speck of object 2 far from it, surrounded by background
     ids[40:45, 60:66] = 0  # hole inside object 2
     out = clean_mask(ids, min_area=100)
     assert np.array_equal(out, two_touching_objects())
+
+
+def test_a_small_object_alone_survives_and_a_small_speck_inside_an_object_does_not():
+    """300 px under a 500 px threshold: alone in the background it is an object (the only
+    component of its ID); cut out of another object it is a speck of that object, unless
+    other views confirm its ID; with keep_objects=False (the paper's rule) both go."""
+    ids = np.zeros((100, 120), np.uint8)
+    ids[10:90, 10:60] = 1
+    ids[40:55, 20:40] = 2  # 300 px inside object 1
+    ids[40:55, 80:100] = 3  # 300 px alone in the background
+    out = clean_mask(ids, min_area=500)
+    assert (out[40:55, 20:40] == 1).all() and (out[40:55, 80:100] == 3).all()
+    assert (clean_mask(ids, min_area=500, keep=frozenset({2}))[40:55, 20:40] == 2).all()
+    paper = clean_mask(ids, min_area=500, keep_objects=False)
+    assert (paper[40:55, 20:40] == 1).all() and (paper[40:55, 80:100] == 0).all()
+
+
+def test_the_default_threshold_is_the_papers_share_of_the_image():
+    assert default_min_area((756, 1008)) == 500
+    assert default_min_area((512, 512)) == 172 and default_min_area((192, 192)) == 24
+    assert default_min_area((8, 8)) == 1
 
 
 def test_components_over_min_area_change_only_by_closing():
@@ -50,7 +71,7 @@ def test_components_over_min_area_change_only_by_closing():
     noise = rng.uniform(size=ids.shape) < 0.02
     ids[noise] = rng.integers(0, 5, noise.sum())
     closed = close_labels(ids)
-    out = remove_small_components(closed, 100)
+    out = remove_small_components(closed, 100, keep_objects=False)
     comp, n = label_components(closed)
     big = np.bincount(comp.ravel(), minlength=n)[comp] >= 100
     assert np.array_equal(out[big], closed[big])

@@ -1,14 +1,27 @@
-"""The matching rules of the ``flow`` association on hand-made sequences. The images are
-uniform, so the optical flow is zero and the rules alone decide."""
+"""The matching rules of the ``flow`` association on hand-made sequences, and the order in
+which it visits the views. The images are uniform, so the optical flow is zero and the rules
+alone decide; the cameras stand on a line in the order of the list."""
 
 import numpy as np
 
-from hqmask.association.flow import associate_flow
+from dataset_tools.cameras import CameraPose, PinholeCamera
+from hqmask.association.flow import associate_flow, pose_order
+
+
+def on_a_line(n: int, shape: tuple[int, int]) -> list[CameraPose]:
+    """Telephoto cameras one unit apart along x, all looking along +z: every ray is parallel
+    to every other within a degree, so the poses say nothing and the rules alone decide."""
+    camera = PinholeCamera(shape[1], shape[0], 1e5, 1e5, shape[1] / 2, shape[0] / 2)
+    return [CameraPose(camera, np.concatenate([np.eye(3), [[-k], [0.0], [0.0]]], 1)) for k in range(n)]
+
+
+def associate_flow_on_a_line(images: list[np.ndarray], segments: list[np.ndarray]) -> list[np.ndarray]:
+    return associate_flow(images, segments, on_a_line(len(images), segments[0].shape))
 
 
 def associate(segments: list[np.ndarray]) -> list[np.ndarray]:
     images = [np.full((*s.shape, 3), 128, np.uint8) for s in segments]
-    return associate_flow(images, segments)
+    return associate_flow_on_a_line(images, segments)
 
 
 def box(shape: tuple[int, int], boxes: dict[int, tuple[int, int, int, int]]) -> np.ndarray:
@@ -67,7 +80,7 @@ def test_a_lost_object_is_reidentified_by_its_colours():
     for color, same in ((red, True), (blue, False)):
         views = ([view({1: ((10, 30, 10, 30), red)}) for _ in range(3)] + [view({}) for _ in range(2)]
                  + [view({1: ((10, 30, 150, 170), color)}) for _ in range(3)])
-        out = associate_flow([v[0] for v in views], [v[1] for v in views])
+        out = associate_flow_on_a_line([v[0] for v in views], [v[1] for v in views])
         assert (out[0][20, 20] == out[7][20, 160]) == same and out[0][20, 20] > 0 and out[7][20, 160] > 0
 
 
@@ -85,7 +98,21 @@ def test_a_weak_overlap_with_another_objects_colours_is_not_a_match():
         return image, seg
 
     views = [view(10, 100) for _ in range(3)] + [view(160, 24) for _ in range(3)]
-    out = associate_flow([v[0] for v in views], [v[1] for v in views])
+    out = associate_flow_on_a_line([v[0] for v in views], [v[1] for v in views])
     assert out[0][20, 20] == out[5][20, 170] > 0  # red
     assert out[0][20, 110] == out[5][20, 34] > 0  # blue
     assert out[0][20, 20] != out[0][20, 110]
+
+
+def test_the_path_through_the_views_depends_on_the_poses_alone():
+    """A 12-view orbit given in a shuffled order: the path visits the same poses in the same
+    order, and every step goes to a neighbour on the circle."""
+    angles = 2 * np.pi * np.arange(12) / 12 + 0.01 * np.sin(np.arange(12))  # uneven: no exact ties
+    centers = np.stack([np.cos(angles), np.sin(angles), np.zeros(12)], 1)
+    directions = -centers
+    path = pose_order(centers, directions)
+    assert sorted(path) == list(range(12))
+    assert all(abs(a - b) % 12 in (1, 11) for a, b in zip(path, path[1:]))
+    shuffle = np.random.default_rng(0).permutation(12)
+    shuffled = pose_order(centers[shuffle], directions[shuffle])
+    assert [int(shuffle[k]) for k in shuffled] == path

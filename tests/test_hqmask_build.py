@@ -2,6 +2,7 @@
 
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -35,6 +36,45 @@ def test_association_undoes_per_view_permutations(tmp_path, method, path):
     assert consistent_fraction(after, gt) >= 0.97
 
 
+def views_of_different_sizes(scene_dir: Path) -> None:
+    """Crop 1 to 3 px off the right and bottom of every other view (its image, mask and
+    camera), as undistortion with a camera per image leaves a capture."""
+    from dataset_tools import colmap
+    from dataset_tools.image_files import read_image, read_mask
+
+    scene = load_scene(scene_dir)
+    cameras = []
+    for k, v in enumerate(scene.views):
+        cut = (k % 3) + 1 if k % 2 else 0
+        camera = replace(v.camera, width=v.camera.width - cut, height=v.camera.height - cut)
+        if cut:
+            write_png(v.image_path, read_image(v.image_path)[:-cut, :-cut])
+            write_png(v.mask_path, read_mask(v.mask_path)[:-cut, :-cut])
+        cameras.append(camera)
+    keep = [(ids, uv) for ids, uv in ((v.point_ids, v.uv) for v in scene.views)]
+    keep = [(ids[(uv < [c.width, c.height]).all(1)], uv[(uv < [c.width, c.height]).all(1)])
+            for (ids, uv), c in zip(keep, cameras)]
+    colmap.write_model(scene_dir / "sparse" / "0", [v.name for v in scene.views], cameras,
+                       [v.cam_from_world for v in scene.views], keep, scene.points.xyz, scene.points.rgb)
+
+
+@pytest.mark.parametrize("method", ["flow", "tracks"])
+def test_views_of_different_sizes_build_with_each_association(tmp_path, method):
+    """Every place that relates two views (flow, consensus, association) takes views whose
+    sizes differ by a few pixels, and the masks come out at each view's own size."""
+    scene = generate_scene(SynthConfig(views=10, res=96, objects=3, path="forward", seed=2), tmp_path / "s",
+                           progress=False).root
+    views_of_different_sizes(scene)
+    permuted_masks(scene, "perm")
+    build_masks(scene, BuildConfig(proposer="existing", from_masks="perm", associate=method, out_masks="out"),
+                progress=False)
+    out = load_scene(scene, masks="out").views
+    gt = [v.load_mask() for v in load_scene(scene).views]
+    assert len({v.load_mask().shape for v in out}) > 1
+    assert all(v.load_mask().shape == g.shape for v, g in zip(out, gt))
+    assert consistent_fraction([v.load_mask() for v in out], gt) >= 0.97
+
+
 def test_dataset_export_round_trips(scene_copy, tmp_path):
     import datasets
 
@@ -60,7 +100,7 @@ def test_clean_writes_a_new_folder(scene_copy):
         (BuildConfig(proposer="sam-hq"), "sam-hq"),
         (BuildConfig(proposer="existing"), "needs --from-masks"),
         (BuildConfig(proposer="existing", from_masks="missing", out_masks="x"), "mask folder not found"),
-        (BuildConfig(associate="magic"), "use flow or tracks"),
+        (BuildConfig(associate="magic"), "use auto, flow or tracks"),
         (BuildConfig(out_masks="object_mask"), "already exists"),
     ],
 )
@@ -133,3 +173,28 @@ def test_tracks_joins_the_pieces_of_a_mask_split_alike_in_two_views(tmp_path):
     mapping = match_ids(sum(overlap(o, g) for o, g in zip(out, gt)))
     for k in (3, 4):
         assert np.mean(mapping[out[k][gt[k] == obj]] == obj) > 0.95, k
+
+
+@pytest.mark.parametrize("method", ["flow", "tracks"])
+def test_shuffled_file_names_give_the_same_masks(tmp_path, method):
+    """The views are visited in an order their poses give, so renaming the files (as a
+    phone's burst or a merged folder names them) changes no view's masks."""
+    from dataset_tools.corruption import corrupt_scene
+    from pipeline.experiment import shuffled_copy
+
+    scene = generate_scene(SynthConfig(views=10, res=96, objects=4, path="orbit", seed=4), tmp_path / "s",
+                           progress=False).root
+    corrupt_scene(scene, "noisy", "medium", seed=4, progress=False)
+    shuffled = shuffled_copy(scene, tmp_path / "shuffled", seed=3)
+    for root in (scene, shuffled):
+        build_masks(root, BuildConfig(proposer="existing", from_masks="noisy", associate=method, out_masks="out"),
+                    progress=False)
+    ours = [v.load_mask() for v in load_scene(scene, masks="out").views]
+    theirs = {v.image_path.read_bytes(): v.load_mask() for v in load_scene(shuffled, masks="out").views}
+    gt = [v.load_mask() for v in load_scene(scene).views]
+    same_order = [theirs[v.image_path.read_bytes()] for v in load_scene(scene).views]
+    name_in_copy = {v.image_path.read_bytes(): v.name for v in load_scene(shuffled).views}
+    assert sum(name_in_copy[v.image_path.read_bytes()] != v.name for v in load_scene(scene).views) >= 5
+    assert consistent_fraction(same_order, gt) == consistent_fraction(ours, gt)
+    mapping = match_ids(sum(overlap(a, b) for a, b in zip(ours, same_order)))
+    assert all(np.array_equal(mapping[a], b) for a, b in zip(ours, same_order))

@@ -20,12 +20,14 @@
 from __future__ import annotations
 
 from collections import defaultdict
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.spatial import cKDTree
 
 from dataset_tools.scene import View
 from hqmask.association.common import ViewExclusiveUnion, compact_ids
+from hqmask.association.flow import pose_order
 
 
 def _segment_of_points(view: View, seg: np.ndarray, n_points: int) -> np.ndarray:
@@ -98,12 +100,17 @@ def associate_tracks(
     min_shared: int = 3,
     split_ratio: float = 0.3,
 ) -> list[np.ndarray]:
-    """Associate segments across views through the SfM points they share.
+    """Associate segments across views through the SfM points they share (steps 1-5 of the
+    module docstring). The views are taken in an order their poses give
+    (:func:`hqmask.association.flow.pose_order`), so that ties between equally strong links
+    never depend on file names.
 
     Args:
         views: the views (their ``point_ids`` and ``uv`` observations are used).
-        segments: per view, (H, W) int32 segment map (0 = background).
+        segments: per view, (H, W) int32 segment map (0 = background); not modified.
         n_points: number of SfM points (rows of ``Scene.points``).
+        link_ratio: two segments link when each holds this share of the points both views see.
+        min_shared: the fewest shared points a link needs.
         split_ratio: a segment whose points belong to two or more objects, each holding at
             least this share of them (and ``min_shared`` points), is split between them:
             every pixel goes to the object of its nearest point (a merged mask repaired).
@@ -111,76 +118,150 @@ def associate_tracks(
     Returns:
         per view, (H, W) uint8 consistent ID map.
     """
-    V = len(views)
-    seg_at = np.stack([_segment_of_points(v, s, n_points) for v, s in zip(views, segments)])  # (V, P)
-    offsets = np.concatenate([[0], np.cumsum([int(s.max()) + 1 for s in segments])])
-    node = np.where(seg_at >= 0, seg_at + offsets[:V, None], -1)  # global node id, background nodes included
-    is_bg = np.zeros(offsets[-1], bool)
-    is_bg[offsets[:V]] = True
-    view_of_node = np.repeat(np.arange(V), np.diff(offsets))
-    links = []
-    for a in range(V):
-        for b in range(a + 1, V):
-            both = (seg_at[a] >= 0) & (seg_at[b] >= 0)
-            if not both.any():
-                continue
-            na, nb = node[a, both], node[b, both]
-            pairs, shared = np.unique(np.stack([na, nb]), axis=1, return_counts=True)
-            size_a = dict(zip(*np.unique(na, return_counts=True)))
-            size_b = dict(zip(*np.unique(nb, return_counts=True)))
-            for (x, y), s in zip(pairs.T, shared):
-                if is_bg[x] or is_bg[y] or s < min_shared:
+    centers = np.stack([v.center for v in views])
+    order = pose_order(centers, np.stack([v.cam_from_world[2, :3] for v in views]))
+    ids = _associate([views[k] for k in order], [segments[k] for k in order], n_points, link_ratio=link_ratio,
+                     min_shared=min_shared, split_ratio=split_ratio)
+    out: list[np.ndarray] = [np.empty(0)] * len(views)
+    for k, m in zip(order, ids):
+        out[k] = m
+    return out
+
+
+@dataclass
+class _Graph:
+    """Every segment of every view as a node (each view's background too), and where the SfM
+    points fall.
+
+    Attributes:
+        seg_at: (V, P) local segment under each point in each view; -1 where the view does not
+            see it. node: (V, P) the same as global node numbers. offsets: (V + 1,) first node
+            of each view. is_background: (nodes,) bool. view_of: (nodes,) view of each node.
+    """
+
+    seg_at: np.ndarray
+    node: np.ndarray
+    offsets: np.ndarray
+    is_background: np.ndarray
+    view_of: np.ndarray
+
+    @classmethod
+    def of(cls, views: list[View], segments: list[np.ndarray], n_points: int) -> _Graph:
+        seg_at = np.stack([_segment_of_points(v, s, n_points) for v, s in zip(views, segments)])
+        offsets = np.concatenate([[0], np.cumsum([int(s.max()) + 1 for s in segments])])
+        node = np.where(seg_at >= 0, seg_at + offsets[:-1, None], -1)
+        is_background = np.zeros(offsets[-1], bool)
+        is_background[offsets[:-1]] = True
+        return cls(seg_at, node, offsets, is_background, np.repeat(np.arange(len(views)), np.diff(offsets)))
+
+    def links(self, link_ratio: float, min_shared: int) -> list[tuple[int, int, int]]:
+        """(shared points, node, node) for every pair of object segments of two views that
+        hold most of each other's points seen in both views."""
+        found = []
+        n_views = len(self.seg_at)
+        for a in range(n_views):
+            for b in range(a + 1, n_views):
+                both = (self.seg_at[a] >= 0) & (self.seg_at[b] >= 0)
+                if not both.any():
                     continue
-                if s >= link_ratio * size_a[x] and s >= link_ratio * size_b[y]:
-                    links.append((int(s), int(x), int(y)))
-    uf = ViewExclusiveUnion([{int(v)} for v in view_of_node])
+                na, nb = self.node[a, both], self.node[b, both]
+                pairs, shared = np.unique(np.stack([na, nb]), axis=1, return_counts=True)
+                size_a = dict(zip(*np.unique(na, return_counts=True)))
+                size_b = dict(zip(*np.unique(nb, return_counts=True)))
+                for (x, y), count in zip(pairs.T, shared):
+                    if self.is_background[x] or self.is_background[y] or count < min_shared:
+                        continue
+                    if count >= link_ratio * size_a[x] and count >= link_ratio * size_b[y]:
+                        found.append((int(count), int(x), int(y)))
+        return found
+
+
+def _core_objects(graph: _Graph, links: list[tuple[int, int, int]]) -> tuple[np.ndarray, np.ndarray]:
+    """Step 2: links taken strongest first into a union-find that never holds two segments of
+    one view. Returns each node's root (N,) and whether it belongs to a core object (N,)."""
+    union = ViewExclusiveUnion([{int(v)} for v in graph.view_of])
     for _, x, y in sorted(links, key=lambda l: (-l[0], l[1], l[2])):
-        uf.union(x, y)
-    root = uf.roots()
+        union.union(x, y)
+    root = union.roots()
     members = defaultdict(int)
-    for r in root[~is_bg]:
+    for r in root[~graph.is_background]:
         members[int(r)] += 1
-    core = np.array([not is_bg[i] and members[int(root[i])] >= 2 for i in range(len(root))])
+    core = np.array([not graph.is_background[i] and members[int(root[i])] >= 2 for i in range(len(root))])
+    return root, core
+
+
+def _join_pieces(graph: _Graph, root: np.ndarray, core: np.ndarray) -> np.ndarray:
+    """Step 3: every core object that is a piece of another takes the whole's root. Returns
+    each node's object (N,): a root for core nodes, -1 for the others, -2 for background."""
     obj_of_node = np.where(core, root, -1)
-    obj_of_node[is_bg] = -2  # background
-    whole_of = _pieces(np.where(node >= 0, obj_of_node[np.maximum(node, 0)], -1), np.unique(root[core]))
+    obj_of_node[graph.is_background] = -2
+    whole_of = _pieces(np.where(graph.node >= 0, obj_of_node[np.maximum(graph.node, 0)], -1), np.unique(root[core]))
+    root = root.copy()
     for piece in whole_of:
         whole = whole_of[piece]
         while whole in whole_of:  # a piece of a piece (no cycles: a whole is seen in more views)
             whole = whole_of[whole]
         root[root == piece] = whole
     obj_of_node[core] = root[core]
-    # each point's object: majority over views of the core object it falls in (or background)
+    return obj_of_node
+
+
+def _point_objects(graph: _Graph, obj_of_node: np.ndarray) -> dict[int, int]:
+    """Each point's object: the majority over the views of the core object it falls in (or
+    background, -2); ties to the smaller."""
     votes: dict[int, dict[int, int]] = defaultdict(lambda: defaultdict(int))
-    for v in range(V):
-        seen = np.flatnonzero(node[v] >= 0)
-        for p, o in zip(seen, obj_of_node[node[v, seen]]):
+    for v in range(len(graph.node)):
+        seen = np.flatnonzero(graph.node[v] >= 0)
+        for p, o in zip(seen, obj_of_node[graph.node[v, seen]]):
             if o != -1:
                 votes[int(p)][int(o)] += 1
-    point_obj = {p: max(c.items(), key=lambda kv: (kv[1], -kv[0]))[0] for p, c in votes.items()}
-    global_of = []
-    for v, seg in enumerate(segments):
-        seg = segments[v] = seg.copy()
-        g = np.full(int(seg.max()) + 1, -1, np.int64)
-        for local in range(1, len(g)):
-            n = offsets[v] + local
-            pts = np.flatnonzero(seg_at[v] == local)
-            objs = np.array([point_obj.get(int(p), -1) for p in pts], np.int64)
-            parts = _split_by_points(views[v], seg == local, pts, objs, split_ratio, min_shared)
-            if parts:
-                for k, (obj, pixels) in enumerate(parts):
-                    if k:  # every further part becomes a new local segment
-                        seg[pixels] = len(g)
-                        g = np.append(g, -1)
-                    g[local if k == 0 else len(g) - 1] = obj if obj >= 0 else -1
-                continue
-            if core[n]:
-                g[local] = root[n]
-                continue
-            known = objs[objs != -1]
-            if len(known):
-                values, counts = np.unique(known, return_counts=True)
-                best = values[np.lexsort((-values, counts))[-1]]  # most points, ties to the smaller
-                g[local] = best if best >= 0 else -1
-        global_of.append(g)
-    return compact_ids(global_of, segments)
+    return {p: max(c.items(), key=lambda kv: (kv[1], -kv[0]))[0] for p, c in votes.items()}
+
+
+def _label_view(view: View, seg: np.ndarray, v: int, graph: _Graph, obj_of_node: np.ndarray,
+                point_obj: dict[int, int], split_ratio: float, min_shared: int) -> tuple[np.ndarray, np.ndarray]:
+    """Steps 4-5 for one view: the global object of each local segment, after splitting the
+    segments whose points belong to several objects. Returns the (possibly split) segment
+    map and the (n + 1,) objects of its segments (-1: background)."""
+    seg = seg.copy()
+    g = np.full(int(seg.max()) + 1, -1, np.int64)
+    for local in range(1, len(g)):
+        pts = np.flatnonzero(graph.seg_at[v] == local)
+        objs = np.array([point_obj.get(int(p), -1) for p in pts], np.int64)
+        parts = _split_by_points(view, seg == local, pts, objs, split_ratio, min_shared)
+        if parts:
+            for k, (obj, pixels) in enumerate(parts):
+                if k:  # every further part becomes a new local segment
+                    seg[pixels] = len(g)
+                    g = np.append(g, -1)
+                g[local if k == 0 else len(g) - 1] = obj if obj >= 0 else -1
+            continue
+        obj = obj_of_node[graph.offsets[v] + local]
+        if obj >= 0:
+            g[local] = obj
+            continue
+        known = objs[objs != -1]
+        if len(known):
+            values, counts = np.unique(known, return_counts=True)
+            best = values[np.lexsort((-values, counts))[-1]]  # most points, ties to the smaller
+            g[local] = best if best >= 0 else -1
+    return seg, g
+
+
+def _associate(
+    views: list[View],
+    segments: list[np.ndarray],
+    n_points: int,
+    *,
+    link_ratio: float,
+    min_shared: int,
+    split_ratio: float,
+) -> list[np.ndarray]:
+    """Steps 1-5 of the module docstring on views in a fixed order."""
+    graph = _Graph.of(views, segments, n_points)
+    root, core = _core_objects(graph, graph.links(link_ratio, min_shared))
+    obj_of_node = _join_pieces(graph, root, core)
+    point_obj = _point_objects(graph, obj_of_node)
+    labelled = [_label_view(view, seg, v, graph, obj_of_node, point_obj, split_ratio, min_shared)
+                for v, (view, seg) in enumerate(zip(views, segments))]
+    return compact_ids([g for _, g in labelled], [seg for seg, _ in labelled])

@@ -1,0 +1,186 @@
+"""Benchmark: the mask stage on a grid of captures, read by its worst cell.
+
+Cells: views x resolution x path (orbit, forward, the orbit with its files named in a
+shuffled order) x error family (``blobs``, ``proposer``) x severity (low, medium, high),
+each over several scene seeds (by default 11, 12, 13, which no test or tuning uses). Per
+cell, the share of ground-truth object pixels carrying their ID after one matching of IDs
+per scene (``consistent_fraction``), for:
+
+- ``input``: the corrupted masks as they are;
+- ``exact``: the exact masks through ``hqmask build`` (default association; should be ~1);
+- ``tracks``, ``flow``: the corrupted masks through ``hqmask build --associate tracks|flow``;
+- ``ceiling``: every segment of the noise-removed input given the ground-truth ID it
+  overlaps most, the best any choice of IDs for those segments reaches.
+
+Resolutions of 1024 run with 8 and 16 views only, and 64 views run up to 256 (the rest of
+the grid fits in under 45 minutes on 2 cores that way). Scenes are generated once into
+``--cache`` and reused. Prints a markdown table with the worst seed of every cell and the
+cells that miss their targets; writes JSON.
+
+    python -m benchmarks.association_grid [--seeds 11,12,13] [--views 8,16,32,64]
+        [--res 128,192,256,512,1024] [--workers 2] [--cache DIR] [--out FILE]
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import json
+import os
+import shutil
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+from benchmarks import record
+from dataset_tools.scene import load_scene
+from eval.metrics import segment_ceiling
+from eval.report import markdown_table
+from hqmask.build import BuildConfig, build_masks, clean_scene_masks
+from pipeline.experiment import SceneSpec, corrupt_masks, mask_scores, shuffled_copy, synthetic_scene
+
+PATHS = ("orbit", "forward", "shuffled")
+FAMILIES = ("blobs", "proposer")
+SEVERITIES = ("low", "medium", "high")
+METHODS = ("tracks", "flow")
+# where a cell passes: every family, every cell of 16 views or more
+TARGETS = {"exact": 0.995, ("medium", "tracks"): 0.95, ("medium", "flow"): 0.93, ("low", "tracks"): 0.97,
+           ("low", "flow"): 0.97}
+CEILING_GAP = 0.02  # at medium, within this of the ceiling
+
+
+def included(views: int, res: int) -> bool:
+    """The cells the default run measures (see the module docstring)."""
+    return not (res >= 1024 and views > 16) and not (res >= 512 and views > 32)
+
+
+def _masks(scene: Path, name: str) -> list[np.ndarray]:
+    return [v.load_mask() for v in load_scene(scene, masks=name).views]
+
+
+def _built(scene: Path, source: str, associate: str = "auto") -> float:
+    """Consistency of ``hqmask build --proposer existing --from-masks source`` (always rebuilt;
+    only scenes and corrupted masks come from the cache)."""
+    out = f".grid_{source}_{associate}"
+    build_masks(scene, BuildConfig(proposer="existing", from_masks=source, associate=associate, out_masks=out,
+                                   force=True), progress=False)
+    score = mask_scores(scene, out)["consistency"]
+    shutil.rmtree(scene / out)
+    return score
+
+
+def measure_scene(cache: str, views: int, res: int, path: str, seed: int) -> dict:
+    """Every column of one scene, for every family and severity."""
+    os.environ.setdefault("NUMBA_NUM_THREADS", "1")
+    start = time.perf_counter()
+    base = "orbit" if path == "shuffled" else path
+    root = Path(cache) / f"{base}-v{views}-r{res}-s{seed}"
+    scene = synthetic_scene(root, SceneSpec(path=base, seed=seed, res=res, views=views, objects=6))
+    for family, severity in itertools.product(FAMILIES, SEVERITIES):
+        corrupt_masks(scene, f"{family}_{severity}", severity=severity, model=family, seed=seed)
+    if path == "shuffled":
+        scene = shuffled_copy(scene, Path(cache) / f"shuffled-v{views}-r{res}-s{seed}", seed=seed)
+    truth = _masks(scene, "object_mask")
+    out = {"exact": _built(scene, "object_mask"), "cells": {}}
+    for family, severity in itertools.product(FAMILIES, SEVERITIES):
+        noisy = f"{family}_{severity}"
+        cell = {"input": mask_scores(scene, noisy)["consistency"]}
+        clean_scene_masks(scene, noisy, f".grid_{noisy}_cleaned", force=True, progress=False)
+        cell["ceiling"] = segment_ceiling(_masks(scene, f".grid_{noisy}_cleaned"), truth)
+        shutil.rmtree(scene / f".grid_{noisy}_cleaned")
+        for method in METHODS:
+            cell[method] = _built(scene, noisy, method)
+        out["cells"][f"{family}/{severity}"] = cell
+    out["seconds"] = time.perf_counter() - start
+    return out
+
+
+def misses(results: dict) -> list[str]:
+    """The cells of 16 views or more whose worst seed misses a target."""
+    found = []
+    for key, by_seed in results["scenes"].items():
+        views = int(key.split("/")[0])
+        if views < 16:
+            continue
+        worst_exact = min(s["exact"] for s in by_seed.values())
+        if worst_exact < TARGETS["exact"]:
+            found.append(f"{key}: exact {worst_exact:.3f}")
+        for cell in next(iter(by_seed.values()))["cells"]:
+            severity = cell.split("/")[1]
+            for method in METHODS:
+                target = TARGETS.get((severity, method))
+                if target is None:
+                    continue
+                for seed, s in by_seed.items():
+                    c = s["cells"][cell]
+                    gap = c["ceiling"] - c[method] if severity == "medium" else 0.0
+                    if c[method] < target or gap > CEILING_GAP:
+                        found.append(f"{key} {cell} seed {seed}: {method} {c[method]:.3f} (ceiling {c['ceiling']:.3f})")
+    return found
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seeds", default="11,12,13", help="Scene seeds (tuning used others).")
+    parser.add_argument("--views", default="8,16,32,64")
+    parser.add_argument("--res", default="128,192,256,512,1024")
+    parser.add_argument("--paths", default=",".join(PATHS))
+    parser.add_argument("--all-cells", action="store_true", help="Also the large cells the default run leaves out.")
+    parser.add_argument("--workers", type=int, default=2, help="Scenes measured at once (processes).")
+    parser.add_argument("--cache", default=str(Path.home() / ".cache" / "gsseg" / "association_grid"),
+                        help="Folder the scenes are generated into once and reused from.")
+    parser.add_argument("--out", default=None, help="JSON file (default: benchmarks/results/association_grid.json).")
+    parser.add_argument("--tag", default="", help="Suffix of the default JSON file name.")
+    args = parser.parse_args()
+    seeds = [int(x) for x in args.seeds.split(",")]
+    jobs = [(v, r, p, s) for v in map(int, args.views.split(",")) for r in map(int, args.res.split(","))
+            for p in args.paths.split(",") for s in seeds if args.all_cells or included(v, r)]
+    jobs.sort(key=lambda j: -j[0] * j[1] ** 2)  # largest first: the pool ends evenly
+    start = time.perf_counter()
+    results: dict = {"scenes": {}, "setup": vars(args)}
+    with ProcessPoolExecutor(args.workers) as pool:
+        futures = {job: pool.submit(measure_scene, args.cache, *job) for job in jobs}
+        for (views, res, path, seed), future in futures.items():
+            result = future.result()
+            results["scenes"].setdefault(f"{views}/{res}/{path}", {})[str(seed)] = result
+            print(views, res, path, seed, f"exact {result['exact']:.3f}",
+                  json.dumps({k: {m: round(v, 3) for m, v in c.items()} for k, c in result["cells"].items()}),
+                  flush=True)
+    results["wall_seconds"] = time.perf_counter() - start
+    results["misses"] = misses(results)
+    print(report(results)[1])
+    record.save("association_grid", results, tag=args.tag, out=args.out)
+
+
+def report(r: dict) -> tuple[str, str]:
+    rows = []
+    worst: dict[str, float] = {}
+    for key, by_seed in sorted(r["scenes"].items(), key=lambda kv: [int(x) if x.isdigit() else x
+                                                                   for x in kv[0].split("/")]):
+        for cell in next(iter(by_seed.values()))["cells"]:
+            values = {c: min(s["cells"][cell][c] for s in by_seed.values())
+                      for c in ("input", "ceiling", *METHODS)}
+            exact = min(s["exact"] for s in by_seed.values())
+            rows.append([*key.split("/"), *cell.split("/"), f"{values['input']:.3f}", f"{exact:.3f}",
+                         f"{values['tracks']:.3f}", f"{values['flow']:.3f}", f"{values['ceiling']:.3f}"])
+            if int(key.split("/")[0]) >= 16:
+                sev = cell.split("/")[1]
+                for c in ("tracks", "flow"):
+                    worst[f"{sev} {c}"] = min(worst.get(f"{sev} {c}", 1.0), values[c])
+                worst["exact"] = min(worst.get("exact", 1.0), exact)
+    headline = ("worst cell of >= 16 views: exact " + f"{worst.get('exact', float('nan')):.3f}; " + ", ".join(
+        f"{k} {v:.3f}" for k, v in sorted(worst.items()) if k != "exact") + f"; {len(r['misses'])} misses; "
+        f"{r['wall_seconds'] / 60:.0f} min")
+    n_seeds = len(next(iter(r["scenes"].values())))
+    table = markdown_table(["views", "res", "path", "errors", "severity", "input", "exact", "tracks", "flow",
+                            "ceiling"], rows)
+    listed = "\n".join(f"- {m}" for m in r["misses"]) or "none"
+    return headline, (f"Worst of {n_seeds} scene seeds per cell (consistency: share of ground-truth object pixels "
+                      f"with their ID after one matching per scene).\n\n{table}\n\nCells of 16 views or more "
+                      f"that miss a target:\n\n{listed}")
+
+
+if __name__ == "__main__":
+    main()
