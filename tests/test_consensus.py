@@ -169,10 +169,17 @@ def test_depth_priors_have_known_answers():
     xyz = np.array([[(u - 20) / 50 * z, (v - 15) / 50 * z, z] for (u, v), z in zip(uv, (2.0, 8.0, 9.0))])
     depth = depth_from_points(view, uv, xyz, ids)
     assert (depth[ids == 3] == 2.0).all() and depth[2, 30] == 8.0 and depth[28, 30] == 9.0
-    anchors = {3: Anchor(np.array([0.0, 0.0, 4.0]), 0.5), 5: Anchor(np.array([1.0, 0.0, 7.0]), 0.5)}
+    anchors = {3: Anchor(np.array([0.0, 0.0, 4.0]), 0.5, 0.3), 5: Anchor(np.array([1.0, 0.0, 7.0]), 0.5, 0.3)}
     depth = depth_from_anchors(view, ids, anchors)
-    assert (depth[ids == 3] == 4.0).all() and (depth[ids == 0] == 7.0).all()
-    assert depth_from_anchors(view, ids, {3: Anchor(np.array([0.0, 0.0, -1.0]), 0.5)}) is None
+    assert (depth[ids == 3] == 4.0).all() and depth[0, 0] == 7.0
+    # object 5, missed in this view, stands where its anchor projects: a disk of 5 px radius
+    # about (30, 15); the background lies as far as the farthest anchor, object 6
+    anchors = {3: anchors[3], 5: Anchor(np.array([1.0, 0.0, 5.0]), 0.5, 0.3),
+               6: Anchor(np.array([-3.0, 0.0, 9.0]), 0.5, 0.3)}
+    depth = depth_from_anchors(view, ids, anchors)
+    assert depth[15, 30] == 5.0 and depth[15, 34] == 5.0 and depth[15, 37] == 9.0 and depth[28, 2] == 9.0
+    assert (depth[ids == 3] == 4.0).all()
+    assert depth_from_anchors(view, ids, {3: Anchor(np.array([0.0, 0.0, -1.0]), 0.5, 0.3)}) is None
 
 
 def test_carrying_along_a_plane_agrees_with_the_flow_its_depth_implies():

@@ -34,10 +34,12 @@ class Sighting:
 
 @dataclass(frozen=True)
 class Anchor:
-    """point (3,) in world coordinates and radius, the object's size in world units."""
+    """point (3,) in world coordinates; radius, the object's size in world units; spread, the
+    widest angle between its rays in radians (how well the point's depth is fixed)."""
 
     point: np.ndarray
     radius: float
+    spread: float
 
 
 def sighting(view: int, mask: np.ndarray, camera: PinholeCamera, cam_from_world: np.ndarray) -> Sighting:
@@ -49,29 +51,43 @@ def sighting(view: int, mask: np.ndarray, camera: PinholeCamera, cam_from_world:
     return Sighting(view, -R.T @ t, d / np.linalg.norm(d), float(len(xs)), 0.5 * (camera.fx + camera.fy))
 
 
-def triangulate(sightings: list[Sighting]) -> Anchor | None:
-    """The anchor of an object seen in ``sightings``: the point minimising the area-weighted
-    squared distances to their rays, and the median size its segments give at that depth.
-    None when fewer than two rays, rays closer to parallel than ``MIN_RAY_ANGLE``, or a
-    point behind a camera."""
-    if len(sightings) < 2:
-        return None
-    dirs = np.stack([s.direction for s in sightings])
-    if np.arccos(np.clip(dirs @ dirs.T, -1, 1)).max() < MIN_RAY_ANGLE:
-        return None
-    weights = np.sqrt([s.area for s in sightings])
+def _nearest_point(sightings: list[Sighting], weights: np.ndarray) -> np.ndarray:
+    """The point minimising the weighted squared distances to the sightings' rays."""
     A = np.zeros((3, 3))
     b = np.zeros(3)
     for w, s in zip(weights, sightings):
         P = np.eye(3) - np.outer(s.direction, s.direction)
         A += w * P
         b += w * P @ s.origin
-    point = np.linalg.solve(A, b)
-    depths = np.array([(point - s.origin) @ s.direction for s in sightings])
-    if (depths <= 0).any():
+    return np.linalg.solve(A, b)
+
+
+def triangulate(sightings: list[Sighting], rounds: int = 3) -> Anchor | None:
+    """The anchor of an object seen in ``sightings``: the point nearest to their rays (squared
+    distances weighted by the square root of each segment's area, then ``rounds`` times
+    reweighted by a Cauchy function of each ray's distance in object radii, so that a
+    segment that merged the object with a neighbour, or kept only a piece of it, does not
+    drag the point), and the median size its segments give at that depth. None when fewer
+    than two rays, rays closer to parallel than ``MIN_RAY_ANGLE``, or a point behind a camera."""
+    if len(sightings) < 2:
         return None
-    radius = float(np.median([np.sqrt(s.area / np.pi) * d / s.focal for s, d in zip(sightings, depths)]))
-    return Anchor(point, radius)
+    dirs = np.stack([s.direction for s in sightings])
+    spread = float(np.arccos(np.clip(dirs @ dirs.T, -1, 1)).max())
+    if spread < MIN_RAY_ANGLE:
+        return None
+    prior = np.sqrt([s.area for s in sightings])
+    weights = prior
+    for _ in range(rounds + 1):
+        point = _nearest_point(sightings, weights)
+        depths = np.array([(point - s.origin) @ s.direction for s in sightings])
+        if (depths <= 0).any():
+            return None
+        sizes = np.array([np.sqrt(s.area / np.pi) * d / s.focal for s, d in zip(sightings, depths)])
+        radius = float(np.median(sizes))
+        off = np.array([np.linalg.norm((point - s.origin) - ((point - s.origin) @ s.direction) * s.direction)
+                        for s in sightings])
+        weights = prior / (1.0 + (off / max(radius, 1e-12)) ** 2)
+    return Anchor(point, radius, spread)
 
 
 def rays_meet(a: Sighting, b: Sighting, tolerance: float) -> bool:

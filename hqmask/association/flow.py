@@ -4,9 +4,11 @@ The views are visited along a path that depends on their camera poses alone
 (:func:`pose_order`), so renaming the files changes nothing. In each direction:
 
 1. the previous view's object masks are carried to the current view by dense optical flow
-   (OpenCV DIS, computed from the current view back to the previous one); a track with an
-   anchor (see below) is carried instead along the flow that a plane at its anchor's depth
-   implies, which follows steps between views that optical flow cannot;
+   (OpenCV DIS, computed from the current view back to the previous one); a track whose
+   anchor (see below) is fixed by rays at least ``carry_spread`` degrees apart is carried
+   instead along the flow that a plane at its anchor's depth implies, which follows steps
+   between views that optical flow cannot (between views close together, as a forward-facing
+   capture's, the anchor's depth is too loose for that and the flow is better);
 2. the current view's segments are matched to the carried masks by IoU with the Hungarian
    algorithm (IoU >= ``min_iou``), then what is left to the tracks left free at a weaker
    IoU (>= ``weak_iou``: large steps between views move the carried masks off their
@@ -70,9 +72,11 @@ def pose_distances(centers: np.ndarray, directions: np.ndarray) -> np.ndarray:
 
 
 def pose_order(centers: np.ndarray, directions: np.ndarray) -> list[int]:
-    """A path through the views that depends on their poses alone: it starts at an end of the
-    longest path of the poses' minimum spanning tree and goes to the nearest unvisited view
-    each time (ties broken by the camera centres' coordinates, never by file order).
+    """A path through the views that depends on their poses alone, with no long step: it
+    starts at an end of the longest path of the poses' minimum spanning tree, goes to the
+    nearest unvisited view each time (ties broken by the camera centres' coordinates, never
+    by file order), then 2-opt reversals shorten it until no reversal lowers the sum of its
+    squared steps (a greedy walk through a spiral of views jumps between the arms at its end).
 
     Args:
         centers: (V, 3) camera centres. directions: (V, 3) unit viewing directions.
@@ -91,7 +95,31 @@ def pose_order(centers: np.ndarray, directions: np.ndarray) -> list[int]:
         nxt = min(left, key=lambda k: (dist[last, k], tuple(centers[k])))
         order.append(nxt)
         left.remove(nxt)
-    return order
+    return _two_opt(order, dist**2)
+
+
+def _two_opt(order: list[int], cost: np.ndarray) -> list[int]:
+    """``order`` with segments reversed while that lowers the summed ``cost`` (V, V) of its
+    steps. The path is closed through a dummy stop that costs nothing to reach or leave, so
+    its ends may move too; the first improving reversal is taken each time (deterministic)."""
+    n = len(order)
+    full = np.zeros((n + 1, n + 1))
+    full[:n, :n] = cost
+    tour = np.array(order + [n])  # the dummy stop closes the path into a tour
+    improved = True
+    while improved:
+        improved = False
+        for i in range(n - 1):
+            a, b = tour[i], tour[i + 1]
+            c, d = tour[i + 2:], np.roll(tour, -1)[i + 2:]
+            gain = full[a, b] + full[c, d] - full[a, c] - full[b, d]
+            best = int(np.argmax(gain))
+            if gain[best] > 1e-12:
+                j = i + 2 + best
+                tour[i + 1: j + 1] = tour[i + 1: j + 1][::-1]
+                improved = True
+    k = int(np.flatnonzero(tour == n)[0])
+    return [int(x) for x in np.roll(tour, -k)[1:]]
 
 
 @dataclass
@@ -120,6 +148,7 @@ class FlowOptions:
     consensus: float = 0.3
     anchor_inside: float = 0.5
     gate: float = 1.5
+    carry_spread: float = 10.0
     min_views: int = 2
 
 
@@ -179,7 +208,8 @@ class _Pass:
         flow = None
         for t, track in self.tracks.items():
             anchor = self.anchors.get(t)
-            depth = None if anchor is None else anchor.point @ view.cam_from_world[2, :3] + view.cam_from_world[2, 3]
+            firm = anchor is not None and anchor.spread >= np.deg2rad(self.options.carry_spread)
+            depth = anchor.point @ view.cam_from_world[2, :3] + view.cam_from_world[2, 3] if firm else None
             if depth is not None and depth > 0:
                 track.mask = pull_along_plane(track.mask, view, before, depth, (H, W))
                 continue

@@ -23,6 +23,7 @@ from collections import defaultdict
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import sparse
 from scipy.spatial import cKDTree
 
 from dataset_tools.scene import View
@@ -156,24 +157,25 @@ class _Graph:
 
     def links(self, link_ratio: float, min_shared: int) -> list[tuple[int, int, int]]:
         """(shared points, node, node) for every pair of object segments of two views that
-        hold most of each other's points seen in both views."""
-        found = []
-        n_views = len(self.seg_at)
-        for a in range(n_views):
-            for b in range(a + 1, n_views):
-                both = (self.seg_at[a] >= 0) & (self.seg_at[b] >= 0)
-                if not both.any():
-                    continue
-                na, nb = self.node[a, both], self.node[b, both]
-                pairs, shared = np.unique(np.stack([na, nb]), axis=1, return_counts=True)
-                size_a = dict(zip(*np.unique(na, return_counts=True)))
-                size_b = dict(zip(*np.unique(nb, return_counts=True)))
-                for (x, y), count in zip(pairs.T, shared):
-                    if self.is_background[x] or self.is_background[y] or count < min_shared:
-                        continue
-                    if count >= link_ratio * size_a[x] and count >= link_ratio * size_b[y]:
-                        found.append((int(count), int(x), int(y)))
-        return found
+        hold most of each other's points seen in both views.
+
+        With M the (nodes, points) incidence of segments and the points they hold, and V the
+        (views, points) visibility, M M^T counts the points two segments share and M V^T the
+        points of a segment that another view sees: one sparse product each.
+        """
+        n_views, n_points = self.seg_at.shape
+        n_nodes = len(self.view_of)
+        views, points = np.nonzero(self.node >= 0)
+        nodes = self.node[views, points]
+        incidence = sparse.csr_matrix((np.ones(len(nodes)), (nodes, points)), shape=(n_nodes, n_points))
+        visible = sparse.csr_matrix((np.ones(len(views)), (views, points)), shape=(n_views, n_points))
+        shared = sparse.triu(incidence @ incidence.T, k=1).tocoo()
+        seen_by = (incidence @ visible.T).toarray()  # (nodes, views): points of a node seen in a view
+        x, y, count = shared.row, shared.col, shared.data
+        keep = ((self.view_of[x] != self.view_of[y]) & ~self.is_background[x] & ~self.is_background[y]
+                & (count >= min_shared) & (count >= link_ratio * seen_by[x, self.view_of[y]])
+                & (count >= link_ratio * seen_by[y, self.view_of[x]]))
+        return [(int(c), int(a), int(b)) for c, a, b in zip(count[keep], x[keep], y[keep])]
 
 
 def _core_objects(graph: _Graph, links: list[tuple[int, int, int]]) -> tuple[np.ndarray, np.ndarray]:
