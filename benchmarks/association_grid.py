@@ -70,7 +70,7 @@ def _masks(scene: Path, name: str) -> list[np.ndarray]:
 def _built(scene: Path, source: str, associate: str = "auto") -> float:
     """Consistency of ``hqmask build --proposer existing --from-masks source`` (always rebuilt;
     only scenes and corrupted masks come from the cache)."""
-    out = f".grid_{source}_{associate}"
+    out = f"grid_{source}_{associate}"
     build_masks(scene, BuildConfig(proposer="existing", from_masks=source, associate=associate, out_masks=out,
                                    force=True), progress=False)
     score = mask_scores(scene, out)["consistency"]
@@ -94,9 +94,9 @@ def measure_scene(cache: str, views: int, res: int, path: str, seed: int) -> dic
     for family, severity in itertools.product(FAMILIES, SEVERITIES):
         noisy = f"{family}_{severity}"
         cell = {"input": mask_scores(scene, noisy)["consistency"]}
-        clean_scene_masks(scene, noisy, f".grid_{noisy}_cleaned", force=True, progress=False)
-        cell["ceiling"] = segment_ceiling(_masks(scene, f".grid_{noisy}_cleaned"), truth)
-        shutil.rmtree(scene / f".grid_{noisy}_cleaned")
+        clean_scene_masks(scene, noisy, f"grid_{noisy}_cleaned", force=True, progress=False)
+        cell["ceiling"] = segment_ceiling(_masks(scene, f"grid_{noisy}_cleaned"), truth)
+        shutil.rmtree(scene / f"grid_{noisy}_cleaned")
         for method in METHODS:
             cell[method] = _built(scene, noisy, method)
         out["cells"][f"{family}/{severity}"] = cell

@@ -9,6 +9,14 @@ import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
+from dataset_tools.errors import InputError
+
+
+def require_folder_path(path: Path) -> None:
+    """Refuse an output folder path where a file stands (before any work is done)."""
+    if path.exists() and not path.is_dir():
+        raise InputError(f"{path}: a file stands there; choose another --out.")
+
 
 def _default_mode(kind: int) -> int:
     """``kind`` (0o666 for files, 0o777 for folders) less the process umask, the mode a plain

@@ -1,4 +1,5 @@
-"""``python -m dataset_tools``: synthetic scenes, mask corruption, scene inspection and the HQ dataset."""
+"""``python -m dataset_tools``: scene folders from photos or a video (SfM), synthetic scenes, mask
+corruption, scene inspection and the HQ dataset."""
 
 from __future__ import annotations
 
@@ -22,15 +23,45 @@ def cli() -> None:
 @click.option("--objects", type=int, default=6, show_default=True)
 @click.option("--path", "path_kind", type=click.Choice(["orbit", "forward"]), default="orbit", show_default=True)
 @click.option("--wall/--no-wall", default=None, help="Back wall (default: only for --path forward).")
+@click.option("--edit-truth", is_flag=True,
+              help="Also render the test views without each object and each object alone (edit_truth/).")
 @click.option("--force", is_flag=True, help="Replace --out if it exists.")
-def synth(out: Path, seed: int, views: int, res: int, objects: int, path_kind: str, wall: bool | None, force: bool) -> None:
+def synth(out: Path, seed: int, views: int, res: int, objects: int, path_kind: str, wall: bool | None,
+          edit_truth: bool, force: bool) -> None:
     """Ray-cast a synthetic scene with exact object masks and SfM points."""
     from dataset_tools.synth import SynthConfig, generate_scene
+    from dataset_tools.synth.edit_truth import write_edit_truth
 
     cfg = SynthConfig(views=views, res=res, objects=objects, path=path_kind, seed=seed, wall=wall)
     result = generate_scene(cfg, out, overwrite=force)
+    if edit_truth:
+        write_edit_truth(result.root)
     click.echo(f"wrote {result.root}: {views} views at {res}x{res}, {objects} objects, "
                f"{len(result.point_object_ids)} points3D")
+
+
+@cli.command()
+@click.argument("photos", type=click.Path(path_type=Path))
+@click.option("--out", type=click.Path(path_type=Path), required=True, help="Scene folder to write.")
+@click.option("--frames", type=int, default=150, show_default=True, help="Frames to keep from a video.")
+@click.option("--matcher", type=click.Choice(["auto", "exhaustive", "sequential"]), default="auto", show_default=True,
+              help="auto: exhaustive for up to 150 photos, sequential with keyframe loop closure otherwise and for video.")
+@click.option("--mapper", type=click.Choice(["incremental", "global"]), default="incremental", show_default=True)
+@click.option("--camera-model", default="SIMPLE_RADIAL", show_default=True, help="COLMAP camera model to fit.")
+@click.option("--single-camera/--camera-per-folder", default=None,
+              help="One camera for every image (default for a video) or one per folder of photos (default).")
+@click.option("--max-image-size", type=int, default=3200, show_default=True, help="SIFT runs on images at most this large.")
+@click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--force", is_flag=True, help="Make the scene again where --out already holds one.")
+def sfm(photos: Path, out: Path, force: bool, **options) -> None:
+    """Camera poses and a sparse model (COLMAP through pycolmap, on the CPU) for a folder of
+    PHOTOS or a video; writes a scene folder. A second call continues an interrupted one."""
+    from dataset_tools.sfm import SfmConfig, run_sfm
+
+    result = run_sfm(photos, out, SfmConfig(**options), overwrite=force)
+    others = f"; other models: {result.other_models}" if result.other_models else ""
+    click.echo(f"wrote {result.scene}: {result.registered} of {result.images} images registered in "
+               f"{result.seconds:.0f} s{others}")
 
 
 @cli.command()

@@ -1,31 +1,88 @@
-"""What every command-line front end shares: user errors become one line and exit code 2."""
+"""What every command-line front end shares: user errors and I/O failures become one line
+and exit code 2, interruptions exit 130 saying how to continue, and ``--version``."""
 
 from __future__ import annotations
 
+import errno
 import sys
 from collections.abc import Callable
+from importlib.metadata import PackageNotFoundError, version
 
 import click
+from tqdm import tqdm
 
 from dataset_tools.errors import InputError
+from dataset_tools.interrupts import Interrupted
+
+# What to do about an operating-system error, by errno.
+OS_FIXES = {
+    errno.ENOSPC: "free some disk space or write elsewhere",
+    errno.EDQUOT: "free some disk space or write elsewhere",
+    errno.EROFS: "the file system is read-only; write elsewhere",
+    errno.EACCES: "check the permissions or write elsewhere",
+    errno.EPERM: "check the permissions or write elsewhere",
+    errno.ENOTDIR: "a file stands where a folder is needed; choose another path",
+    errno.EISDIR: "a folder stands where a file is needed; choose another path",
+    errno.EEXIST: "it already exists; choose another path",
+    errno.ENOENT: "check the path",
+    errno.ENAMETOOLONG: "choose a shorter path",
+}
+
+
+def package_version() -> str:
+    try:
+        return version("gsseg")
+    except PackageNotFoundError:
+        return "unknown"
+
+
+def _close_progress_bars() -> None:
+    """Finish every open progress bar, so that what is printed next starts on a fresh line."""
+    for bar in list(getattr(tqdm, "_instances", ())):
+        bar.close()
+
+
+def describe_os_error(e: OSError) -> str:
+    """``<file>: <what>; <fix>`` for an operating-system error."""
+    where = e.filename if e.filename is not None else "writing the output"
+    what = e.strerror or str(e)
+    return f"{where}: {what.lower()}; {OS_FIXES.get(e.errno, 'check the path and try again')}."
 
 
 def run_cli(group: click.Group, prog_name: str) -> Callable[[], None]:
-    """An entry point that runs ``group`` and turns an ``InputError`` into ``error: ...``
-    on stderr and exit code 2, without a traceback."""
+    """An entry point that runs ``group`` and turns an ``InputError`` or an ``OSError`` into
+    ``error: ...`` on stderr and exit code 2, without a traceback; interrupted work exits 130
+    with its own message (a checkpoint written, how to continue)."""
+    group = click.version_option(package_version(), "--version", prog_name=prog_name)(group)
 
     def main() -> None:
         try:
             group.main(prog_name=prog_name, standalone_mode=False)
         except InputError as e:
+            _close_progress_bars()
             click.echo(f"error: {e}", err=True)
             sys.exit(2)
-        except click.exceptions.Abort:
-            click.echo("aborted", err=True)
+        except OSError as e:
+            _close_progress_bars()
+            click.echo(f"error: {describe_os_error(e)}", err=True)
+            sys.exit(2)
+        except Interrupted as e:
+            _close_progress_bars()
+            click.echo(f"interrupted: {e}", err=True)
             sys.exit(130)
+        except (click.exceptions.Abort, KeyboardInterrupt):
+            _close_progress_bars()
+            click.echo("interrupted; nothing half-written was left behind", err=True)
+            sys.exit(130)
+        except click.UsageError as e:
+            _close_progress_bars()
+            command = e.ctx.command_path if e.ctx is not None else prog_name
+            message = e.format_message().replace("\n", " ")
+            click.echo(f"error: {message}; see `{command} --help`.", err=True)
+            sys.exit(2)
         except click.ClickException as e:
-            e.show()
+            _close_progress_bars()
+            click.echo(f"error: {e.format_message()}", err=True)
             sys.exit(e.exit_code)
 
     return main
-

@@ -51,6 +51,12 @@ def read_model(sparse_dir: Path) -> ColmapModel:
             f"{sparse_dir}: not a readable COLMAP model ({str(e).strip().splitlines()[0]}); it needs "
             "cameras, images and points3D as .bin or .txt files."
         ) from None
+    for camera_id, cam in rec.cameras.items():
+        params = np.asarray(cam.params, float)
+        focal = params[cam.focal_length_idxs()] if len(params) else params
+        if cam.width <= 0 or cam.height <= 0 or not np.isfinite(params).all() or (focal <= 0).any():
+            raise InputError(f"{sparse_dir}: camera {camera_id} is {cam.width}x{cam.height} with parameters "
+                             f"{params.round(3).tolist()}; the model is damaged, export it from COLMAP again.")
     point_ids = sorted(rec.points3D.keys())
     row_of = {pid: row for row, pid in enumerate(point_ids)}
     xyz = np.array([rec.points3D[p].xyz for p in point_ids], dtype=np.float64).reshape(-1, 3)

@@ -8,7 +8,7 @@ import cv2
 import numpy as np
 from PIL import Image
 
-from dataset_tools.atomic import write_bytes_atomic
+from dataset_tools.atomic import atomic_directory, write_bytes_atomic
 from dataset_tools.errors import InputError
 
 IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".JPG", ".JPEG", ".PNG")
@@ -26,31 +26,47 @@ def image_size(path: Path) -> tuple[int, int]:
 
 
 def read_image(path: Path) -> np.ndarray:
-    """Read an RGB image. Returns (H, W, 3) uint8."""
-    img = cv2.imread(str(path), cv2.IMREAD_COLOR)
-    if img is None:
-        raise InputError(f"{path}: cannot read this image; replace it with a JPEG or PNG.")
-    return cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
+    """Read an RGB image as its pixels are stored (no EXIF rotation: COLMAP's cameras describe
+    the stored pixels). Returns (H, W, 3) uint8. A truncated or damaged file is an error, not
+    an image with grey rows."""
+    try:
+        with Image.open(path) as im:
+            im.load()
+            return np.array(im.convert("RGB"))
+    except FileNotFoundError:
+        raise InputError(f"{path}: image file not found; restore it or remove the view from the COLMAP model.") from None
+    except (OSError, SyntaxError, ValueError) as e:
+        raise InputError(f"{path}: cannot read this image ({e}); replace it with a whole JPEG or PNG.") from None
 
 
 def read_mask(path: Path) -> np.ndarray:
-    """Read an object-ID map. Returns (H, W) uint8, 0 = background, 1..255 = object IDs."""
-    ids = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-    if ids is None:
-        raise InputError(f"{path}: cannot read this mask; object masks must be 8-bit single-channel PNGs.")
-    if ids.ndim != 2:
+    """Read an object-ID map: an 8-bit single-channel PNG, or a palette PNG whose indices are
+    the IDs. Returns (H, W) uint8, 0 = background, 1..255 = object IDs."""
+    try:
+        with Image.open(path) as im:
+            im.load()
+            mode, ids = im.mode, np.array(im)
+    except FileNotFoundError:
+        raise InputError(f"{path}: mask file not found; rebuild the masks with `hqmask build`.") from None
+    except (OSError, SyntaxError, ValueError) as e:
+        raise InputError(f"{path}: cannot read this mask ({e}); object masks must be 8-bit single-channel PNGs.") from None
+    if mode in ("L", "P"):
+        return np.ascontiguousarray(ids, dtype=np.uint8)
+    if mode == "1":
+        return ids.astype(np.uint8)
+    if ids.ndim == 3:
         raise InputError(
             f"{path}: mask has {ids.shape[2]} channels; object masks must be 8-bit single-channel "
             "PNGs of object IDs (convert colour masks to one ID per colour)."
         )
-    if ids.dtype != np.uint8:
-        if np.issubdtype(ids.dtype, np.integer) and ids.max(initial=0) > 255:
-            raise InputError(
-                f"{path}: mask holds IDs up to {int(ids.max())}, more than the 255 an 8-bit map can "
-                "hold; merge or drop objects so that at most 255 IDs remain."
-            )
-        raise InputError(f"{path}: mask is {ids.dtype}; save it as an 8-bit single-channel PNG.")
-    return ids
+    if np.issubdtype(ids.dtype, np.integer) and ids.max(initial=0) > 255:
+        raise InputError(
+            f"{path}: mask holds IDs up to {int(ids.max())}, more than the 255 an 8-bit map can "
+            "hold; merge or drop objects so that at most 255 IDs remain."
+        )
+    if np.issubdtype(ids.dtype, np.integer) and ids.min(initial=0) >= 0:
+        return ids.astype(np.uint8)
+    raise InputError(f"{path}: mask is {ids.dtype}; save it as an 8-bit single-channel PNG.")
 
 
 def as_label_map(ids: np.ndarray, what: str) -> np.ndarray:
@@ -99,15 +115,18 @@ def colorize_labels(ids: np.ndarray) -> np.ndarray:
 
 
 def write_downsampled(src: Path, dst: Path, factor: int) -> None:
-    """Write every PNG of ``src`` to ``dst`` at 1/``factor`` size (area filter), with the same
-    names: the ``images_N`` copies a scene folder may hold. ``dst`` appears whole or not at all."""
-    from dataset_tools.atomic import atomic_directory
-
-    files = sorted(Path(src).rglob("*.png"))
+    """Write every image of ``src`` (JPEG or PNG, sub-folders too) to ``dst`` at 1/``factor``
+    size (area filter), with the same names and formats: the ``images_N`` copies a scene folder
+    may hold. ``dst`` appears whole or not at all."""
+    files = sorted(p for p in Path(src).rglob("*") if p.suffix in IMAGE_SUFFIXES)
     if not files:
-        raise InputError(f"{src}: no PNG images to downsample.")
+        raise InputError(f"{src}: no JPEG or PNG images to downsample.")
     with atomic_directory(Path(dst)) as tmp:
         for f in files:
             image = read_image(f)
             size = (max(1, image.shape[1] // factor), max(1, image.shape[0] // factor))
-            write_png(tmp / f.relative_to(src), cv2.resize(image, size, interpolation=cv2.INTER_AREA))
+            small = cv2.cvtColor(cv2.resize(image, size, interpolation=cv2.INTER_AREA), cv2.COLOR_RGB2BGR)
+            ok, data = cv2.imencode(f.suffix.lower(), small, [cv2.IMWRITE_JPEG_QUALITY, 95])
+            if not ok:
+                raise InputError(f"{f}: OpenCV cannot encode {f.suffix} images; use JPEG or PNG.")
+            write_bytes_atomic(tmp / f.relative_to(src), data.tobytes())

@@ -325,3 +325,19 @@ def save_scene(scene: Scene, out: Path | str, *, overwrite: bool = False, text: 
         meta["split"] = {"test": sorted(scene.test_names)}
         write_bytes_atomic(tmp / "scene.json", json.dumps(meta, indent=2, sort_keys=True).encode())
     return out
+
+
+def linked_scene(source: Path | str, out: Path | str) -> Path:
+    """A scene folder at ``out`` whose images, downsampled copies, COLMAP model and scene.json
+    are symbolic links to those of ``source``: what is written into it (masks, caches) stays
+    out of ``source``. Returns ``out``."""
+    source, out = Path(source).resolve(), Path(out)
+    if not (source / "sparse").is_dir():
+        raise InputError(f"{source}: no sparse/ COLMAP model; make one with `python -m dataset_tools sfm`.")
+    out.mkdir(parents=True, exist_ok=True)
+    for entry in source.iterdir():
+        if entry.name in ("sparse", "scene.json") or (entry.is_dir() and entry.name.split("_")[0] == "images"):
+            link = out / entry.name
+            if not link.exists():
+                link.symlink_to(entry, target_is_directory=entry.is_dir())
+    return out

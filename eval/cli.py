@@ -18,10 +18,12 @@ def cli() -> None:
 @click.argument("run", type=click.Path(path_type=Path))
 @click.option("--scene", required=True, type=click.Path(path_type=Path), help="The scene the run was trained on.")
 @click.option("--out", required=True, type=click.Path(path_type=Path), help="Report folder to write.")
-@click.option("--gt-masks", default="object_mask", show_default=True, help="Ground-truth mask folder of SCENE.")
+@click.option("--gt-masks", default="object_mask", show_default=True, callback=lambda ctx, param, v: None if v == "none" else v,
+              help="Ground-truth mask folder of SCENE; none: image metrics only.")
 @click.option("--split", default="test", show_default=True, help="Views to evaluate: test, train or all.")
 @click.option("--object-id", type=int, default=None, help="Label to edit in the image rows (default: the largest).")
-@click.option("--color", nargs=3, type=int, default=(255, 40, 200), show_default=True, help="Recolour target, 0..255.")
+@click.option("--color", nargs=3, type=click.IntRange(0, 255), default=(255, 40, 200), show_default=True,
+              help="Recolour target, 0..255.")
 @click.option("--backend", default="auto", show_default=True, help="auto, cpu, torch or gsplat.")
 @click.option("--lpips", type=click.Path(path_type=Path), default=None,
               help="LPIPS network (ONNX, from `gseval export-lpips`); without it LPIPS is n/a.")
@@ -34,8 +36,9 @@ def report(run: Path, scene: Path, out: Path, gt_masks: str, split: str, object_
     ev = report_run(run, scene, out, gt_masks=gt_masks, split=split, object_id=object_id, color=color,
                     backend=backend, lpips=lpips, overwrite=force)
     s = ev.summary()
-    click.echo(f"mIoU visible {s['visible']['miou']:.3f}, extracted {s['extracted']['miou']:.3f}; "
-               f"PSNR {s['psnr']:.2f} dB")
+    scores = (f"mIoU visible {s['visible']['miou']:.3f}, extracted {s['extracted']['miou']:.3f}; "
+              if s["visible"]["miou"] is not None else "")
+    click.echo(f"{scores}PSNR {s['psnr']:.2f} dB over {s['views']} views")
     click.echo(f"wrote {out / 'report.html'}")
 
 

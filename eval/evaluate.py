@@ -85,6 +85,17 @@ class Evaluation:
     def save(self, path: Path) -> None:
         write_bytes_atomic(path, (json.dumps(self.to_json(), indent=2) + "\n").encode())
 
+    @classmethod
+    def load(cls, path: Path) -> Evaluation:
+        """An ``evaluation.json`` written by :meth:`save`; a missing or damaged file is an
+        :class:`InputError` that says how to write it again."""
+        if not path.is_file():
+            raise InputError(f"{path}: missing; run `gseval report {path.parent} --scene SCENE --out DIR` first.")
+        try:
+            return cls.from_json(json.loads(path.read_text()))
+        except (ValueError, TypeError, KeyError, AttributeError) as e:
+            raise InputError(f"{path}: damaged ({e}); run `gseval report` on the run again.") from None
+
 
 def _mean(values: list[float]) -> float | None:
     return float(np.mean(values)) if values else None
@@ -118,7 +129,7 @@ def score_views(renders: list[ViewRenders], *, run: str, scene: str, split: str,
 def load_inputs(run_dir: Path, scene_dir: Path, gt_masks: str | None, split: str) -> tuple[Run, Segmentation, list[View]]:
     """The run, its labels and the scene's ``split`` views, refusing what cannot be evaluated."""
     run = load_run(run_dir)
-    segmentation = Segmentation.load(run.folder.labels)
+    segmentation = run.labels()
     if gt_masks is not None and not (scene_dir / gt_masks).is_dir():
         raise InputError(f"{scene_dir / gt_masks}: no ground-truth masks for the metrics; "
                          "pass --gt-masks NAME, the scene's ground-truth mask folder.")

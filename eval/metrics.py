@@ -64,3 +64,85 @@ def segment_ceiling(preds: list[np.ndarray], gts: list[np.ndarray]) -> float:
         hit += int(np.count_nonzero(best[p[obj]] == g[obj]))
         total += int(np.count_nonzero(obj))
     return hit / max(total, 1)
+
+
+def similarity_alignment(source: np.ndarray, target: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+    """The similarity (scale s, rotation R (3, 3), translation t (3,)) that best maps the points
+    ``source`` (N, 3) onto ``target`` (N, 3) in the least-squares sense (Umeyama's method):
+    target ~ s R source + t."""
+    mu_s, mu_t = source.mean(0), target.mean(0)
+    a, b = source - mu_s, target - mu_t
+    U, D, Vt = np.linalg.svd(b.T @ a / len(source))
+    sign = np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))])
+    R = U @ sign @ Vt
+    s = float(np.trace(np.diag(D) @ sign) / (a**2).sum(1).mean())
+    return s, R, mu_t - s * R @ mu_s
+
+
+def camera_errors(estimated: list[np.ndarray], truth: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """Per camera, the rotation error in degrees after the rotation that best aligns the
+    estimated orientations with the true ones (their chordal mean), and the centre error as a
+    share of the true cameras' extent (their largest distance from their mean) after the
+    similarity that best aligns the centres (:func:`similarity_alignment`). The orientations,
+    not the centres, fix the rotation errors' frame: centres along an arc fix a rotation badly.
+
+    Args:
+        estimated, truth: per camera, (3, 4) world-to-camera [R | t], in the same order.
+    Returns:
+        (rotation errors (N,), centre errors (N,)).
+    """
+    def centers(poses: list[np.ndarray]) -> np.ndarray:
+        return np.stack([-p[:, :3].T @ p[:, 3] for p in poses])
+
+    est, true = centers(estimated), centers(truth)
+    s, R, t = similarity_alignment(est, true)
+    extent = float(np.linalg.norm(true - true.mean(0), axis=1).max())
+    center_error = np.linalg.norm((s * est @ R.T + t) - true, axis=1) / extent
+    U, _, Vt = np.linalg.svd(sum(g[:, :3].T @ e[:, :3] for e, g in zip(estimated, truth)))
+    align = U @ np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))]) @ Vt  # estimated world -> true world
+    rotation_error = []
+    for e, g in zip(estimated, truth):
+        relative = (e[:, :3] @ align.T) @ g[:, :3].T  # the estimated rotation in the true world, against the truth
+        rotation_error.append(np.degrees(np.arccos(np.clip((np.trace(relative) - 1) / 2, -1, 1))))
+    return np.array(rotation_error), center_error
+
+
+def removal_scores(removed: np.ndarray, truth: np.ndarray, region: np.ndarray, seen: np.ndarray) -> dict[str, float]:
+    """A removal against the view rendered without the object: PSNR and SSIM of the whole view,
+    PSNR over the ``region`` (H, W) bool the object covered (where a ghost of it would show)
+    and over its ``seen`` part (whose background some training view saw).
+
+    Args:
+        removed, truth: (H, W, 3) uint8.
+    """
+    def masked_psnr(mask: np.ndarray) -> float | None:
+        if not mask.any():
+            return None
+        mse = np.mean((removed[mask].astype(np.float64) - truth[mask].astype(np.float64)) ** 2)
+        return float("inf") if mse == 0 else float(10 * np.log10(255.0**2 / mse))
+
+    return {"psnr": psnr(removed, truth), "ssim": ssim(removed, truth), "psnr_region": masked_psnr(region),
+            "psnr_seen": masked_psnr(region & seen)}
+
+
+def extraction_scores(alpha: np.ndarray, rgb: np.ndarray, truth: np.ndarray, silhouette: np.ndarray,
+                      margin: int = 2) -> dict[str, float]:
+    """An extraction against the object rendered alone: IoU of its alpha >= 0.5 silhouette
+    with the true silhouette, PSNR inside the true silhouette of the render on white, and the
+    leak: the share of the extraction's opacity outside the true silhouette dilated by
+    ``margin`` pixels (floor, shadow or neighbours carried along).
+
+    Args:
+        alpha: (H, W) float accumulated opacity. rgb, truth: (H, W, 3) uint8 on white.
+        silhouette: (H, W) bool.
+    """
+    import cv2
+
+    iou, _ = binary_scores(alpha >= 0.5, silhouette)
+    grown = cv2.dilate(silhouette.astype(np.uint8), np.ones((2 * margin + 1, 2 * margin + 1), np.uint8)) > 0
+    total = float(alpha.sum())
+    inside = silhouette
+    mse = np.mean((rgb[inside].astype(np.float64) - truth[inside].astype(np.float64)) ** 2) if inside.any() else None
+    return {"iou": iou, "psnr_inside": None if mse is None else (float("inf") if mse == 0 else
+                                                                   float(10 * np.log10(255.0**2 / mse))),
+            "leak": float(alpha[~grown].sum() / total) if total > 0 else 0.0}

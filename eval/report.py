@@ -56,13 +56,14 @@ def edit_panels(run: Run, segmentation: Segmentation, views: list[View], label: 
 
 
 def image_row(r: ViewRenders, id_map: dict[int, int], edits: dict[str, list[np.ndarray]], index: int) -> np.ndarray:
-    """The panels of one view side by side, 4 px apart: (H, 6W + 20, 3) uint8."""
+    """The panels of one view side by side, 4 px apart: (H, 6W + 20, 3) uint8 (5 panels
+    without ground truth)."""
     mapping = np.full(256, 255, np.uint8)
     mapping[0] = 0
     for label, gt in id_map.items():
         mapping[label] = gt
-    truth = colorize_labels(r.truth) if r.truth is not None else np.full_like(r.image, 255)
-    panels = [r.image, truth, colorize_labels(mapping[r.visible])] + [edits[op][index] for op in ("remove", "extract", "recolor")]
+    truth = [colorize_labels(r.truth)] if r.truth is not None else []
+    panels = [r.image, *truth, colorize_labels(mapping[r.visible])] + [edits[op][index] for op in ("remove", "extract", "recolor")]
     gap = np.full((r.image.shape[0], 4, 3), 255, np.uint8)
     return np.concatenate([x for p in panels for x in (p, gap)][:-1], axis=1)
 
@@ -92,23 +93,32 @@ def training_plot(history: list[dict]) -> bytes | None:
     return buf.getvalue()
 
 
-def _tables(ev: Evaluation) -> tuple[list[str], list[list[str]], list[str], list[list[str]], list[str], list[list[str]]]:
+def _sections(ev: Evaluation) -> list[tuple[str, list[str], list[list[str]]]]:
+    """The report's tables as (title, head, rows): the summary (untitled), the objects and
+    the views. Without ground truth the segmentation columns and the objects table are left
+    out, not drawn empty."""
     s = ev.summary()
-    summary_head = ["views", "mIoU visible", "mAcc visible", "mIoU extracted", "mAcc extracted", "PSNR", "SSIM", "LPIPS"]
-    summary = [[str(s["views"]), _fmt(s["visible"]["miou"]), _fmt(s["visible"]["macc"]), _fmt(s["extracted"]["miou"]),
-                _fmt(s["extracted"]["macc"]), _fmt(s["psnr"], 2), _fmt(s["ssim"]),
-                s["lpips"] if isinstance(s["lpips"], str) else _fmt(s["lpips"])]]
-    object_head = ["object", "predicted label", "IoU visible", "acc visible", "IoU extracted", "acc extracted"]
-    label_of = {g: p for p, g in ev.id_map.items()}
-    objects = [[str(o), str(label_of.get(o, "none")), *(_fmt(v[f"{p}_{m}"]) for p in PROTOCOLS for m in ("iou", "acc"))]
-               for o, v in ev.per_object().items()]
-    view_head = ["view", "PSNR", "SSIM", "LPIPS", "mIoU visible", "mIoU extracted"]
+    truth = bool(ev.objects)
+    lpips = s["lpips"] if isinstance(s["lpips"], str) else _fmt(s["lpips"])
+    summary_head = ["views", *(["mIoU visible", "mAcc visible", "mIoU extracted", "mAcc extracted"] if truth else []),
+                    "PSNR", "SSIM", "LPIPS"]
+    scores = [_fmt(s[p][m]) for p in PROTOCOLS for m in ("miou", "macc")] if truth else []
+    sections = [("", summary_head, [[str(s["views"]), *scores, _fmt(s["psnr"], 2), _fmt(s["ssim"]), lpips]])]
+    if truth:
+        label_of = {g: p for p, g in ev.id_map.items()}
+        sections.append(("Objects", ["object", "predicted label", "IoU visible", "acc visible", "IoU extracted",
+                                     "acc extracted"],
+                         [[str(o), str(label_of.get(o, "none")), *(_fmt(v[f"{p}_{m}"]) for p in PROTOCOLS
+                                                                   for m in ("iou", "acc"))]
+                          for o, v in ev.per_object().items()]))
     views = []
     for v in ev.views:
         rows = {p: [r["iou"] for r in ev.objects if r["view"] == v["view"] and r["protocol"] == p] for p in PROTOCOLS}
         views.append([v["view"], _fmt(v["psnr"], 2), _fmt(v["ssim"]), _fmt(v.get("lpips")),
-                      *(_fmt(float(np.mean(rows[p])) if rows[p] else None) for p in PROTOCOLS)])
-    return summary_head, summary, object_head, objects, view_head, views
+                      *((_fmt(float(np.mean(rows[p])) if rows[p] else None) for p in PROTOCOLS) if truth else ())])
+    sections.append(("Views", ["view", "PSNR", "SSIM", "LPIPS", *(["mIoU visible", "mIoU extracted"] if truth else [])],
+                     views))
+    return sections
 
 
 def markdown_table(head: list[str], rows: list[list[str]]) -> str:
@@ -129,21 +139,22 @@ def _data_uri(png: bytes) -> str:
 def write_report(ev: Evaluation, renders: list[ViewRenders], edits: dict[str, list[np.ndarray]], history: list[dict],
                  out_dir: Path, *, selected: int, title: str, overwrite: bool = False) -> Path:
     """Write ``out_dir`` (atomically) with metrics.json, report.md, report.html and images/."""
-    summary_head, summary, object_head, objects, view_head, views = _tables(ev)
+    sections = _sections(ev)
     rows = {r.stem: encode_png(image_row(r, ev.id_map, edits, i)) for i, r in enumerate(renders)}
     curve = training_plot(history)
     gt = ev.id_map.get(selected)
     edit_note = f"edits of predicted label {selected}" + (f" (ground-truth object {gt})" if gt is not None else "")
-    panels = " | ".join(PANELS)
+    panels = " | ".join(p for p in PANELS if p != "ground truth" or ev.objects)
     with atomic_directory(out_dir, overwrite=overwrite) as tmp:
         ev.save(tmp / "metrics.json")
         for stem, png in rows.items():
             write_bytes_atomic(tmp / "images" / f"{stem}.png", png)
         if curve is not None:
             write_bytes_atomic(tmp / "images" / "training.png", curve)
-        md = [f"# {title}", "", f"Run `{ev.run}` on scene `{ev.scene}`, {ev.split} views.", "",
-              markdown_table(summary_head, summary), "", "## Objects", "", markdown_table(object_head, objects), "",
-              "## Views", "", markdown_table(view_head, views), "", f"## Images: {panels}", "", f"{edit_note}.", ""]
+        md = [f"# {title}", "", f"Run `{ev.run}` on scene `{ev.scene}`, {ev.split} views.", ""]
+        for name, head, table in sections:
+            md += ([f"## {name}", ""] if name else []) + [markdown_table(head, table), ""]
+        md += [f"## Images: {panels}", "", f"{edit_note}.", ""]
         md += [f"![{stem}](images/{stem}.png)" for stem in rows]
         if curve is not None:
             md += ["", "## Training", "", "![training](images/training.png)"]
@@ -151,14 +162,15 @@ def write_report(ev: Evaluation, renders: list[ViewRenders], edits: dict[str, li
         images = "".join(f"<figure><img src='{_data_uri(png)}' alt='{html.escape(stem)}'><figcaption>{html.escape(stem)}"
                          "</figcaption></figure>" for stem, png in rows.items())
         training = f"<h2>Training</h2><img src='{_data_uri(curve)}' alt='training curves'>" if curve is not None else ""
+        tables = "".join((f"<h2>{html.escape(name)}</h2>" if name else "") + _html_table(head, table)
+                         for name, head, table in sections)
         page = f"""<!doctype html><html><head><meta charset="utf-8"><title>{html.escape(title)}</title><style>
 body{{font-family:sans-serif;margin:24px;color:#222}} table{{border-collapse:collapse;margin:8px 0 20px}}
 td,th{{border:1px solid #ccc;padding:4px 10px;text-align:right}} th{{background:#f0f0f0}}
 figure{{margin:0 0 12px}} img{{max-width:100%;image-rendering:pixelated}} figcaption{{font-size:12px;color:#666}}
 </style></head><body><h1>{html.escape(title)}</h1>
 <p>Run <code>{html.escape(ev.run)}</code> on scene <code>{html.escape(ev.scene)}</code>, {html.escape(ev.split)} views.</p>
-{_html_table(summary_head, summary)}<h2>Objects</h2>{_html_table(object_head, objects)}
-<h2>Views</h2>{_html_table(view_head, views)}<h2>Images</h2><p>{html.escape(panels)}; {html.escape(edit_note)}.</p>
+{tables}<h2>Images</h2><p>{html.escape(panels)}; {html.escape(edit_note)}.</p>
 {images}{training}</body></html>
 """
         write_bytes_atomic(tmp / "report.html", page.encode())
@@ -185,7 +197,8 @@ def report_run(run_dir: Path | str, scene_dir: Path | str, out_dir: Path | str, 
     history = json.loads(metrics.read_text()).get("train", {}).get("history", []) if metrics.is_file() else []
     write_report(ev, renders, edits, history, out_dir, selected=selected, title=f"gsseg report: {run_dir.name}",
                  overwrite=overwrite)
-    ev.save(run.folder.evaluation)
+    with run.folder.lock():
+        ev.save(run.folder.evaluation)
     return ev
 
 
@@ -194,10 +207,7 @@ def compare_runs(run_dirs: list[Path]) -> str:
     head = ["run", "scene", "mIoU visible", "mAcc visible", "mIoU extracted", "mAcc extracted", "PSNR", "SSIM"]
     rows = []
     for run in run_dirs:
-        path = RunFolder(run).evaluation
-        if not path.is_file():
-            raise InputError(f"{path}: missing; run `gseval report {run} --scene SCENE --out DIR` first.")
-        ev = Evaluation.from_json(json.loads(path.read_text()))
+        ev = Evaluation.load(RunFolder(run).evaluation)
         s = ev.summary()
         rows.append([str(run), Path(ev.scene).name, _fmt(s["visible"]["miou"]),
                      _fmt(s["visible"]["macc"]), _fmt(s["extracted"]["miou"]), _fmt(s["extracted"]["macc"]),

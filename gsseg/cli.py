@@ -18,13 +18,16 @@ def cli() -> None:
 @cli.command()
 @click.argument("scene", type=click.Path(path_type=Path))
 @click.option("--out", "run", required=True, type=click.Path(path_type=Path), help="Run folder to write.")
-@click.option("--masks", default="object_mask", show_default=True, help="Object-ID map folder; views without one train RGB only.")
+@click.option("--masks", default="object_mask", show_default=True, callback=lambda ctx, param, v: None if v == "none" else v,
+              help="Object-ID map folder (views without a mask train colour only); none: train colour alone.")
 @click.option("--images", default="images", show_default=True, help="Image folder (images or images_N).")
 @click.option("--iters", type=int, default=None, help="Iterations (default: 3000 on cpu, 30000 with gsplat); the schedule scales with it.")
 @click.option("--schedule", type=click.Choice(["auto", "cpu", "gpu"]), default="auto", show_default=True,
               help="cpu: the short laptop schedule; gpu: the paper's 30k schedule; auto picks by backend.")
 @click.option("--backend", type=click.Choice(["auto", "cpu", "torch", "gsplat"]), default="auto", show_default=True)
 @click.option("--gamma-obj", type=float, default=1.0, show_default=True, help="Weight of the object cross-entropy.")
+@click.option("--knn-reg", type=float, default=0.0, show_default=True,
+              help="Weight of Gaussian Grouping's 3D identity term (nearest Gaussians agree on their object); 0: off.")
 @click.option("--environment", "environment_degree", type=click.Choice(["none", "0", "1", "2", "3"]), default="3",
               show_default=True, callback=lambda ctx, param, v: None if v == "none" else int(v),
               help="SH degree of the learned background behind the Gaussians (sky, far ground); none: black.")
@@ -34,22 +37,26 @@ def cli() -> None:
               help="Densification stops at this many Gaussians (default: 150 000 on the cpu schedule, 6 000 000 on gpu).")
 @click.option("--seed", type=int, default=0, show_default=True)
 @click.option("--resume", is_flag=True, help="Continue the run in --out from its latest checkpoint.")
+@click.option("--allow-other-scene", is_flag=True, help="With --resume, continue on another scene than the run's.")
 @click.option("--stop-after", type=int, default=None, help="Checkpoint and stop at this step; continue with --resume.")
-def train(scene: Path, run: Path, schedule: str, resume: bool, stop_after: int | None, **options) -> None:
+def train(scene: Path, run: Path, schedule: str, resume: bool, allow_other_scene: bool, stop_after: int | None,
+          **options) -> None:
     """Train 3D-GS jointly with 16-d object features on SCENE."""
     from gsseg.render import get_backend
     from gsseg.train import TrainConfig, train as run_training
 
     if schedule == "auto":
         schedule = get_backend(options["backend"]).default_schedule
-    result = run_training(scene, run, TrainConfig(schedule=schedule, **options), resume=resume, stop_after=stop_after)
+    result = run_training(scene, run, TrainConfig(schedule=schedule, **options), resume=resume, stop_after=stop_after,
+                          other_scene=allow_other_scene)
     state = "finished" if result.finished else f"stopped at step {result.step}; continue with --resume"
     click.echo(f"{result.run}: {state}, {result.num_gaussians} Gaussians, {result.seconds:.0f} s")
 
 
 @cli.command()
 @click.argument("run", type=click.Path(path_type=Path))
-@click.option("--scene", required=True, type=click.Path(path_type=Path), help="Scene folder whose views to render.")
+@click.option("--scene", default=None, type=click.Path(path_type=Path),
+              help="Scene folder whose views to render (default: the one the run was trained on).")
 @click.option("--out", required=True, type=click.Path(path_type=Path), help="Folder to write.")
 @click.option("--split", type=click.Choice(["train", "test", "all"]), default="test", show_default=True)
 @click.option("--what", default="rgb,labels", show_default=True,
@@ -67,18 +74,22 @@ def render(run: Path, scene: Path, out: Path, what: str, force: bool, **options)
 
 @cli.command()
 @click.argument("run", type=click.Path(path_type=Path))
-@click.option("--scene", required=True, type=click.Path(path_type=Path), help="The scene the run was trained on.")
+@click.option("--scene", default=None, type=click.Path(path_type=Path),
+              help="The scene the run was trained on, where it moved (default: the recorded one).")
 @click.option("--method", type=click.Choice(["prior", "flashsplat", "classifier"]), default="prior", show_default=True)
 @click.option("--mode", type=click.Choice(["multi", "binary"]), default="multi", show_default=True)
 @click.option("--gamma-p", type=float, default=0.2, show_default=True, help="Weight of the learned prior (any real).")
 @click.option("--slack", type=float, default=0.0, show_default=True, help="Background bias of --method flashsplat.")
+@click.option("--smooth", type=int, default=0, show_default=True,
+              help="Gaussians with weak evidence take the label majority of this many nearest Gaussians (0: off).")
+@click.option("--fill-interiors", "fill", is_flag=True, help="Objects take the Gaussians they enclose.")
 @click.option("--masks", default="object_mask", show_default=True, help="Mask folder that votes.")
 @click.option("--backend", type=click.Choice(["auto", "cpu", "torch", "gsplat"]), default="auto", show_default=True)
-def segment(run: Path, scene: Path, **options) -> None:
+def segment(run: Path, scene: Path, masks: str, backend: str, **options) -> None:
     """Prior-guided label reassignment of every Gaussian of RUN; writes RUN/labels.npz."""
-    from gsseg.segment.segment_run import segment_run
+    from gsseg.segment.segment_run import LabelOptions, segment_run
 
-    result = segment_run(run, scene, **options)
+    result = segment_run(run, scene, options=LabelOptions(**options), masks=masks, backend=backend)
     counts = {int(o): int(s.sum()) for o, s in zip(result.objects, result.selections)}
     click.echo(f"wrote {run / 'labels.npz'}: {len(result.labels)} Gaussians; per object {counts}")
 
@@ -89,7 +100,7 @@ def segment(run: Path, scene: Path, **options) -> None:
 @click.option("--click", "click_", type=(str, float, float), default=None, help="VIEW U V: a pixel of a view.")
 @click.option("--object-id", type=int, default=None, help="The object's label.")
 @click.option("--op", type=click.Choice(["remove", "extract", "recolor"]), required=True)
-@click.option("--color", type=int, nargs=3, default=None, help="R G B (0..255) for --op recolor.")
+@click.option("--color", type=click.IntRange(0, 255), nargs=3, default=None, help="R G B (0..255) for --op recolor.")
 @click.option("--name", default=None, help="Edit folder name (default: <op>_<id>).")
 @click.option("--scene", default=None, type=click.Path(path_type=Path), help="Scene whose views to render (default: the run's).")
 @click.option("--split", type=click.Choice(["train", "test", "all"]), default="test", show_default=True)
@@ -105,13 +116,16 @@ def edit(run: Path, point, click_, scene, force: bool, **options) -> None:
 
 @cli.command()
 @click.option("--out", default="demo", show_default=True, type=click.Path(path_type=Path), help="Folder to write.")
-@click.option("--scene", default=None, type=click.Path(path_type=Path), help="Your scene folder instead of the synthetic one.")
-@click.option("--images", default="images", show_default=True, help="Image folder of --scene (images or images_N).")
+@click.option("--scene", default=None, type=click.Path(path_type=Path),
+              help="Your scene folder, folder of photos or video instead of the synthetic scene (photos and video "
+                   "go through `python -m dataset_tools sfm` first).")
+@click.option("--images", default=None, help="Image folder of --scene (default: the largest copy at most 640 px).")
 @click.option("--iters", type=int, default=1500, show_default=True, help="Training iterations.")
 @click.option("--max-gaussians", type=int, default=30_000, show_default=True, help="Densification stops at this many Gaussians.")
 @click.option("--backend", type=click.Choice(["auto", "cpu", "torch", "gsplat"]), default="auto", show_default=True)
 @click.option("--force", is_flag=True, help="Replace the outputs in --out.")
-def demo(out: Path, scene: Path | None, images: str, iters: int, max_gaussians: int, backend: str, force: bool) -> None:
+def demo(out: Path, scene: Path | None, images: str | None, iters: int, max_gaussians: int, backend: str,
+         force: bool) -> None:
     """The whole pipeline: scene, masks, training, segmentation, a 3D-point edit, the report."""
     from pipeline.demo import run_demo
 

@@ -13,12 +13,12 @@ from tqdm import tqdm
 from dataset_tools.atomic import atomic_directory
 from dataset_tools.errors import InputError
 from dataset_tools.image_files import write_png
+from dataset_tools.names import plain_name
 from gsseg.gaussians import Gaussians
 from gsseg.ply import write_ply
 from gsseg.render import Backend, get_backend
 from gsseg.run import load_run
 from gsseg.segment.prompts import pick_object, point_from_click
-from gsseg.segment.reassign import Segmentation
 from gsseg.sh import C0, rgb_to_sh_dc
 
 OPS = ("remove", "extract", "recolor")
@@ -64,8 +64,18 @@ def edit_run(run_dir: Path | str, op: str, *, point=None, click=None, object_id:
     scene's ``split`` views, ``video.mp4`` of those renders, and ``edit.json``."""
     if sum(x is not None for x in (point, click, object_id)) != 1:
         raise InputError("give exactly one of --point, --click or --object-id.")
+    if name is not None:
+        plain_name(name, "--name")
+    if point is not None and not np.isfinite(np.asarray(point, float)).all():
+        raise InputError(f"--point {' '.join(map(str, point))}: give three finite coordinates.")
+    if op not in OPS:
+        raise InputError(f"unknown edit {op!r}; choose one of {', '.join(OPS)}.")
+    if op == "recolor" and color is None:
+        raise InputError("--op recolor needs --color R G B (0..255).")
+    if color is not None and not all(0 <= c <= 255 for c in color):
+        raise InputError(f"--color {' '.join(map(str, color))}: give three values in 0..255.")
     run = load_run(run_dir)
-    segmentation = Segmentation.load(run.folder.labels)
+    segmentation = run.labels()
     backend = get_backend(backend)
     scene = run.scene(scene_dir)
     if click is not None:
@@ -80,7 +90,7 @@ def edit_run(run_dir: Path | str, op: str, *, point=None, click=None, object_id:
     out = run.folder.edit(name or f"{op}_{object_id}")
     if out.exists() and not overwrite:
         raise InputError(f"{out} exists; pass --force or choose another --name.")
-    with atomic_directory(out, overwrite=overwrite) as tmp:
+    with run.folder.lock(), atomic_directory(out, overwrite=overwrite) as tmp:
         write_ply(edited, tmp / "gaussians.ply")
         frames = []
         for view in tqdm(scene.split(split), desc="rendering edit", unit="view", disable=not progress):

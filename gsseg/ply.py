@@ -83,6 +83,10 @@ def read_ply(path: Path | str) -> Gaussians:
     obj_feat = stack("obj_feat_", n_feat) if n_feat else torch.zeros(n, OBJ_FEAT_DIM)
     if obj_feat.shape[1] != OBJ_FEAT_DIM:
         raise InputError(f"{path} has {n_feat} obj_feat_* properties; this version uses {OBJ_FEAT_DIM}.")
+    for name in vertex.dtype.names:
+        if not np.isfinite(np.asarray(vertex[name], np.float64)).all():
+            raise InputError(f"{path}: property {name} holds NaN or infinite values; the model is damaged, "
+                             "train it again.")
     return Gaussians(
         means=torch.from_numpy(np.stack([np.asarray(vertex[c], np.float32) for c in "xyz"], 1)),
         log_scales=stack("scale_", 3),

@@ -14,7 +14,6 @@ from dataset_tools.image_files import colorize_labels, write_png
 from gsseg.gaussians import Gaussians
 from gsseg.render import Backend, get_backend, render, to_uint8
 from gsseg.run import load_run
-from gsseg.segment.reassign import Segmentation
 
 PRODUCTS = ("rgb", "labels", "segments")
 
@@ -62,7 +61,7 @@ def render_run(
     if out.exists() and not overwrite:
         raise InputError(f"{out} exists; pass --force to replace it or choose another --out.")
     run = load_run(run_dir)
-    segmentation = Segmentation.load(run.folder.labels) if "segments" in what else None
+    segmentation = run.labels() if "segments" in what else None
     backend = get_backend(backend)
     classifier = run.classifier.to(backend.device)
     with atomic_directory(out, overwrite=overwrite) as tmp:

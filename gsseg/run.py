@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import hashlib
 import json
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 from typing import Literal, Protocol
 
@@ -11,12 +13,14 @@ import numpy as np
 import torch
 
 from dataset_tools.cameras import PinholeCamera
+from dataset_tools.errors import InputError
 from dataset_tools.scene import Scene, load_scene
 from gsseg.environment import Environment, background_image
 from gsseg.gaussians import Gaussians, make_classifier
 from gsseg.ply import read_ply
 from gsseg.render import Backend, RenderOutput, get_backend, render, to_uint8
 from gsseg.run_folder import RunFolder
+from gsseg.segment.reassign import Segmentation
 from gsseg.train.config import RunRecord, TrainConfig
 
 Background = Literal["environment", "white", "black"]
@@ -31,7 +35,11 @@ class Posed(Protocol):
 
 @dataclass
 class Run:
-    """The model of a finished run and the record of how it was trained."""
+    """The model of a finished run and the record of how it was trained.
+
+    ``fingerprint`` names the model (a hash of gaussians.ply): labels made for another model
+    of the same folder (before a ``--resume`` that changed it) are refused.
+    """
 
     folder: RunFolder
     record: RunRecord
@@ -44,6 +52,18 @@ class Run:
     def root(self) -> Path:
         return self.folder.root
 
+    @cached_property
+    def fingerprint(self) -> str:
+        return hashlib.sha256(self.folder.gaussians.read_bytes()).hexdigest()[:16]
+
+    def labels(self) -> Segmentation:
+        """``labels.npz``, refused when it labels another model than the run's."""
+        segmentation = Segmentation.load(self.folder.labels)
+        if len(segmentation.labels) != len(self.gaussians) or segmentation.model not in ("", self.fingerprint):
+            raise InputError(f"{self.folder.labels}: labels another model than {self.folder.gaussians} (trained "
+                             "again since); run `gsseg segment` on the run again.")
+        return segmentation
+
     @property
     def config(self) -> TrainConfig:
         return self.record.config
@@ -55,8 +75,14 @@ class Run:
 
     def scene(self, scene_dir: Path | str | None = None, *, masks: str | None = None,
               images: str | None = None) -> Scene:
-        """The scene the run was trained on (or ``scene_dir``), at the run's image size."""
-        return load_scene(scene_dir or self.record.scene, images=images or self.images, masks=masks)
+        """The scene the run was trained on, at the run's image size; ``scene_dir`` names it
+        where it moved, and is refused when it lacks a view the run was trained on."""
+        scene = load_scene(scene_dir or self.record.scene, images=images or self.images, masks=masks)
+        missing = set(self.record.train_views) - {v.name for v in scene.views}
+        if missing:
+            raise InputError(f"{scene.root}: not the scene {self.root} was trained on ({self.record.scene}; "
+                             f"{len(missing)} of its views are missing, e.g. {sorted(missing)[0]}); pass that scene.")
+        return scene
 
     def gaussians_on(self, device: str) -> Gaussians:
         """The run's Gaussians on ``device`` (moved once, then kept)."""
@@ -87,16 +113,38 @@ class Run:
         return to_uint8(self.render(view, **options).rgb)
 
 
+def _damaged(path: Path, e: Exception) -> InputError:
+    return InputError(f"{path}: damaged run file ({type(e).__name__}: {str(e).splitlines()[0] if str(e) else ''}); "
+                      "restore it or train the run again.")
+
+
+def _classifier(path: Path) -> torch.nn.Linear:
+    try:
+        state = torch.load(path, map_location="cpu", weights_only=True)
+        classifier = make_classifier(state["weight"].shape[0])
+        classifier.load_state_dict(state)
+        return classifier
+    except Exception as e:  # truncated, foreign or unpicklable: torch raises many types
+        raise _damaged(path, e) from None
+
+
+def _environment(path: Path) -> Environment | None:
+    if not path.is_file():
+        return None
+    try:
+        return Environment.from_state(torch.load(path, map_location="cpu", weights_only=True))
+    except Exception as e:  # as above
+        raise _damaged(path, e) from None
+
+
 def load_run(root: Path | str) -> Run:
-    """Load the model of a finished training run."""
+    """Load the model of a finished training run; damaged files are refused in one sentence."""
     folder = RunFolder(root)
     folder.require_finished()
-    record = RunRecord.from_json(json.loads(folder.config.read_text()))
-    state = torch.load(folder.classifier, map_location="cpu", weights_only=True)
-    classifier = make_classifier(state["weight"].shape[0])
-    classifier.load_state_dict(state)
-    environment = None
-    if folder.environment.is_file():
-        environment = Environment.from_state(torch.load(folder.environment, map_location="cpu", weights_only=True))
-    return Run(folder, record, read_ply(folder.gaussians), classifier, environment)
+    try:
+        record = RunRecord.from_json(json.loads(folder.config.read_text()))
+    except (ValueError, KeyError, TypeError, AttributeError) as e:
+        raise _damaged(folder.config, e) from None
+    return Run(folder, record, read_ply(folder.gaussians), _classifier(folder.classifier),
+               _environment(folder.environment))
 

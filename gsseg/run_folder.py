@@ -29,6 +29,7 @@ import torch
 
 from dataset_tools.atomic import write_bytes_atomic
 from dataset_tools.errors import InputError
+from dataset_tools.names import plain_name
 
 
 @dataclass(frozen=True)
@@ -79,9 +80,7 @@ class RunFolder:
     def edit(self, name: str) -> Path:
         """The folder of the edit called ``name``, which must be a plain folder name (an edit
         never reaches outside ``edits/``)."""
-        if not name or name in (".", "..") or name.startswith(".") or any(c in name for c in "/\\\0"):
-            raise InputError(f"--name {name!r}: give a plain folder name (letters, digits, -, _), not a path.")
-        return self.edits / name
+        return self.edits / plain_name(name, "--name")
 
     def checkpoint(self, step: int) -> Path:
         return self.checkpoints / f"step_{step:07d}.pt"

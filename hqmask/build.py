@@ -17,6 +17,7 @@ from tqdm import tqdm
 
 from dataset_tools.atomic import atomic_directory, write_bytes_atomic
 from dataset_tools.errors import InputError
+from dataset_tools.names import plain_name
 from dataset_tools.image_files import encode_png, read_mask
 from dataset_tools.scene import Scene, load_scene
 from hqmask.association import associate_flow, associate_tracks
@@ -104,8 +105,13 @@ def build_masks(scene_dir: Path | str, cfg: BuildConfig, *, progress: bool = Tru
     scene_dir = Path(scene_dir)
     if cfg.associate not in ASSOCIATIONS:
         raise InputError(f"--associate {cfg.associate}: use auto, flow or tracks.")
+    plain_name(cfg.out_masks, "--out-masks")
     if cfg.min_area is not None and cfg.min_area < 1:
         raise InputError(f"--min-area {cfg.min_area}: give a number of pixels of 1 or more (or leave it out).")
+    if cfg.points_per_side < 1:
+        raise InputError(f"--points-per-side {cfg.points_per_side}: give 1 or more points per side of the grid.")
+    if cfg.threads < 0:
+        raise InputError(f"--threads {cfg.threads}: give 0 (ONNX Runtime's choice) or a number of threads.")
     if cfg.consensus < 0:
         raise InputError(f"--consensus {cfg.consensus}: use 0 (off) or a number of neighbouring views.")
     if cfg.proposer == "existing" and not cfg.from_masks:
@@ -123,6 +129,8 @@ def build_masks(scene_dir: Path | str, cfg: BuildConfig, *, progress: bool = Tru
     out_dir = scene_dir / cfg.out_masks
     if out_dir.exists() and not cfg.force:
         raise InputError(f"{out_dir}: already exists; pass --force to rebuild it.")
+    if cfg.dataset and Path(cfg.dataset).exists() and not cfg.force:
+        raise InputError(f"{cfg.dataset}: already exists; choose another --dataset or pass --force.")
     scene = load_scene(scene_dir, images=cfg.images, masks=cfg.from_masks if cfg.proposer == "existing" else None)
     if cfg.proposer == "existing" and scene.mask_dir is None:
         raise InputError(f"{scene_dir / cfg.from_masks}: mask folder not found; check --from-masks.")
@@ -155,7 +163,9 @@ def clean_scene_masks(
 ) -> Path:
     """Noise removal alone: ``scene_dir/masks`` -> ``scene_dir/out_masks``."""
     scene_dir = Path(scene_dir)
-    src, dst = scene_dir / masks, scene_dir / out_masks
+    src, dst = scene_dir / masks, scene_dir / plain_name(out_masks, "--out-masks")
+    if min_area is not None and min_area < 1:
+        raise InputError(f"--min-area {min_area}: give a number of pixels of 1 or more (or leave it out).")
     if not src.is_dir():
         raise InputError(f"{src}: mask folder not found; check --masks.")
     if src == dst:

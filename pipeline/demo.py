@@ -1,8 +1,9 @@
 """``gsseg demo``: the whole pipeline on an embedded default scene (or the user's), with a report.
 
-1. a synthetic orbit scene with exact ground truth (``dataset_tools.synth``), unless a
-   scene is given; masks are proposed at its full 256x256 size, the rest runs on the
-   128x128 copies;
+1. a synthetic orbit scene with exact ground truth (``dataset_tools.synth``): masks are
+   proposed at its full 256x256 size, the rest runs on the 128x128 copies; or the user's
+   scene folder, or a folder of photos or a video made into one by structure from motion
+   (``dataset_tools.sfm``);
 2. masks from the weight-free ``graph`` proposer, associated across views by SfM tracks and
    cleaned (``hqmask build``);
 3. 3D-GS with object features trained on those masks (CPU schedule, shortened, at most
@@ -16,15 +17,19 @@
 
 from __future__ import annotations
 
+import shutil
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 import torch
 
+from dataset_tools.atomic import require_folder_path
 from dataset_tools.errors import InputError
-from dataset_tools.image_files import write_downsampled
+from dataset_tools.image_files import IMAGE_SUFFIXES, image_size, write_downsampled
+from dataset_tools.scene import linked_scene
+from dataset_tools.sfm import run_sfm
 from dataset_tools.synth import SynthConfig, generate_scene
 from eval.report import report_run
 from gsseg.edits import edit_run
@@ -41,6 +46,7 @@ DEMO_SCENE = SynthConfig(views=24, res=256, objects=4, seed=1)
 DEMO_IMAGES = "images_2"
 DEMO_ITERS = 1500
 DEMO_MAX_GAUSSIANS = 30_000  # about two per pixel of a 128x128 view; keeps the demo under 10 min on 2 cores
+DEMO_MAX_SIDE = 640  # on your scene: the largest image copy at most this large
 MASKS = "hqmask"
 
 
@@ -62,40 +68,72 @@ def _prompt_point(scene_dir: Path, run: Run, synth_point: np.ndarray | None, bac
                             view.camera.height / 2, backend=backend)
 
 
-def run_demo(out: Path | str, *, scene: Path | str | None = None, images: str = "images", iters: int = DEMO_ITERS,
+def demo_images(scene: Path) -> str:
+    """The first of ``images``, ``images_2``, ``images_4``, ``images_8`` of ``scene`` whose
+    longest side is at most ``DEMO_MAX_SIDE`` pixels (the smallest there is otherwise)."""
+    present = [f for f in ("images", "images_2", "images_4", "images_8") if (scene / f).is_dir()]
+    if not present:
+        raise InputError(f"{scene}: no images/ folder; pass a scene folder, a folder of photos or a video.")
+    for folder in present:
+        first = next((p for p in sorted((scene / folder).rglob("*")) if p.suffix in IMAGE_SUFFIXES), None)
+        if first is not None and max(image_size(first)) <= DEMO_MAX_SIDE:
+            return folder
+    return present[-1]
+
+
+def run_demo(out: Path | str, *, scene: Path | str | None = None, images: str | None = None, iters: int = DEMO_ITERS,
              max_gaussians: int = DEMO_MAX_GAUSSIANS, backend: str = "auto", overwrite: bool = False,
              progress: bool = True) -> DemoResult:
-    """Run the pipeline into ``out`` (``out/scene`` when synthetic, ``out/run``, ``out/report``)."""
+    """Run the pipeline into ``out``: ``out/scene`` (the synthetic scene; for photos or a video,
+    the scene structure from motion makes of them; for a scene folder, links to it, so that
+    its masks are written here and never into ``scene``), ``out/run``, ``out/report``. Every
+    option is checked before any work; ``images`` defaults to the largest copy at most 640 px."""
     start = time.perf_counter()
     out = Path(out)
+    backend = get_backend(backend)
+    cfg = TrainConfig(iters=iters, masks=MASKS, images=images or "images", backend=backend.name,
+                      max_gaussians=max_gaussians)
+    if scene is not None and not Path(scene).exists():
+        raise InputError(f"{scene}: not found; pass a scene folder, a folder of photos or a video with --scene.")
+    require_folder_path(out)
     if out.exists() and any(out.iterdir()) and not overwrite:
         raise InputError(f"{out}: already exists and is not empty; pass --force or choose another --out.")
-    backend = get_backend(backend)
+    for owned in ("scene", "run", "report"):  # --force: the demo's own outputs, nothing else
+        if (out / owned).is_symlink() or (out / owned).is_file():
+            (out / owned).unlink()
+        elif (out / owned).exists():
+            shutil.rmtree(out / owned)
     synth_point = None
     if scene is None:
-        result = generate_scene(DEMO_SCENE, out / "scene", overwrite=overwrite, progress=progress)
+        result = generate_scene(DEMO_SCENE, out / "scene", progress=progress)
         write_downsampled(result.root / "images", result.root / DEMO_IMAGES, 2)
-        scene_dir, gt_masks, images = result.root, "object_mask", DEMO_IMAGES
+        scene_dir, gt_masks, mask_images = result.root, "object_mask", "images"
         synth_point = result.layout.objects[0].bounding_sphere[0]
+        images = DEMO_IMAGES
     else:
-        scene_dir, gt_masks = Path(scene), None
-        if not scene_dir.is_dir():
-            raise InputError(f"{scene_dir}: scene folder not found; check --scene.")
-    build_masks(scene_dir, BuildConfig(proposer="graph", associate="tracks", out_masks=MASKS,
-                                       images="images" if scene is None else images, force=overwrite), progress=progress)
+        scene = Path(scene)
+        if scene.is_dir() and (scene / "sparse").is_dir():
+            scene_dir = linked_scene(scene, out / "scene")
+        else:  # photos or a video: structure from motion first
+            scene_dir = run_sfm(scene, out / "scene", progress=progress).scene
+        gt_masks = None
+        images = images or demo_images(scene_dir)
+        mask_images = images
+    cfg = replace(cfg, images=images)
+    build_masks(scene_dir, BuildConfig(proposer="graph", associate="tracks", out_masks=MASKS, images=mask_images),
+                progress=progress)
     run_dir = out / "run"
-    train(scene_dir, run_dir, TrainConfig(iters=iters, masks=MASKS, images=images, backend=backend.name,
-                                          max_gaussians=max_gaussians), progress=progress)
+    train(scene_dir, run_dir, cfg, progress=progress)
     segmentation = segment_run(run_dir, scene_dir, masks=MASKS, backend=backend, progress=progress)
     run = load_run(run_dir)
     point = np.asarray(_prompt_point(scene_dir, run, synth_point, backend), np.float64)
     object_id = pick_object(run.gaussians.means.numpy(), segmentation.labels, point)
     for op, color in (("remove", None), ("extract", None), ("recolor", (255, 40, 200))):
         edit_run(run_dir, op, object_id=object_id, color=color, scene_dir=scene_dir, backend=backend,
-                 overwrite=overwrite, progress=progress)
+                 progress=progress)
     report = out / "report"
     with torch.no_grad():
         ev = report_run(run_dir, scene_dir, report, gt_masks=gt_masks, object_id=object_id, backend=backend,
-                        overwrite=overwrite, progress=progress)
+                        progress=progress)
     miou = ev.summary()["visible"]["miou"]
     return DemoResult(out, report / "report.html", object_id, point, miou, time.perf_counter() - start)

@@ -36,7 +36,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from dataset_tools.atomic import write_bytes_atomic
+from dataset_tools.atomic import require_folder_path, write_bytes_atomic
 from eval.report import markdown_table
 from gsseg.render import Backend, get_backend
 from gsseg.train import TrainConfig
@@ -190,6 +190,7 @@ def paper_tables(out: Path | str, *, setup: TableSetup = SETUPS["full"], backend
     finished work in ``out/work``, and write ``out/paper_tables.md`` and
     ``out/paper_tables.json``. Returns the markdown path."""
     out = Path(out)
+    require_folder_path(out)
     backend = get_backend(backend)
     steps_per_scene = 2 + len(TRAINING_MASKS)
     start = time.perf_counter()

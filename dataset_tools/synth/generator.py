@@ -180,11 +180,16 @@ def object_ids(layout: Layout, hits: Hits) -> np.ndarray:
     return np.where(hits.surface >= 0, ids_of_surface[np.maximum(hits.surface, 0)], 0)
 
 
-def shade(layout: Layout, origin: np.ndarray, d: np.ndarray, hits: Hits) -> np.ndarray:
-    """Colour of every ray in [0, 1], (N, 3): albedo times ambient + Lambert, or the sky."""
+def shade(layout: Layout, origin: np.ndarray, d: np.ndarray, hits: Hits,
+          sky: tuple[float, float, float] | None = None) -> np.ndarray:
+    """Colour of every ray in [0, 1], (N, 3): albedo times ambient + Lambert, or the sky (a
+    gradient by elevation, or the flat colour ``sky``)."""
     textures = [tex for _, tex in layout.background] + [ob.texture for ob in layout.objects]
-    w = np.clip(d[:, 2], 0.0, 1.0)[:, None] ** 0.5
-    rgb = (1 - w) * np.array([0.86, 0.9, 0.95]) + w * np.array([0.45, 0.62, 0.86])
+    if sky is None:
+        w = np.clip(d[:, 2], 0.0, 1.0)[:, None] ** 0.5
+        rgb = (1 - w) * np.array([0.86, 0.9, 0.95]) + w * np.array([0.45, 0.62, 0.86])
+    else:
+        rgb = np.tile(np.asarray(sky, float), (len(d), 1))
     points = origin + np.where(np.isfinite(hits.t), hits.t, 0.0)[:, None] * d
     light = AMBIENT + (1 - AMBIENT) * np.clip(hits.normal @ LIGHT, 0.0, 1.0)
     for s in np.unique(hits.surface[hits.surface >= 0]):
@@ -205,9 +210,10 @@ def _rays(cam: PinholeCamera, pose: np.ndarray, du: float, dv: float) -> tuple[n
 
 
 def render_view(
-    layout: Layout, cam: PinholeCamera, pose: np.ndarray, supersample: int = 2
+    layout: Layout, cam: PinholeCamera, pose: np.ndarray, supersample: int = 2,
+    sky: tuple[float, float, float] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Ray-cast one view.
+    """Ray-cast one view (the sky a flat ``sky`` colour when given).
 
     Returns rgb (H, W, 3) uint8 (box-filtered over supersample^2 rays a pixel), ids (H, W)
     uint8 at pixel centres, z-depth (H, W) float64 at pixel centres (inf for sky), and the
@@ -223,7 +229,7 @@ def render_view(
     for dv in offsets:
         for du in offsets:
             o, d = _rays(cam, pose, du, dv)
-            acc += shade(layout, o, d, trace(layout, o, d))
+            acc += shade(layout, o, d, trace(layout, o, d), sky)
     rgb = np.clip(np.rint(acc / supersample**2 * 255), 0, 255).astype(np.uint8).reshape(H, W, 3)
     return rgb, object_ids(layout, hits).reshape(H, W).astype(np.uint8), depth, points
 

@@ -12,6 +12,8 @@ breaks near-ties. Gaussians no view observed (column sum 0) keep their prior lab
 
 from __future__ import annotations
 
+import zipfile
+
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -34,6 +36,8 @@ class Segmentation:
         labels: (N,) uint8 label of every Gaussian.
         objects: (M,) uint8 object IDs (mask labels other than 0).
         selections: (M, N) bool, Gaussians selected for each object.
+        model: the fingerprint of the model labelled (:attr:`gsseg.run.Run.fingerprint`),
+            "" when unknown.
     """
 
     labels: np.ndarray
@@ -42,6 +46,7 @@ class Segmentation:
     method: str
     mode: str
     gamma_p: float
+    model: str = ""
 
     def selection(self, obj: int) -> np.ndarray:
         """(N,) bool Gaussians of object ``obj``."""
@@ -56,16 +61,21 @@ class Segmentation:
 
         buf = io.BytesIO()
         np.savez_compressed(buf, labels=self.labels, objects=self.objects, selections=self.selections,
-                            method=self.method, mode=self.mode, gamma_p=self.gamma_p)
+                            method=self.method, mode=self.mode, gamma_p=self.gamma_p, model=self.model,
+                            gaussians=len(self.labels))
         write_bytes_atomic(Path(path), buf.getvalue())
 
     @classmethod
     def load(cls, path: Path) -> Segmentation:
         if not Path(path).is_file():
             raise InputError(f"{path} does not exist; run `gsseg segment` on the run first.")
-        with np.load(path) as f:
-            return cls(labels=f["labels"], objects=f["objects"], selections=f["selections"],
-                       method=str(f["method"]), mode=str(f["mode"]), gamma_p=float(f["gamma_p"]))
+        try:
+            with np.load(path, allow_pickle=False) as f:
+                return cls(labels=f["labels"], objects=f["objects"], selections=f["selections"],
+                           method=str(f["method"]), mode=str(f["mode"]), gamma_p=float(f["gamma_p"]),
+                           model=str(f["model"]) if "model" in f else "")
+        except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as e:
+            raise InputError(f"{path}: damaged labels ({e}); run `gsseg segment` on the run again.") from None
 
 
 def normalize(weights: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:

@@ -2,13 +2,42 @@
 
 from __future__ import annotations
 
+import math
+from dataclasses import dataclass
 from pathlib import Path
 
 from dataset_tools.errors import InputError
 from gsseg.render import Backend
 from gsseg.render.contributions import Contributions, MaskedView, contribution_matrix
 from gsseg.run import Run, load_run
-from gsseg.segment.reassign import Segmentation, classifier_prior, reassign
+from gsseg.segment.reassign import METHODS, MODES, Segmentation, classifier_prior, reassign
+from gsseg.segment.regularize import fill_interiors, smooth_weak_labels, weak_evidence
+
+
+@dataclass(frozen=True)
+class LabelOptions:
+    """How labels are chosen: the reassignment (method, mode, gamma_p, slack) and the 3D
+    regularisation after it (``smooth``: neighbours that relabel weak Gaussians, 0 off;
+    ``fill``: objects take the Gaussians they enclose)."""
+
+    method: str = "prior"
+    mode: str = "multi"
+    gamma_p: float = 0.2
+    slack: float = 0.0
+    smooth: int = 0
+    fill: bool = False
+
+    def check(self) -> None:
+        if self.method not in METHODS:
+            raise InputError(f"--method {self.method}: choose one of {', '.join(METHODS)}.")
+        if self.mode not in MODES:
+            raise InputError(f"--mode {self.mode}: choose multi or binary.")
+        if not (math.isfinite(self.gamma_p) and math.isfinite(self.slack)):
+            raise InputError(f"--gamma-p {self.gamma_p} / --slack {self.slack}: give finite numbers.")
+        if self.smooth < 0:
+            raise InputError(f"--smooth {self.smooth}: give 0 (off) or a number of neighbours.")
+        if (self.smooth or self.fill) and self.mode != "multi":
+            raise InputError("--smooth and --fill-interiors relabel Gaussians one label each; use --mode multi.")
 
 
 def mask_contributions(run: Run, scene_dir: Path | str | None = None, *, masks: str = "object_mask",
@@ -20,18 +49,34 @@ def mask_contributions(run: Run, scene_dir: Path | str | None = None, *, masks: 
     return contribution_matrix(run.gaussians, views, backend=backend, progress=progress)
 
 
-def segment_run(run_dir: Path | str, scene_dir: Path | str | None = None, *, method: str = "prior",
-                mode: str = "multi", gamma_p: float = 0.2, slack: float = 0.0, masks: str = "object_mask",
-                split: str = "train", backend: str | Backend = "auto", progress: bool = True) -> Segmentation:
+def label_gaussians(run: Run, contributions: Contributions, options: LabelOptions = LabelOptions()) -> Segmentation:
+    """Every Gaussian's label from the contribution matrix and the run's classifier."""
+    options.check()
+    prior_labels, prior_probs = classifier_prior(run.gaussians.obj_feat, run.classifier)
+    result = reassign(contributions, prior_labels, prior_probs, method=options.method, mode=options.mode,
+                      gamma_p=options.gamma_p, slack=options.slack)
+    means = run.gaussians.means.numpy()
+    if options.smooth and len(contributions.labels):
+        result = smooth_weak_labels(result, means, run.gaussians.opacities.detach().numpy(),
+                                    weak_evidence(contributions), k=options.smooth)
+    if options.fill:
+        result = fill_interiors(result, means)
+    result.model = run.fingerprint
+    return result
+
+
+def segment_run(run_dir: Path | str, scene_dir: Path | str | None = None, *, options: LabelOptions = LabelOptions(),
+                masks: str = "object_mask", split: str = "train", backend: str | Backend = "auto",
+                progress: bool = True) -> Segmentation:
     """Label every Gaussian of a run from the masks of ``split`` (the training views by
     default) and the run's classifier; write ``RUN/labels.npz``."""
+    options.check()
     run = load_run(run_dir)
     contributions = mask_contributions(run, scene_dir, masks=masks, split=split, backend=backend, progress=progress)
-    if not len(contributions.labels) and method != "classifier":
+    if not len(contributions.labels) and options.method != "classifier":
         raise InputError(f"{Path(scene_dir or run.record.scene) / masks} holds no masks for the {split} views; "
                          "build them with `hqmask build` or use --method classifier.")
-    prior_labels, prior_probs = classifier_prior(run.gaussians.obj_feat, run.classifier)
-    result = reassign(contributions, prior_labels, prior_probs, method=method, mode=mode, gamma_p=gamma_p,
-                      slack=slack)
-    result.save(run.folder.labels)
+    result = label_gaussians(run, contributions, options)
+    with run.folder.lock():
+        result.save(run.folder.labels)
     return result

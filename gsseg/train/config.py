@@ -3,6 +3,8 @@ shorter CPU default."""
 
 from __future__ import annotations
 
+import math
+
 from dataclasses import asdict, dataclass, field, fields, replace
 
 from dataset_tools.errors import InputError
@@ -78,6 +80,9 @@ class TrainConfig:
     initial_opacity: float = 0.1
     random_init_points: int = 20_000
     max_gaussians: int | None = None  # densification stops at this count; None: the schedule's cap
+    knn_reg: float = 0.0  # weight of Gaussian Grouping's 3D identity term; 0: off
+    knn_samples: int = 1000
+    knn_k: int = 5
     lr: LearningRates = field(default_factory=LearningRates)
     seed: int = 0
 
@@ -92,6 +97,10 @@ class TrainConfig:
             raise InputError(f"--environment-degree must be 0..3 (got {self.environment_degree}).")
         if self.max_gaussians is not None and self.max_gaussians < 1:
             raise InputError(f"--max-gaussians must be at least 1 (got {self.max_gaussians}).")
+        if not math.isfinite(self.gamma_obj) or self.gamma_obj < 0:
+            raise InputError(f"--gamma-obj {self.gamma_obj}: give a finite weight of 0 or more.")
+        if not math.isfinite(self.knn_reg) or self.knn_reg < 0:
+            raise InputError(f"--knn-reg {self.knn_reg}: give a finite weight of 0 or more.")
 
     @property
     def timing(self) -> Schedule:

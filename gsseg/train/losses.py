@@ -28,3 +28,22 @@ def psnr(rendered: torch.Tensor, target: torch.Tensor) -> float:
     """PSNR in dB of images in [0, 1], for progress display."""
     mse = torch.mean((rendered.detach().clamp(0, 1) - target) ** 2).item()
     return float("inf") if mse == 0 else -10.0 * torch.log10(torch.tensor(mse)).item()
+
+
+def knn_identity_loss(means: torch.Tensor, obj_feat: torch.Tensor, classifier: torch.nn.Linear, samples: int,
+                      k: int, generator: torch.Generator | None = None) -> torch.Tensor:
+    """Gaussian Grouping's 3D identity term: the mean KL divergence between the class
+    distribution of ``samples`` Gaussians drawn at random and that of each of their ``k``
+    nearest Gaussians in 3D (means (N, 3), obj_feat (N, F)). Neighbours agree on their object."""
+    from scipy.spatial import cKDTree
+
+    n = len(means)
+    if n <= k:
+        return obj_feat.new_zeros(())
+    pick = torch.randperm(n, generator=generator, device=means.device)[: min(samples, n)]
+    points = means.detach().cpu().numpy()
+    _, nearest = cKDTree(points).query(points[pick.cpu().numpy()], k=k + 1)
+    nearest = torch.as_tensor(nearest[:, 1:], device=means.device)  # (m, k), itself left out
+    log_p = torch.log_softmax(classifier(obj_feat[pick]), dim=-1)  # (m, C)
+    log_q = torch.log_softmax(classifier(obj_feat[nearest]), dim=-1)  # (m, k, C)
+    return (log_p.exp()[:, None] * (log_p[:, None] - log_q)).sum(-1).mean()

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import math
+import shutil
 import time
 import warnings
 from dataclasses import dataclass
@@ -20,6 +21,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
+from dataset_tools.atomic import require_folder_path
 from dataset_tools.errors import InputError
 from dataset_tools.interrupts import Interrupted, stop_requests
 from dataset_tools.scene import Scene, View, load_scene
@@ -29,7 +31,7 @@ from gsseg.ply import write_ply
 from gsseg.render import Backend, RenderOutput, get_backend, render
 from gsseg.run_folder import RunFolder, write_json, write_torch
 from gsseg.train.config import RunRecord, TrainConfig
-from gsseg.train.losses import object_loss, photometric_loss, psnr
+from gsseg.train.losses import knn_identity_loss, object_loss, photometric_loss, psnr
 from gsseg.train.optim import GaussianOptimizer
 from gsseg.train.strategy import DensifyOptions, DensifyStrategy
 from gsseg.train.views import TrainView, camera_extent, load_views
@@ -213,13 +215,17 @@ def _loss_and_backward(state: _State, view: TrainView, cfg: TrainConfig, backend
     obj = (object_loss(out.features, view.mask, state.classifier, obj_pixels, generator) if use_mask
            else torch.zeros((), device=rgb_loss.device))
     loss = rgb_loss + cfg.gamma_obj * obj
+    if cfg.knn_reg > 0:
+        g = state.gaussians.gaussians
+        loss = loss + cfg.knn_reg * knn_identity_loss(g.means, g.obj_feat, state.classifier, cfg.knn_samples,
+                                                      cfg.knn_k, generator)
     if torch.isfinite(loss):
         loss.backward()
     return {"loss": loss.item(), "rgb": rgb_loss.item(), "obj": obj.item(), "psnr": psnr(out.rgb, view.image)}, out
 
 
 def train(scene_dir: Path | str, run: Path | str, cfg: TrainConfig, *, resume: bool = False,
-          stop_after: int | None = None, progress: bool = True) -> TrainResult:
+          stop_after: int | None = None, other_scene: bool = False, progress: bool = True) -> TrainResult:
     """Train 3D-GS with object features on a scene folder and write the run folder.
 
     Args:
@@ -228,6 +234,7 @@ def train(scene_dir: Path | str, run: Path | str, cfg: TrainConfig, *, resume: b
         cfg: the options; with ``resume`` those saved in the run are used (``iters`` may change).
         resume: continue from the latest checkpoint of ``run``.
         stop_after: write a checkpoint and stop at this step (continue later with ``resume``).
+        other_scene: let ``resume`` continue on another scene than the run's.
         progress: show a progress bar.
 
     Raises:
@@ -237,19 +244,39 @@ def train(scene_dir: Path | str, run: Path | str, cfg: TrainConfig, *, resume: b
     folder = RunFolder(run)
     if stop_after is not None and stop_after < 1:
         raise InputError(f"--stop-after {stop_after}: give a step of 1 or more.")
-    with folder.lock():
-        cfg, restore = _settled_config(folder, cfg, resume)
-        backend = get_backend(cfg.backend)
-        scene = load_scene(scene_dir, images=cfg.images, masks=cfg.masks)
-        train_views = scene.split("train") or scene.views
-        extent = camera_extent(scene.views)
-        views = load_views(train_views, progress=progress, device=backend.device)
-        write_json(folder.config, RunRecord(cfg, str(Path(scene_dir).resolve()), backend.name, extent,
-                                            scene.views[0].camera.near, tuple(v.name for v in views)).to_json())
-        state = _new_state(scene, cfg, train_views, extent, backend.device)
-        if restore:
-            state.load_state_dict(_latest_good_checkpoint(folder, backend.device))
-        return _loop(folder, state, views, cfg, backend, stop_after, progress)
+    require_folder_path(folder.root)
+    created = not folder.root.exists()
+    try:
+        with folder.lock():
+            return _train_locked(folder, Path(scene_dir), cfg, resume, stop_after, other_scene, progress)
+    except BaseException:
+        if created and not folder.config.exists():  # a start that wrote nothing leaves nothing
+            shutil.rmtree(folder.root, ignore_errors=True)
+        raise
+
+
+def _train_locked(folder: RunFolder, scene_dir: Path, cfg: TrainConfig, resume: bool, stop_after: int | None,
+                  other_scene: bool, progress: bool) -> TrainResult:
+    cfg, restore = _settled_config(folder, cfg, resume)
+    backend = get_backend(cfg.backend)
+    scene = load_scene(scene_dir, images=cfg.images, masks=cfg.masks)
+    if cfg.masks is not None and scene.mask_dir is None:
+        raise InputError(f"{scene_dir / cfg.masks}: mask folder not found; build masks with `hqmask build` "
+                         "or train on colour alone with --masks none.")
+    if restore and not other_scene:
+        trained_on = json.loads(folder.config.read_text()).get("scene")
+        if trained_on and Path(trained_on) != scene_dir.resolve():
+            raise InputError(f"{folder.root} was trained on {trained_on}, not {scene_dir.resolve()}; "
+                             "pass that scene, or --allow-other-scene to continue on this one.")
+    train_views = scene.split("train") or scene.views
+    extent = camera_extent(scene.views)
+    views = load_views(train_views, progress=progress, device=backend.device)
+    state = _new_state(scene, cfg, train_views, extent, backend.device)
+    if restore:
+        state.load_state_dict(_latest_good_checkpoint(folder, backend.device))
+    write_json(folder.config, RunRecord(cfg, str(scene_dir.resolve()), backend.name, extent,
+                                        scene.views[0].camera.near, tuple(v.name for v in views)).to_json())
+    return _loop(folder, state, views, cfg, backend, stop_after, progress)
 
 
 def _loop(folder: RunFolder, state: _State, views: list[TrainView], cfg: TrainConfig, backend: Backend,

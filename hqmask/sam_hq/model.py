@@ -56,8 +56,12 @@ class ModelInfo:
         try:
             fields = json.loads(path.read_text())
             info = cls(**fields)
-        except (json.JSONDecodeError, TypeError) as e:
+        except (json.JSONDecodeError, TypeError, UnicodeDecodeError) as e:
             raise InputError(f"{path}: not a SAM-HQ model.json ({e}); {EXPORT_HINT}.") from None
+        if not isinstance(info.image_size, int) or info.image_size < 16 or len(info.pixel_std) != 3 \
+                or min(info.pixel_std) <= 0:
+            raise InputError(f"{path}: image_size must be an integer of 16 or more and pixel_std three positive "
+                             f"numbers (got {info.image_size}, {info.pixel_std}); {EXPORT_HINT}.")
         return info
 
 

@@ -1,0 +1,13 @@
+"""Names a user gives to outputs inside a folder the command owns (a mask folder in a scene,
+an edit in a run): plain folder names, never a path that leaves the folder."""
+
+from __future__ import annotations
+
+from dataset_tools.errors import InputError
+
+
+def plain_name(name: str, option: str) -> str:
+    """``name`` if it is a plain folder name; else InputError naming ``option``."""
+    if not name or name in (".", "..") or name.startswith(".") or any(c in name for c in "/\\\0"):
+        raise InputError(f"{option} {name!r}: give a plain folder name (letters, digits, -, _), not a path.")
+    return name

@@ -1,0 +1,275 @@
+"""Structure from motion with pycolmap on the CPU: photos or a video in, a scene folder out.
+
+Steps, each recorded with its options in ``SCENE/.sfm/steps.json`` when it finishes, so that
+a second call continues after the last finished one (and redoes a step whose options
+changed, with every step after it):
+
+1. ``images``: the photos as they are, or a video's frames (:mod:`dataset_tools.sfm.frames`);
+2. ``features``: SIFT on every image into ``.sfm/database.db`` (one shared camera for a video,
+   one per folder of photos by default);
+3. ``matches``: exhaustive for up to ``EXHAUSTIVE_UP_TO`` images; otherwise, and for a video,
+   sequential (each image with its next ``overlap`` and at powers of two further) plus every
+   pair of keyframes spread over the sequence, which closes loops without a vocabulary tree;
+4. ``mapping``: incremental (or global) mapping; the model with the most images is kept and
+   the others reported;
+5. ``undistort``: the kept model undistorted to PINHOLE cameras.
+
+Then the scene folder is written: ``images/`` (undistorted), ``images_2/``, ``images_4/`` (and
+``images_8/`` past 1600 px), ``sparse/0/`` and ``scene.json`` (what was run and how many
+images registered), each item renamed into place, ``scene.json`` last.
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import shutil
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+from PIL import Image
+from tqdm import tqdm
+
+from dataset_tools.atomic import require_folder_path, write_bytes_atomic
+from dataset_tools.errors import InputError
+from dataset_tools.image_files import IMAGE_SUFFIXES, write_downsampled
+from dataset_tools.sfm.frames import VIDEO_SUFFIXES, sample_frames
+
+STEPS = ("images", "features", "matches", "mapping", "undistort")
+EXHAUSTIVE_UP_TO = 150
+MIN_REGISTERED_SHARE = 0.5
+CAMERA_MODELS = ("SIMPLE_RADIAL", "RADIAL", "OPENCV", "SIMPLE_PINHOLE", "PINHOLE", "OPENCV_FISHEYE")
+
+
+@dataclass(frozen=True)
+class SfmConfig:
+    """Options of ``python -m dataset_tools sfm`` (same names as the CLI)."""
+
+    frames: int = 150  # a video's frames to keep
+    matcher: str = "auto"  # auto | exhaustive | sequential
+    mapper: str = "incremental"  # incremental | global
+    camera_model: str = "SIMPLE_RADIAL"
+    single_camera: bool | None = None  # None: one camera for a video, one per folder of photos
+    max_image_size: int = 3200  # SIFT runs on images at most this large
+    overlap: int = 10  # sequential matching: each image with its next ``overlap``
+    keyframes: int = 30  # sequential matching: keyframes matched exhaustively among themselves
+    seed: int = 0
+
+    def check(self) -> None:
+        if self.frames < 3:
+            raise InputError(f"--frames {self.frames}: keep at least 3 frames.")
+        if self.matcher not in ("auto", "exhaustive", "sequential"):
+            raise InputError(f"--matcher {self.matcher}: use auto, exhaustive or sequential.")
+        if self.mapper not in ("incremental", "global"):
+            raise InputError(f"--mapper {self.mapper}: use incremental or global.")
+        if self.camera_model not in CAMERA_MODELS:
+            raise InputError(f"--camera-model {self.camera_model}: use one of {', '.join(CAMERA_MODELS)}.")
+        if self.max_image_size < 64:
+            raise InputError(f"--max-image-size {self.max_image_size}: give 64 pixels or more.")
+
+
+@dataclass
+class SfmResult:
+    scene: Path
+    images: int
+    registered: int
+    seconds: float
+    other_models: list[int]
+
+
+def _input_images(photos: Path) -> list[str]:
+    """The image files of a folder (sub-folders too), relative, sorted; each checked whole."""
+    names = sorted(str(p.relative_to(photos)) for p in photos.rglob("*") if p.suffix in IMAGE_SUFFIXES
+                   and not any(part.startswith(".") for part in p.relative_to(photos).parts))
+    if not names:
+        raise InputError(f"{photos}: holds no JPEG or PNG images; pass a folder of photos or a video file.")
+    for name in names:
+        try:
+            with Image.open(photos / name) as im:
+                im.draft("RGB", (im.width // 8, im.height // 8))  # decode small: truncation still shows
+                im.load()
+        except (OSError, SyntaxError, ValueError) as e:
+            raise InputError(f"{photos / name}: not a readable image ({e}); remove or replace it.") from None
+    return names
+
+
+def _pairs_file(names: list[str], cfg: SfmConfig, path: Path) -> None:
+    """Image pairs for sequential matching: each image with its next ``overlap`` and at powers
+    of two further, and every pair of ``keyframes`` spread over the sequence (loop closure)."""
+    n = len(names)
+    pairs = set()
+    for i in range(n):
+        for j in range(i + 1, min(n, i + cfg.overlap + 1)):
+            pairs.add((i, j))
+        step = 1
+        while i + step < n:
+            pairs.add((i, i + step))
+            step *= 2
+    keys = sorted({round(k) for k in (i * (n - 1) / max(1, cfg.keyframes - 1) for i in range(min(n, cfg.keyframes)))})
+    pairs |= set(itertools.combinations(keys, 2))
+    path.write_text("".join(f"{names[i]} {names[j]}\n" for i, j in sorted(pairs)))
+
+
+class _Steps:
+    """The record of finished steps in ``work/steps.json``."""
+
+    def __init__(self, work: Path):
+        self.path = work / "steps.json"
+        self.done: dict = json.loads(self.path.read_text()) if self.path.is_file() else {}
+
+    def finished(self, step: str, options: dict) -> bool:
+        """Whether ``step`` finished with these options; if not, it and every later step are forgotten."""
+        if self.done.get(step, {}).get("options") == options:
+            return True
+        for later in STEPS[STEPS.index(step):]:
+            self.done.pop(later, None)
+        return False
+
+    def record(self, step: str, options: dict, **facts) -> None:
+        self.done[step] = {"options": options, **facts}
+        write_bytes_atomic(self.path, (json.dumps(self.done, indent=2) + "\n").encode())
+
+
+def run_sfm(photos: Path | str, out: Path | str, cfg: SfmConfig = SfmConfig(), *, overwrite: bool = False,
+            progress: bool = True) -> SfmResult:
+    """Make a scene folder at ``out`` from a folder of photos or a video file ``photos``."""
+    import pycolmap  # after the image libraries: importing it first breaks PNG writes
+
+    cfg.check()
+    photos, out = Path(photos), Path(out)
+    if not photos.exists():
+        raise InputError(f"{photos}: not found; pass a folder of photos or a video file.")
+    video = photos.is_file()
+    if video and photos.suffix not in VIDEO_SUFFIXES:
+        raise InputError(f"{photos}: not a folder of photos nor a video ({', '.join(VIDEO_SUFFIXES[:5])}).")
+    require_folder_path(out)
+    if (out / "scene.json").exists() and not overwrite:
+        raise InputError(f"{out}: already holds a scene; pass --force to make it again or choose another --out.")
+    start = time.perf_counter()
+    work = out / ".sfm"
+    work.mkdir(parents=True, exist_ok=True)
+    steps = _Steps(work)
+    pycolmap.logging.minloglevel = 2  # warnings and errors only; progress is shown here
+    bar = tqdm(total=len(STEPS) + 1, desc="sfm", unit="step", disable=not progress)
+
+    # 1. images
+    options = {"source": str(photos.resolve()), "frames": cfg.frames if video else None}
+    image_dir = work / "frames" if video else photos
+    if not steps.finished("images", options):
+        shutil.rmtree(work / "frames", ignore_errors=True)
+        names = sample_frames(photos, image_dir, cfg.frames, progress=progress) if video else _input_images(photos)
+        steps.record("images", options, names=names)
+    names = steps.done["images"]["names"]
+    bar.set_postfix_str(f"{len(names)} images")
+    bar.update(1)
+
+    # 2. features
+    database = work / "database.db"
+    single = video if cfg.single_camera is None else cfg.single_camera
+    options = {"camera_model": cfg.camera_model, "single_camera": single, "max_image_size": cfg.max_image_size}
+    if not steps.finished("features", options):
+        database.unlink(missing_ok=True)
+        extraction = pycolmap.FeatureExtractionOptions(max_image_size=cfg.max_image_size, use_gpu=False)
+        pycolmap.extract_features(database, image_dir, image_names=names,
+                                  camera_mode=pycolmap.CameraMode.SINGLE if single else pycolmap.CameraMode.PER_FOLDER,
+                                  reader_options=pycolmap.ImageReaderOptions(camera_model=cfg.camera_model),
+                                  extraction_options=extraction, device=pycolmap.Device.cpu)
+        steps.record("features", options)
+    bar.update(1)
+
+    # 3. matches
+    matcher = cfg.matcher if cfg.matcher != "auto" else (
+        "sequential" if video or len(names) > EXHAUSTIVE_UP_TO else "exhaustive")
+    options = {"matcher": matcher, "overlap": cfg.overlap, "keyframes": cfg.keyframes}
+    if not steps.finished("matches", options):
+        _rebuild_database_without_matches(pycolmap, database)
+        matching = pycolmap.FeatureMatchingOptions(use_gpu=False)
+        if matcher == "exhaustive":
+            pycolmap.match_exhaustive(database, matching_options=matching, device=pycolmap.Device.cpu)
+        else:
+            _pairs_file(names, cfg, work / "pairs.txt")
+            pycolmap.match_image_pairs(database, matching_options=matching,
+                                       pairing_options=pycolmap.ImportedPairingOptions(
+                                           match_list_path=str(work / "pairs.txt")),
+                                       device=pycolmap.Device.cpu)
+        steps.record("matches", options)
+    bar.update(1)
+
+    # 4. mapping
+    options = {"mapper": cfg.mapper, "seed": cfg.seed}
+    if not steps.finished("mapping", options):
+        shutil.rmtree(work / "sparse", ignore_errors=True)
+        (work / "sparse").mkdir()
+        if cfg.mapper == "incremental":
+            mapping = pycolmap.IncrementalPipelineOptions(random_seed=cfg.seed)
+            models = pycolmap.incremental_mapping(database, image_dir, work / "sparse", mapping)
+        else:
+            models = pycolmap.global_mapping(database, image_dir, work / "sparse")
+        sizes = {int(k): m.num_reg_images() for k, m in models.items()}
+        if not sizes:
+            raise InputError(f"{photos}: no two images could be matched into a model; the photos need more overlap "
+                             "(take them 10-20 degrees apart around the object, with texture in view).")
+        best = max(sizes, key=lambda k: (sizes[k], -k))
+        registered = sizes[best]
+        if registered < max(3, MIN_REGISTERED_SHARE * len(names)):
+            raise InputError(f"{photos}: {registered} of {len(names)} images registered; the photos need more overlap "
+                             "(take them 10-20 degrees apart around the object, with texture in view).")
+        model = models[best]
+        steps.record("mapping", options, model=str(best), registered=registered, other_models=sorted(
+            (s for k, s in sizes.items() if k != best), reverse=True), points=model.num_points3D(),
+            mean_reprojection_error=model.compute_mean_reprojection_error())
+    mapped = steps.done["mapping"]
+    bar.update(1)
+
+    # 5. undistort
+    options = {"model": mapped["model"]}
+    if not steps.finished("undistort", options):
+        shutil.rmtree(work / "undistorted", ignore_errors=True)
+        pycolmap.undistort_images(work / "undistorted", work / "sparse" / mapped["model"], image_dir,
+                                  output_type="COLMAP")
+        steps.record("undistort", options)
+    bar.update(1)
+
+    _write_scene(work, out, {"sfm": {**asdict(cfg), "matcher_used": matcher, "source": str(photos.resolve()),
+                                     "images": len(names), **{k: v for k, v in mapped.items() if k != "options"}}},
+                 overwrite)
+    bar.update(1)
+    bar.close()
+    return SfmResult(out, len(names), mapped["registered"], time.perf_counter() - start, mapped["other_models"])
+
+
+def _rebuild_database_without_matches(pycolmap, database: Path) -> None:
+    """Remove the matches an interrupted or earlier matching step left in the database."""
+    db = pycolmap.Database.open(str(database))
+    try:
+        db.clear_matches()
+        db.clear_two_view_geometries()
+    finally:
+        db.close()
+
+
+def _write_scene(work: Path, out: Path, provenance: dict, overwrite: bool) -> None:
+    """``images/``, ``images_N/``, ``sparse/0/`` and ``scene.json`` of ``out`` from the undistorted
+    model, each built in ``work`` and renamed into place, ``scene.json`` last."""
+    built = work / "scene"
+    shutil.rmtree(built, ignore_errors=True)
+    built.mkdir()
+    shutil.copytree(work / "undistorted" / "images", built / "images")
+    (built / "sparse").mkdir()
+    shutil.copytree(work / "undistorted" / "sparse", built / "sparse" / "0")
+    with Image.open(next(p for p in (built / "images").rglob("*") if p.is_file())) as im:
+        side = max(im.size)
+    for factor in (2, 4, 8):
+        if factor < 8 or side > 1600:
+            write_downsampled(built / "images", built / f"images_{factor}", factor)
+    for name in ("images", "images_2", "images_4", "images_8", "sparse"):
+        if (built / name).exists():
+            target = out / name
+            if target.exists():
+                if not overwrite:
+                    raise InputError(f"{target}: already exists; pass --force to replace it.")
+                shutil.rmtree(target)
+            (built / name).rename(target)
+    write_bytes_atomic(out / "scene.json", json.dumps({"provenance": provenance}, indent=2).encode())
+    shutil.rmtree(built)

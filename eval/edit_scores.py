@@ -1,0 +1,64 @@
+"""Edits scored against their ground truth, where the scene has it (synthetic scenes with
+``edit_truth/``, see :mod:`dataset_tools.synth.edit_truth`): each ground-truth object's
+predicted label removed and extracted, and the renders compared with the views without it and
+with it alone (:func:`eval.metrics.removal_scores`, :func:`eval.metrics.extraction_scores`)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from dataset_tools.scene import View
+from dataset_tools.synth.edit_truth import read_edit_truth
+from eval.metrics import extraction_scores, removal_scores
+from gsseg.edits import apply_edit
+from gsseg.render import Backend, get_backend, to_uint8
+from gsseg.run import Run
+from gsseg.segment.reassign import Segmentation
+
+
+def edit_rows(run: Run, segmentation: Segmentation, views: list[View], scene_dir: Path, id_map: dict[int, int], *,
+              objects: list[int] | None = None, backend: str | Backend = "cpu") -> list[dict]:
+    """One row per (view, ground-truth object) that has edit truth and a predicted label:
+    {view, object, label, removal: {...}, extraction: {...}}. ``id_map`` maps predicted
+    labels to ground-truth IDs; ``objects`` limits the ground-truth objects scored."""
+    backend = get_backend(backend)
+    label_of = {gt: p for p, gt in id_map.items()}
+    rows = []
+    with torch.no_grad():
+        for obj in sorted(label_of if objects is None else objects):
+            if obj not in label_of:
+                continue
+            selected = segmentation.selection(label_of[obj])
+            removed = apply_edit(run.gaussians, selected, "remove")
+            alone = apply_edit(run.gaussians, selected, "extract")
+            for view in views:
+                truth = read_edit_truth(scene_dir, obj, view.stem)
+                if truth is None:
+                    continue
+                region = view.load_mask() == obj if view.mask_path is not None else truth.silhouette
+                extracted = run.render(view, gaussians=alone, background="white", backend=backend)
+                rows.append({
+                    "view": view.stem, "object": obj, "label": label_of[obj],
+                    "removal": removal_scores(run.render_rgb(view, gaussians=removed, backend=backend), truth.without,
+                                              region, truth.seen),
+                    "extraction": extraction_scores(extracted.alpha.cpu().numpy(), to_uint8(extracted.rgb),
+                                                    truth.alone, truth.silhouette)})
+    return rows
+
+
+def summarize_edits(rows: list[dict]) -> dict:
+    """Means over the rows (PSNRs over the rows where they are finite and defined)."""
+    def mean(values: list) -> float | None:
+        kept = [v for v in values if v is not None and np.isfinite(v)]
+        return float(np.mean(kept)) if kept else None
+
+    return {"pairs": len(rows),
+            "removal_psnr": mean([r["removal"]["psnr"] for r in rows]),
+            "removal_psnr_region": mean([r["removal"]["psnr_region"] for r in rows]),
+            "removal_psnr_seen": mean([r["removal"]["psnr_seen"] for r in rows]),
+            "extraction_iou": mean([r["extraction"]["iou"] for r in rows]),
+            "extraction_psnr_inside": mean([r["extraction"]["psnr_inside"] for r in rows]),
+            "leak": mean([r["extraction"]["leak"] for r in rows])}

@@ -1,0 +1,95 @@
+"""Labels made consistent in 3D after reassignment.
+
+The masks' vote decides each Gaussian from the pixels it reaches. Where that evidence is
+weak, a Gaussian is labelled by chance, and those chance labels are what an edit leaves
+behind: the rim of a removed object (Gaussians along its silhouette split their weight
+between it and what lies behind), and its interior (Gaussians no view sees). Two rules, as
+Gaussian Grouping regularises identities in 3D:
+
+- :func:`smooth_weak_labels`: a Gaussian with weak evidence (a small share of the median
+  contribution, or a near tie between its two best labels) takes the opacity-weighted label
+  majority of its ``k`` nearest Gaussians;
+- :func:`fill_interiors`: a Gaussian that an object's Gaussians enclose from most directions
+  (at least ``share`` of 14 directions meet one of them within the object's size) joins it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+from scipy.spatial import cKDTree
+
+from gsseg.render.contributions import Contributions
+from gsseg.segment.reassign import Segmentation, normalize
+
+DIRECTIONS = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]]
+                      + [[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], float)
+DIRECTIONS /= np.linalg.norm(DIRECTIONS, axis=1, keepdims=True)
+
+
+def weak_evidence(contributions: Contributions, *, min_share: float = 0.05, margin: float = 0.2) -> np.ndarray:
+    """(N,) bool: Gaussians whose total contribution is under ``min_share`` of the median over
+    the observed ones, or whose two best label shares lie within ``margin`` of each other."""
+    weights = contributions.weights
+    total = weights.sum(0)
+    observed = total > 0
+    median = float(total[observed].median()) if observed.any() else 0.0
+    share, _ = normalize(weights)
+    top = torch.topk(share, min(2, len(share)), dim=0).values if len(share) else torch.zeros(1, weights.shape[1])
+    gap = top[0] - (top[1] if len(top) > 1 else 0)
+    return ((total < min_share * median) | (gap < margin)).numpy()
+
+
+def _relabelled(segmentation: Segmentation, labels: np.ndarray) -> Segmentation:
+    return Segmentation(labels=labels.astype(np.uint8), objects=segmentation.objects,
+                        selections=labels[None, :] == segmentation.objects[:, None], method=segmentation.method,
+                        mode=segmentation.mode, gamma_p=segmentation.gamma_p, model=segmentation.model)
+
+
+def smooth_weak_labels(segmentation: Segmentation, means: np.ndarray, opacities: np.ndarray, weak: np.ndarray,
+                       k: int = 16) -> Segmentation:
+    """Weak Gaussians (``weak`` (N,) bool) take the opacity-weighted label majority of their
+    ``k`` nearest Gaussians with strong evidence (N, 3 ``means``; (N,) ``opacities``). Labels
+    of strong Gaussians never change."""
+    strong = np.flatnonzero(~weak)
+    targets = np.flatnonzero(weak)
+    if not len(strong) or not len(targets):
+        return segmentation
+    _, nearest = cKDTree(means[strong]).query(means[targets], k=min(k, len(strong)))
+    nearest = strong[np.atleast_2d(nearest.T).T]  # (T, k) indices into all Gaussians
+    labels = segmentation.labels.copy()
+    votes = np.zeros((len(targets), 256))
+    np.add.at(votes, (np.repeat(np.arange(len(targets)), nearest.shape[1]), labels[nearest].ravel()),
+              opacities[nearest].ravel())
+    labels[targets] = votes.argmax(1)
+    return _relabelled(segmentation, labels)
+
+
+def fill_interiors(segmentation: Segmentation, means: np.ndarray, share: float = 0.85,
+                   steps: int = 8) -> Segmentation:
+    """Gaussians that one object's Gaussians enclose from at least ``share`` of the 14
+    directions join that object (interiors no view sees, and what stands inside a hollow).
+
+    A direction meets the object when a point along it, within the object's size (the
+    diagonal of its Gaussians' bounding box, marched in ``steps`` steps), lies within one
+    step of one of the object's Gaussians."""
+    labels = segmentation.labels.copy()
+    for obj in segmentation.objects:
+        own = labels == obj
+        if own.sum() < 8:
+            continue
+        lo, hi = means[own].min(0), means[own].max(0)
+        size = float(np.linalg.norm(hi - lo))
+        inside_box = np.all((means >= lo) & (means <= hi), axis=1) & ~own
+        candidates = np.flatnonzero(inside_box)
+        if not len(candidates) or size == 0:
+            continue
+        step = size / steps
+        tree = cKDTree(means[own])
+        ts = step * np.arange(1, steps + 1)
+        probes = means[candidates][:, None, None, :] + ts[None, None, :, None] * DIRECTIONS[None, :, None, :]
+        distance, _ = tree.query(probes.reshape(-1, 3), distance_upper_bound=step)
+        met = np.isfinite(distance).reshape(len(candidates), len(DIRECTIONS), steps).any(2)
+        enclosed = met.mean(1) >= share
+        labels[candidates[enclosed]] = obj
+    return _relabelled(segmentation, labels)

@@ -1,0 +1,112 @@
+"""Structure from motion: the cameras of a real capture recovered from its photos alone
+(photos and a video), resumption, the camera-error metric, and bad input."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from dataset_tools import InputError, load_scene
+from dataset_tools.sfm import SfmConfig, run_sfm
+from dataset_tools.image_files import read_image
+from eval.metrics import camera_errors, similarity_alignment
+
+
+def test_similarity_alignment_recovers_a_known_similarity():
+    rng = np.random.default_rng(0)
+    points = rng.normal(size=(20, 3))
+    angle = 0.7
+    R = np.array([[np.cos(angle), -np.sin(angle), 0], [np.sin(angle), np.cos(angle), 0], [0, 0, 1]])
+    s, R_found, t = similarity_alignment(points, 2.5 * points @ R.T + [1.0, -2.0, 0.5])
+    assert s == pytest.approx(2.5) and np.allclose(R_found, R) and np.allclose(t, [1.0, -2.0, 0.5])
+
+
+def test_camera_errors_are_zero_for_a_similar_copy_and_see_a_turned_camera():
+    poses = [np.concatenate([np.eye(3), [[k], [0.3 * k * k], [3.0]]], 1) for k in range(-2, 3)]
+    spin = np.deg2rad(40)
+    Q = np.array([[1, 0, 0], [0, np.cos(spin), -np.sin(spin)], [0, np.sin(spin), np.cos(spin)]])
+    copy = [np.concatenate([p[:, :3] @ Q.T, 0.5 * p[:, 3:]], 1) for p in poses]  # a turned world at half scale
+    rot, ctr = camera_errors(copy, poses)
+    assert np.allclose(rot, 0, atol=1e-5) and np.allclose(ctr, 0, atol=1e-9)
+    turn = np.deg2rad(5)
+    turned = np.array([[np.cos(turn), 0, np.sin(turn)], [0, 1, 0], [-np.sin(turn), 0, np.cos(turn)]])
+    copy[0] = np.concatenate([turned @ copy[0][:, :3], turned @ copy[0][:, 3:]], 1)  # turned about its centre
+    rot, ctr = camera_errors(copy, poses)
+    shift = np.degrees(np.arctan2(np.sin(turn), 4 + np.cos(turn)))  # the chordal mean of 0, 0, 0, 0 and 5 degrees
+    assert rot[0] == pytest.approx(5.0 - shift, abs=1e-6) and np.allclose(rot[1:], shift, atol=1e-6)
+    assert np.allclose(ctr, 0, atol=1e-9)
+
+
+def photos_of(beer: Path, out: Path, count: int) -> Path:
+    """The first ``count`` photos of the beer capture at half size: what a user's photo folder holds."""
+    out.mkdir()
+    for path in sorted((beer / "images_2").iterdir())[:count]:
+        shutil.copy(path, out / path.name)
+    return out
+
+
+@pytest.mark.slow
+def test_sfm_recovers_the_cameras_of_a_real_capture_and_resumes(beer, tmp_path):
+    """14 consecutive beer photos: every one registers, and the cameras agree with the
+    capture's own COLMAP model (all 71 views at full size) to under a degree. (That model
+    maps 0014.jpg to the far side of the can; the first 14 photos are before it.)"""
+    photos = photos_of(beer, tmp_path / "photos", 14)
+    result = run_sfm(photos, tmp_path / "scene", SfmConfig(), progress=False)
+    assert result.registered == result.images == 14
+    made, truth = load_scene(result.scene), {v.name: v for v in load_scene(beer, images="images_2").views}
+    assert made.views[0].camera.width > 0 and (result.scene / "images_2").is_dir()
+    rot, ctr = camera_errors([v.cam_from_world for v in made.views], [truth[v.name].cam_from_world for v in made.views])
+    assert np.median(rot) < 1.0 and rot.max() < 2.0 and np.median(ctr) < 0.02
+    database = tmp_path / "scene" / ".sfm" / "database.db"
+    stamp = database.stat().st_mtime_ns
+    for name in ("images", "images_2", "images_4", "sparse", "scene.json"):  # a run cut before the end
+        path = result.scene / name
+        shutil.rmtree(path) if path.is_dir() else path.unlink()
+    again = run_sfm(photos, tmp_path / "scene", SfmConfig(), progress=False)
+    assert again.registered == 14 and database.stat().st_mtime_ns == stamp  # nothing recomputed
+
+
+@pytest.mark.slow
+def test_sfm_takes_a_phone_style_video(beer, tmp_path):
+    """20 beer photos as the frames of an MP4; 12 frames are kept and register."""
+    frames = [read_image(p) for p in sorted((beer / "images_2").iterdir())[:20]]
+    height, width = frames[0].shape[:2]
+    video = tmp_path / "walk.mp4"
+    writer = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"mp4v"), 10, (width, height))
+    for frame in frames:
+        writer.write(cv2.cvtColor(frame, cv2.COLOR_RGB2BGR))
+    writer.release()
+    result = run_sfm(video, tmp_path / "scene", SfmConfig(frames=12), progress=False)
+    assert result.images == 12 and result.registered >= 10
+    assert len(load_scene(result.scene).views) == result.registered
+
+
+@pytest.mark.parametrize("make, message", [
+    (lambda p: p.mkdir(), "holds no JPEG or PNG images"),
+    (lambda p: (p.mkdir(), (p / "a.jpg").write_bytes(b"\xff\xd8\xff junk")), "not a readable image"),
+    (lambda p: p.with_suffix(".mp4").write_text("not a video") or None, "cannot open this video"),
+])
+def test_bad_photos_are_one_sentence_and_write_nothing(tmp_path, make, message):
+    source = tmp_path / "photos"
+    make(source)
+    source = source if source.exists() else source.with_suffix(".mp4")
+    with pytest.raises(InputError, match=message):
+        run_sfm(source, tmp_path / "scene", progress=False)
+    assert not (tmp_path / "scene" / "scene.json").exists() and not (tmp_path / "scene" / "sparse").exists()
+
+
+@pytest.mark.slow
+def test_photos_that_do_not_overlap_are_refused(tmp_path):
+    """Noise images: no two of them match, so no model forms."""
+    photos = tmp_path / "photos"
+    photos.mkdir()
+    rng = np.random.default_rng(0)
+    for k in range(5):
+        cv2.imwrite(str(photos / f"{k}.png"), rng.integers(0, 255, (120, 160, 3), dtype=np.uint8))
+    with pytest.raises(InputError, match="need more overlap"):
+        run_sfm(photos, tmp_path / "scene", progress=False)
+    assert not (tmp_path / "scene" / "sparse").exists()
