@@ -39,6 +39,16 @@ def read_image(path: Path) -> np.ndarray:
         raise InputError(f"{path}: cannot read this image ({e}); replace it with a whole JPEG or PNG.") from None
 
 
+def encode_image(rgb: np.ndarray, suffix: str) -> bytes:
+    """The bytes of an (H, W, 3) uint8 RGB image as a ``.jpg``/``.jpeg`` (quality 95) or ``.png`` file."""
+    jpeg = suffix.lower() in (".jpg", ".jpeg")
+    ok, data = cv2.imencode(suffix.lower(), cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR),
+                            [cv2.IMWRITE_JPEG_QUALITY, 95] if jpeg else [])
+    if not ok:
+        raise InputError(f"OpenCV cannot encode {suffix} images; use JPEG or PNG.")
+    return data.tobytes()
+
+
 def read_mask(path: Path) -> np.ndarray:
     """Read an object-ID map: an 8-bit single-channel PNG, or a palette PNG whose indices are
     the IDs. Returns (H, W) uint8, 0 = background, 1..255 = object IDs."""
@@ -125,8 +135,5 @@ def write_downsampled(src: Path, dst: Path, factor: int) -> None:
         for f in files:
             image = read_image(f)
             size = (max(1, image.shape[1] // factor), max(1, image.shape[0] // factor))
-            small = cv2.cvtColor(cv2.resize(image, size, interpolation=cv2.INTER_AREA), cv2.COLOR_RGB2BGR)
-            ok, data = cv2.imencode(f.suffix.lower(), small, [cv2.IMWRITE_JPEG_QUALITY, 95])
-            if not ok:
-                raise InputError(f"{f}: OpenCV cannot encode {f.suffix} images; use JPEG or PNG.")
-            write_bytes_atomic(tmp / f.relative_to(src), data.tobytes())
+            small = cv2.resize(image, size, interpolation=cv2.INTER_AREA)
+            write_bytes_atomic(tmp / f.relative_to(src), encode_image(small, f.suffix))

@@ -23,7 +23,7 @@ from dataset_tools import colmap
 from dataset_tools.atomic import atomic_directory, write_bytes_atomic
 from dataset_tools.cameras import DEFAULT_NEAR, PinholeCamera, SourceCamera
 from dataset_tools.errors import InputError
-from dataset_tools.image_files import encode_png, image_size, read_image, read_mask
+from dataset_tools.image_files import encode_image, encode_png, image_size, read_image, read_mask
 
 Split = Literal["train", "test", "all"]
 
@@ -305,9 +305,7 @@ def save_scene(scene: Scene, out: Path | str, *, overwrite: bool = False, text: 
             if v.source_camera is None:
                 shutil.copyfile(v.image_path, dst)
             else:
-                img = cv2.cvtColor(v.load_image(), cv2.COLOR_RGB2BGR)
-                ok, buf = cv2.imencode(dst.suffix, img, [cv2.IMWRITE_JPEG_QUALITY, 95])
-                write_bytes_atomic(dst, buf.tobytes())
+                write_bytes_atomic(dst, encode_image(v.load_image(), dst.suffix))
             mask = v.load_mask()
             if mask is not None:
                 write_bytes_atomic(tmp / "object_mask" / f"{v.stem}.png", encode_png(mask))

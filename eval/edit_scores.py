@@ -11,7 +11,8 @@ import numpy as np
 import torch
 
 from dataset_tools.scene import View
-from dataset_tools.synth.edit_truth import read_edit_truth
+from dataset_tools.errors import InputError
+from dataset_tools.synth.edit_truth import EDIT_TRUTH, read_edit_truth
 from eval.metrics import extraction_scores, removal_scores
 from gsseg.edits import apply_edit
 from gsseg.render import Backend, get_backend, to_uint8
@@ -38,6 +39,11 @@ def edit_rows(run: Run, segmentation: Segmentation, views: list[View], scene_dir
                 truth = read_edit_truth(scene_dir, obj, view.stem)
                 if truth is None:
                     continue
+                if truth.without.shape[:2] != (view.camera.height, view.camera.width):
+                    raise InputError(
+                        f"{Path(scene_dir) / EDIT_TRUTH}: made at {truth.without.shape[1]}x{truth.without.shape[0]} "
+                        f"but {view.name} renders at {view.camera.width}x{view.camera.height}; write it again for "
+                        "the run's image folder (dataset_tools.synth.write_edit_truth(scene, images=...)).")
                 region = view.load_mask() == obj if view.mask_path is not None else truth.silhouette
                 extracted = run.render(view, gaussians=alone, background="white", backend=backend)
                 rows.append({

@@ -26,6 +26,7 @@ from dataset_tools.errors import InputError
 from dataset_tools.label_maps import match_ids, overlap
 from dataset_tools.scene import View
 from eval.lpips import LPIPS
+from eval.edit_scores import summarize_edits
 from eval.metrics import binary_scores, psnr, ssim
 from eval.renders import ViewRenders, render_view
 from gsseg.render import Backend, get_backend
@@ -42,7 +43,8 @@ class Evaluation:
 
     objects: rows {view, object, protocol, iou, acc}; views: rows {view, psnr, ssim} (and lpips
     when an LPIPS network was given); id_map: predicted label -> ground-truth ID (unmatched
-    labels are absent).
+    labels are absent); edits: rows of :func:`eval.edit_scores.edit_rows` where the scene has
+    edit truth.
     """
 
     run: str
@@ -51,6 +53,7 @@ class Evaluation:
     id_map: dict[int, int] = field(default_factory=dict)
     objects: list[dict] = field(default_factory=list)
     views: list[dict] = field(default_factory=list)
+    edits: list[dict] = field(default_factory=list)
 
     def summary(self) -> dict:
         lpips = [v["lpips"] for v in self.views if "lpips" in v]
@@ -61,6 +64,8 @@ class Evaluation:
             rows = [r for r in self.objects if r["protocol"] == protocol]
             out[protocol] = {"miou": _mean([r["iou"] for r in rows]), "macc": _mean([r["acc"] for r in rows]),
                              "pairs": len(rows)}
+        if self.edits:
+            out["edits"] = summarize_edits(self.edits)
         return out
 
     def per_object(self) -> dict[int, dict[str, float]]:

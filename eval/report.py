@@ -19,6 +19,8 @@ from dataset_tools.atomic import atomic_directory, write_bytes_atomic
 from dataset_tools.errors import InputError
 from dataset_tools.image_files import colorize_labels, encode_png
 from dataset_tools.scene import View
+from dataset_tools.synth.edit_truth import read_edit_truth
+from eval.edit_scores import edit_rows, summarize_edits
 from eval.evaluate import PROTOCOLS, Evaluation, evaluate, load_inputs
 from eval.lpips import LPIPS
 from eval.renders import ViewRenders
@@ -29,6 +31,9 @@ from gsseg.run_folder import RunFolder
 from gsseg.segment.reassign import Segmentation
 
 PANELS = ("photo", "ground truth", "predicted (visible)", "removal", "extraction", "recolour")
+TRUTH_PANELS = ("removal", "the view without the object", "extraction", "the object alone")
+EDIT_HEAD = ["object", "removal PSNR (dB)", "removal PSNR, object's region", "removal PSNR, region seen",
+             "extraction IoU", "extraction PSNR inside", "leak"]
 
 
 def _fmt(x: float | None, digits: int = 3) -> str:
@@ -66,6 +71,19 @@ def image_row(r: ViewRenders, id_map: dict[int, int], edits: dict[str, list[np.n
     panels = [r.image, *truth, colorize_labels(mapping[r.visible])] + [edits[op][index] for op in ("remove", "extract", "recolor")]
     gap = np.full((r.image.shape[0], 4, 3), 255, np.uint8)
     return np.concatenate([x for p in panels for x in (p, gap)][:-1], axis=1)
+
+
+def truth_rows(scene_dir: Path, views: list[View], gt: int | None, edits: dict[str, list[np.ndarray]]
+               ) -> dict[str, np.ndarray]:
+    """Per view with edit truth for ground-truth object ``gt``: removal | the view without the
+    object | extraction | the object alone, 4 px apart."""
+    out = {}
+    for view, removed, extracted in zip(views, edits["remove"], edits["extract"]):
+        truth = read_edit_truth(scene_dir, gt, view.stem) if gt is not None else None
+        if truth is not None:
+            gap = np.full((removed.shape[0], 4, 3), 255, np.uint8)
+            out[f"{view.stem}_truth"] = np.concatenate([removed, gap, truth.without, gap, extracted, gap, truth.alone], 1)
+    return out
 
 
 def training_plot(history: list[dict]) -> bytes | None:
@@ -118,6 +136,11 @@ def _sections(ev: Evaluation) -> list[tuple[str, list[str], list[list[str]]]]:
                       *((_fmt(float(np.mean(rows[p])) if rows[p] else None) for p in PROTOCOLS) if truth else ())])
     sections.append(("Views", ["view", "PSNR", "SSIM", "LPIPS", *(["mIoU visible", "mIoU extracted"] if truth else [])],
                      views))
+    if ev.edits:
+        sections.append(("Edits against ground truth", EDIT_HEAD, [
+            [str(obj), *(_fmt(v, 3 if "iou" in k or k == "leak" else 2) for k, v in summarize_edits(
+                [r for r in ev.edits if r["object"] == obj]).items() if k != "pairs")]
+            for obj in sorted({r["object"] for r in ev.edits})]))
     return sections
 
 
@@ -137,17 +160,20 @@ def _data_uri(png: bytes) -> str:
 
 
 def write_report(ev: Evaluation, renders: list[ViewRenders], edits: dict[str, list[np.ndarray]], history: list[dict],
-                 out_dir: Path, *, selected: int, title: str, overwrite: bool = False) -> Path:
-    """Write ``out_dir`` (atomically) with metrics.json, report.md, report.html and images/."""
+                 out_dir: Path, *, selected: int, title: str, truth: dict[str, np.ndarray] | None = None,
+                 overwrite: bool = False) -> Path:
+    """Write ``out_dir`` (atomically) with metrics.json, report.md, report.html and images/;
+    ``truth``: image rows of the edits beside their ground truth (:func:`truth_rows`)."""
     sections = _sections(ev)
     rows = {r.stem: encode_png(image_row(r, ev.id_map, edits, i)) for i, r in enumerate(renders)}
+    truth_pngs = {stem: encode_png(row) for stem, row in (truth or {}).items()}
     curve = training_plot(history)
     gt = ev.id_map.get(selected)
     edit_note = f"edits of predicted label {selected}" + (f" (ground-truth object {gt})" if gt is not None else "")
     panels = " | ".join(p for p in PANELS if p != "ground truth" or ev.objects)
     with atomic_directory(out_dir, overwrite=overwrite) as tmp:
         ev.save(tmp / "metrics.json")
-        for stem, png in rows.items():
+        for stem, png in {**rows, **truth_pngs}.items():
             write_bytes_atomic(tmp / "images" / f"{stem}.png", png)
         if curve is not None:
             write_bytes_atomic(tmp / "images" / "training.png", curve)
@@ -156,11 +182,19 @@ def write_report(ev: Evaluation, renders: list[ViewRenders], edits: dict[str, li
             md += ([f"## {name}", ""] if name else []) + [markdown_table(head, table), ""]
         md += [f"## Images: {panels}", "", f"{edit_note}.", ""]
         md += [f"![{stem}](images/{stem}.png)" for stem in rows]
+        if truth_pngs:
+            md += ["", f"## Edits beside their truth: {' | '.join(TRUTH_PANELS)}", ""]
+            md += [f"![{stem}](images/{stem}.png)" for stem in truth_pngs]
         if curve is not None:
             md += ["", "## Training", "", "![training](images/training.png)"]
         write_bytes_atomic(tmp / "report.md", ("\n".join(md) + "\n").encode())
-        images = "".join(f"<figure><img src='{_data_uri(png)}' alt='{html.escape(stem)}'><figcaption>{html.escape(stem)}"
-                         "</figcaption></figure>" for stem, png in rows.items())
+        def figures(pngs: dict[str, bytes]) -> str:
+            return "".join(f"<figure><img src='{_data_uri(png)}' alt='{html.escape(stem)}'><figcaption>"
+                           f"{html.escape(stem)}</figcaption></figure>" for stem, png in pngs.items())
+
+        images = figures(rows)
+        if truth_pngs:
+            images += f"<h2>Edits beside their truth</h2><p>{html.escape(' | '.join(TRUTH_PANELS))}.</p>" + figures(truth_pngs)
         training = f"<h2>Training</h2><img src='{_data_uri(curve)}' alt='training curves'>" if curve is not None else ""
         tables = "".join((f"<h2>{html.escape(name)}</h2>" if name else "") + _html_table(head, table)
                          for name, head, table in sections)
@@ -192,11 +226,14 @@ def report_run(run_dir: Path | str, scene_dir: Path | str, out_dir: Path | str, 
     ev, renders = evaluate(run, segmentation, views, with_truth=gt_masks is not None, scene=str(scene_dir), split=split,
                            backend=backend, lpips=lpips_net, progress=progress)
     selected = default_object(segmentation) if object_id is None else int(object_id)
+    if gt_masks is not None:
+        ev.edits = edit_rows(run, segmentation, views, scene_dir, ev.id_map, backend=backend)
     edits = edit_panels(run, segmentation, views, selected, color, backend)
+    truth = truth_rows(scene_dir, views, ev.id_map.get(selected), edits) if ev.edits else None
     metrics = run.folder.metrics
     history = json.loads(metrics.read_text()).get("train", {}).get("history", []) if metrics.is_file() else []
     write_report(ev, renders, edits, history, out_dir, selected=selected, title=f"gsseg report: {run_dir.name}",
-                 overwrite=overwrite)
+                 truth=truth, overwrite=overwrite)
     with run.folder.lock():
         ev.save(run.folder.evaluation)
     return ev

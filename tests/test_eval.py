@@ -152,6 +152,30 @@ def test_report_writes_tables_images_and_a_self_contained_page(segmented, small_
     assert r.returncode == 0 and r.stdout.count(str(segmented)) == 2
 
 
+def test_report_scores_edits_where_the_scene_has_edit_truth(segmented, small_scene, tmp_path):
+    """With ``edit_truth/`` in the scene, the report scores every matched object's removal and
+    extraction and shows the selected object's edits beside their truth."""
+    from dataset_tools.synth.edit_truth import write_edit_truth
+    from eval.report import report_run
+
+    scene = tmp_path / "scene"
+    shutil.copytree(small_scene.root, scene)
+    write_edit_truth(scene, progress=False)
+    ev = report_run(segmented, scene, tmp_path / "report", backend="cpu", progress=False)
+    test_views = load_scene(scene).split("test")
+    assert {r["object"] for r in ev.edits} == set(ev.id_map.values())
+    assert len(ev.edits) == len(ev.id_map) * len(test_views)
+    edits = ev.summary()["edits"]
+    assert 0 < edits["extraction_iou"] <= 1 and 0 <= edits["leak"] <= 1 and edits["removal_psnr"] > 10
+    md = (tmp_path / "report" / "report.md").read_text()
+    assert "## Edits against ground truth" in md and "## Edits beside their truth" in md
+    for view in test_views:
+        row = read_image(tmp_path / "report" / "images" / f"{view.stem}_truth.png")
+        assert row.shape == (view.camera.height, 4 * view.camera.width + 12, 3)
+    plain = report_run(segmented, small_scene.root, tmp_path / "plain", backend="cpu", progress=False)
+    assert not plain.edits and "edits" not in plain.summary()
+
+
 @pytest.mark.skipif(shutil.which("chromium") is None, reason="headless Chromium (Debian's chromium) is not installed")
 def test_report_page_renders_in_chromium(segmented, small_scene, tmp_path):
     from eval.report import report_run
