@@ -106,6 +106,7 @@ def main() -> None:
                         print(name, json.dumps({k: {m: round(v, 4) if isinstance(v, float) else v
                                                     for m, v in s.items()} for k, s in results["runs"][name].items()}),
                               flush=True)
+                        record.save("edit_quality", results, out=args.out)  # each finished run, as it finishes
     print(report(results)[1])
     record.save("edit_quality", results, out=args.out)
 

@@ -23,16 +23,18 @@ def cli() -> None:
 @click.option("--objects", type=int, default=6, show_default=True)
 @click.option("--path", "path_kind", type=click.Choice(["orbit", "forward"]), default="orbit", show_default=True)
 @click.option("--wall/--no-wall", default=None, help="Back wall (default: only for --path forward).")
+@click.option("--ground", type=click.Choice(["checker", "speckle"]), default="checker", show_default=True,
+              help="Ground texture; speckle (irregular) lets structure from motion match the views.")
 @click.option("--edit-truth", is_flag=True,
               help="Also render the test views without each object and each object alone (edit_truth/).")
 @click.option("--force", is_flag=True, help="Replace --out if it exists.")
 def synth(out: Path, seed: int, views: int, res: int, objects: int, path_kind: str, wall: bool | None,
-          edit_truth: bool, force: bool) -> None:
+          ground: str, edit_truth: bool, force: bool) -> None:
     """Ray-cast a synthetic scene with exact object masks and SfM points."""
     from dataset_tools.synth import SynthConfig, generate_scene
     from dataset_tools.synth.edit_truth import write_edit_truth
 
-    cfg = SynthConfig(views=views, res=res, objects=objects, path=path_kind, seed=seed, wall=wall)
+    cfg = SynthConfig(views=views, res=res, objects=objects, path=path_kind, seed=seed, wall=wall, ground=ground)
     result = generate_scene(cfg, out, overwrite=force)
     if edit_truth:
         write_edit_truth(result.root)

@@ -85,6 +85,9 @@ def edit_run(run_dir: Path | str, op: str, *, point=None, click=None, object_id:
     if point is not None:
         object_id = pick_object(run.gaussians.means.numpy(), segmentation.labels, np.asarray(point), k)
     selected = segmentation.selection(int(object_id))
+    if not selected.any():
+        raise InputError(f"object {object_id} of {run.folder.labels} holds no Gaussian; pick another object or "
+                         "segment the run again.")
     rgb = tuple(c / 255 for c in color) if color is not None else None
     edited = apply_edit(run.gaussians, selected, op, rgb)
     out = run.folder.edit(name or f"{op}_{object_id}")

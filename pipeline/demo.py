@@ -31,7 +31,7 @@ from dataset_tools.image_files import IMAGE_SUFFIXES, image_size, write_downsamp
 from dataset_tools.scene import linked_scene
 from dataset_tools.sfm import run_sfm
 from dataset_tools.synth import SynthConfig, generate_scene
-from eval.report import report_run
+from eval.report import default_object, report_run
 from gsseg.edits import edit_run
 from gsseg.render import Backend, get_backend
 from gsseg.run import Run, load_run
@@ -60,12 +60,24 @@ class DemoResult:
     seconds: float
 
 
-def _prompt_point(scene_dir: Path, run: Run, synth_point: np.ndarray | None, backend: Backend) -> np.ndarray:
+def _demo_object(scene_dir: Path, run: Run, labels: np.ndarray, default: int, synth_point: np.ndarray | None,
+                 backend: Backend) -> tuple[int, np.ndarray]:
+    """The object the demo edits and the 3D point that selects it: the synthetic scene's first
+    object; in a user's scene the object under the centre of the first test view, or, where
+    the centre shows background, the ``default`` object at the median of its Gaussians."""
+    means = run.gaussians.means.numpy()
     if synth_point is not None:
-        return synth_point
+        return pick_object(means, labels, synth_point), np.asarray(synth_point, np.float64)
     view = run.scene(scene_dir).split("test")[0]
-    return point_from_click(run.gaussians, view.camera, view.cam_from_world, view.camera.width / 2,
-                            view.camera.height / 2, backend=backend)
+    try:
+        point = point_from_click(run.gaussians, view.camera, view.cam_from_world, view.camera.width / 2,
+                                 view.camera.height / 2, backend=backend)
+        return pick_object(means, labels, point), point
+    except InputError:
+        if not (labels == default).any():
+            raise InputError(f"{run.folder.labels}: no Gaussian carries an object label; train longer (--iters) "
+                             "or check the masks in the scene's object_mask/.") from None
+        return default, np.median(means[labels == default], axis=0).astype(np.float64)
 
 
 def demo_images(scene: Path) -> str:
@@ -126,8 +138,8 @@ def run_demo(out: Path | str, *, scene: Path | str | None = None, images: str | 
     train(scene_dir, run_dir, cfg, progress=progress)
     segmentation = segment_run(run_dir, scene_dir, masks=MASKS, backend=backend, progress=progress)
     run = load_run(run_dir)
-    point = np.asarray(_prompt_point(scene_dir, run, synth_point, backend), np.float64)
-    object_id = pick_object(run.gaussians.means.numpy(), segmentation.labels, point)
+    object_id, point = _demo_object(scene_dir, run, segmentation.labels, default_object(segmentation), synth_point,
+                                    backend)
     for op, color in (("remove", None), ("extract", None), ("recolor", (255, 40, 200))):
         edit_run(run_dir, op, object_id=object_id, color=color, scene_dir=scene_dir, backend=backend,
                  progress=progress)

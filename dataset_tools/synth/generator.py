@@ -36,6 +36,7 @@ class SynthConfig:
     path: Literal["orbit", "forward"] = "orbit"
     seed: int = 0
     wall: bool | None = None  # None: a back wall for ``forward`` only
+    ground: Literal["checker", "speckle"] = "checker"  # speckle: irregular, for structure from motion
     points_per_view: int = 200
     supersample: int = 2
     fov_deg: float = 50.0
@@ -49,6 +50,8 @@ class SynthConfig:
             raise InputError(f"--res {self.res}: the resolution must lie in 16..4096 pixels.")
         if self.path not in ("orbit", "forward"):
             raise InputError(f"--path {self.path}: use orbit or forward.")
+        if self.ground not in ("checker", "speckle"):
+            raise InputError(f"--ground {self.ground}: use checker or speckle.")
 
 
 @dataclass(frozen=True)
@@ -131,7 +134,8 @@ def make_layout(cfg: SynthConfig, rng: np.random.Generator) -> Layout:
         objects.append(SceneObject(k, kind, shape, texture))
     ground = (
         Plane((0.0, 0.0, 1.0), 0.0),
-        Texture("checker", (0.72, 0.68, 0.6), (0.45, 0.42, 0.38), scale=0.5, fade=4 * extent),
+        Texture("checker", (0.72, 0.68, 0.6), (0.45, 0.42, 0.38), scale=0.5, fade=4 * extent)
+        if cfg.ground == "checker" else Texture("speckle", (0.78, 0.72, 0.62), (0.3, 0.27, 0.24), scale=0.25),
     )
     background = [ground]
     if cfg.wall if cfg.wall is not None else cfg.path == "forward":

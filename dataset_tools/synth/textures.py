@@ -7,12 +7,43 @@ from typing import Literal
 
 import numpy as np
 
-Pattern = Literal["checker", "stripes", "waves", "plain"]
+Pattern = Literal["checker", "stripes", "waves", "plain", "speckle"]
 
 
 def _smooth_square(x: np.ndarray, sharpness: float = 6.0) -> np.ndarray:
     """A square wave in [0, 1] with soft edges (limits aliasing at low resolution)."""
     return 0.5 + 0.5 * np.tanh(sharpness * np.sin(np.pi * x))
+
+
+def _lattice(cells: np.ndarray) -> np.ndarray:
+    """A fixed pseudo-random value in [0, 1) per integer lattice point (an integer hash with
+    xor-shift mixing, so that neighbouring points are unrelated). (N, 3) int -> (N,)."""
+    c = cells.astype(np.uint64) & np.uint64(0xFFFFFFFF)
+    h = (c[:, 0] * np.uint64(0x9E3779B1)) ^ (c[:, 1] * np.uint64(0x85EBCA77)) ^ (c[:, 2] * np.uint64(0xC2B2AE3D))
+    h &= np.uint64(0xFFFFFFFF)
+    for shift, factor in ((15, 0x2C1B3C6D), (12, 0x297A2D39), (15, 1)):
+        h = ((h ^ (h >> np.uint64(shift))) * np.uint64(factor)) & np.uint64(0xFFFFFFFF)
+    return h.astype(np.float64) / 2.0**32
+
+
+def value_noise(q: np.ndarray, octaves: int = 4) -> np.ndarray:
+    """Multi-octave value noise in [0, 1] at points ``q`` (N, 3): trilinear interpolation
+    (smoothstep weights) of lattice values, each octave twice as fine and half as strong.
+    Irregular blobs at every scale: corners for feature matching, unlike periodic patterns."""
+    total, norm = np.zeros(len(q)), 0.0
+    for octave in range(octaves):
+        p = q * 2.0**octave
+        base = np.floor(p).astype(np.int64)
+        f = p - base
+        w = f * f * (3 - 2 * f)
+        value = np.zeros(len(q))
+        for corner in np.ndindex(2, 2, 2):
+            c = np.asarray(corner)
+            weight = np.prod(np.where(c == 1, w, 1 - w), axis=1)
+            value += weight * _lattice(base + c)
+        total += value * 0.5**octave
+        norm += 0.5**octave
+    return total / norm
 
 
 def _soft_xor(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -43,6 +74,8 @@ class Texture:
             w = _soft_xor(_soft_xor(sx, sy), sz)
         elif self.pattern == "stripes":
             w = _smooth_square(q @ np.asarray(self.axis))
+        elif self.pattern == "speckle":
+            w = 0.5 + 1.6 * (value_noise(q) - 0.5)
         elif self.pattern == "waves":
             w = 0.5 + 0.25 * np.sin(2.1 * q[:, 0] + 1.3 * np.sin(1.7 * q[:, 2])) + 0.25 * np.sin(1.9 * q[:, 1] - 0.7 * q[:, 2])
         else:
