@@ -136,14 +136,11 @@ def report(r: dict) -> tuple[str, str]:
                          _spread([c["removal_psnr_region"] for c in cells]), _spread([c["extraction_iou"] for c in cells]),
                          _spread([c["leak"] for c in cells]), _spread([c["extraction_psnr_inside"] for c in cells]),
                          _spread([c["miou"] for c in cells])])
-    medium = [run for (path, kind), runs in groups.items() if kind == "medium" for run in runs]
-    headline = ""
-    if medium:
-        best = {s: _mean([run[s]["removal_psnr_seen"] for run in medium]) for s in medium[0]}
-        top = max(best, key=lambda s: best[s] or -1)
-        headline = (f"medium masks, {top}: removal {best[top]:.1f} dB where the background was seen, extraction IoU "
-                    f"{_mean([run[top]['extraction_iou'] for run in medium]):.3f}, leak "
-                    f"{100 * _mean([run[top]['leak'] for run in medium]):.1f}%")
+    headline = "; ".join(
+        f"{path}, {kind} masks, {setting}: removal {_mean([run[setting]['removal_psnr_seen'] for run in runs]):.1f} dB "
+        f"where the background was seen, extraction IoU {_mean([run[setting]['extraction_iou'] for run in runs]):.3f}, "
+        f"leak {100 * _mean([run[setting]['leak'] for run in runs]):.1f}%"
+        for (path, kind), runs in groups.items() for setting in ("prior", "prior + smooth") if setting in runs[0])
     table = markdown_table(["path", "masks", "labels", "removal PSNR, seen (dB)", "removal PSNR, region (dB)",
                             "extraction IoU", "leak", "extraction PSNR inside (dB)", "mIoU"], rows)
     return headline, ("Means over the ground-truth objects and test views; the mean over training seeds with their "
