@@ -49,6 +49,27 @@ def describe_os_error(e: OSError) -> str:
     return f"{where}: {what.lower()}; {OS_FIXES.get(e.errno, 'check the path and try again')}."
 
 
+def none_means_off(ctx: click.Context, param: click.Parameter, value: str | None) -> str | None:
+    """A click callback: the option value ``none`` becomes None (the feature turned off)."""
+    return None if value == "none" else value
+
+
+def _failure(e: BaseException, prog_name: str) -> tuple[str, int]:
+    """The one line to print for an exception that ends a command, and the exit code."""
+    if isinstance(e, InputError):
+        return f"error: {e}", 2
+    if isinstance(e, OSError):
+        return f"error: {describe_os_error(e)}", 2
+    if isinstance(e, Interrupted):
+        return f"interrupted: {e}", 130
+    if isinstance(e, (click.exceptions.Abort, KeyboardInterrupt)):
+        return "interrupted; nothing half-written was left behind", 130
+    if isinstance(e, click.UsageError):
+        command = e.ctx.command_path if e.ctx is not None else prog_name
+        return f"error: {e.format_message().replace(chr(10), ' ')}; see `{command} --help`.", 2
+    return f"error: {e.format_message()}", e.exit_code  # any other click.ClickException
+
+
 def run_cli(group: click.Group, prog_name: str) -> Callable[[], None]:
     """An entry point that runs ``group`` and turns an ``InputError`` or an ``OSError`` into
     ``error: ...`` on stderr and exit code 2, without a traceback; interrupted work exits 130
@@ -58,31 +79,11 @@ def run_cli(group: click.Group, prog_name: str) -> Callable[[], None]:
     def main() -> None:
         try:
             group.main(prog_name=prog_name, standalone_mode=False)
-        except InputError as e:
+        except (InputError, OSError, Interrupted, click.exceptions.Abort, KeyboardInterrupt,
+                click.ClickException) as e:
             _close_progress_bars()
-            click.echo(f"error: {e}", err=True)
-            sys.exit(2)
-        except OSError as e:
-            _close_progress_bars()
-            click.echo(f"error: {describe_os_error(e)}", err=True)
-            sys.exit(2)
-        except Interrupted as e:
-            _close_progress_bars()
-            click.echo(f"interrupted: {e}", err=True)
-            sys.exit(130)
-        except (click.exceptions.Abort, KeyboardInterrupt):
-            _close_progress_bars()
-            click.echo("interrupted; nothing half-written was left behind", err=True)
-            sys.exit(130)
-        except click.UsageError as e:
-            _close_progress_bars()
-            command = e.ctx.command_path if e.ctx is not None else prog_name
-            message = e.format_message().replace("\n", " ")
-            click.echo(f"error: {message}; see `{command} --help`.", err=True)
-            sys.exit(2)
-        except click.ClickException as e:
-            _close_progress_bars()
-            click.echo(f"error: {e.format_message()}", err=True)
-            sys.exit(e.exit_code)
+            message, code = _failure(e, prog_name)
+            click.echo(message, err=True)
+            sys.exit(code)
 
     return main

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from dataset_tools.cli_support import run_cli
+from dataset_tools.cli_support import none_means_off, run_cli
 
 
 @click.group(name="gseval", context_settings={"help_option_names": ["-h", "--help"]})
@@ -18,7 +18,7 @@ def cli() -> None:
 @click.argument("run", type=click.Path(path_type=Path))
 @click.option("--scene", required=True, type=click.Path(path_type=Path), help="The scene the run was trained on.")
 @click.option("--out", required=True, type=click.Path(path_type=Path), help="Report folder to write.")
-@click.option("--gt-masks", default="object_mask", show_default=True, callback=lambda ctx, param, v: None if v == "none" else v,
+@click.option("--gt-masks", default="object_mask", show_default=True, callback=none_means_off,
               help="Ground-truth mask folder of SCENE; none: image metrics only.")
 @click.option("--split", default="test", show_default=True, help="Views to evaluate: test, train or all.")
 @click.option("--object-id", type=int, default=None, help="Label to edit in the image rows (default: the largest).")

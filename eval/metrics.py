@@ -9,7 +9,7 @@ from dataset_tools.label_maps import match_ids, overlap
 
 
 def psnr(pred: np.ndarray, target: np.ndarray) -> float:
-    """PSNR in dB of two uint8 images of the same shape."""
+    """PSNR in dB of two uint8 arrays of the same shape (images, or the pixels of a region)."""
     mse = np.mean((pred.astype(np.float64) - target.astype(np.float64)) ** 2)
     return float("inf") if mse == 0 else float(10 * np.log10(255.0**2 / mse))
 
@@ -116,10 +116,7 @@ def removal_scores(removed: np.ndarray, truth: np.ndarray, region: np.ndarray, s
         removed, truth: (H, W, 3) uint8.
     """
     def masked_psnr(mask: np.ndarray) -> float | None:
-        if not mask.any():
-            return None
-        mse = np.mean((removed[mask].astype(np.float64) - truth[mask].astype(np.float64)) ** 2)
-        return float("inf") if mse == 0 else float(10 * np.log10(255.0**2 / mse))
+        return psnr(removed[mask], truth[mask]) if mask.any() else None
 
     return {"psnr": psnr(removed, truth), "ssim": ssim(removed, truth), "psnr_region": masked_psnr(region),
             "psnr_seen": masked_psnr(region & seen)}
@@ -141,8 +138,5 @@ def extraction_scores(alpha: np.ndarray, rgb: np.ndarray, truth: np.ndarray, sil
     iou, _ = binary_scores(alpha >= 0.5, silhouette)
     grown = cv2.dilate(silhouette.astype(np.uint8), np.ones((2 * margin + 1, 2 * margin + 1), np.uint8)) > 0
     total = float(alpha.sum())
-    inside = silhouette
-    mse = np.mean((rgb[inside].astype(np.float64) - truth[inside].astype(np.float64)) ** 2) if inside.any() else None
-    return {"iou": iou, "psnr_inside": None if mse is None else (float("inf") if mse == 0 else
-                                                                   float(10 * np.log10(255.0**2 / mse))),
+    return {"iou": iou, "psnr_inside": psnr(rgb[silhouette], truth[silhouette]) if silhouette.any() else None,
             "leak": float(alpha[~grown].sum() / total) if total > 0 else 0.0}

@@ -7,7 +7,7 @@ from pathlib import Path
 import click
 import numpy as np
 
-from dataset_tools.cli_support import run_cli
+from dataset_tools.cli_support import none_means_off, run_cli
 
 
 @click.group(name="gsseg", context_settings={"help_option_names": ["-h", "--help"]})
@@ -18,7 +18,7 @@ def cli() -> None:
 @cli.command()
 @click.argument("scene", type=click.Path(path_type=Path))
 @click.option("--out", "run", required=True, type=click.Path(path_type=Path), help="Run folder to write.")
-@click.option("--masks", default="object_mask", show_default=True, callback=lambda ctx, param, v: None if v == "none" else v,
+@click.option("--masks", default="object_mask", show_default=True, callback=none_means_off,
               help="Object-ID map folder (views without a mask train colour only); none: train colour alone.")
 @click.option("--images", default="images", show_default=True, help="Image folder (images or images_N).")
 @click.option("--iters", type=int, default=None, help="Iterations (default: 3000 on cpu, 30000 with gsplat); the schedule scales with it.")

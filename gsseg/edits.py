@@ -41,18 +41,23 @@ def recolor(g: Gaussians, selected: torch.Tensor, rgb: tuple[float, float, float
     return out
 
 
+def check_edit(op: str, color: tuple | None) -> None:
+    """Refuse an unknown ``op`` and a recolour without its ``color``."""
+    if op not in OPS:
+        raise InputError(f"unknown edit {op!r}; choose one of {', '.join(OPS)}.")
+    if op == "recolor" and color is None:
+        raise InputError("--op recolor needs --color R G B (0..255).")
+
+
 def apply_edit(g: Gaussians, selected: np.ndarray, op: str, rgb: tuple[float, float, float] | None = None) -> Gaussians:
     """A copy of ``g`` with ``op`` applied to the (N,) bool ``selected`` Gaussians."""
+    check_edit(op, rgb)
     sel = torch.as_tensor(selected, dtype=torch.bool)
     if op == "remove":
         return g.select(~sel)
     if op == "extract":
         return g.select(sel)
-    if op == "recolor":
-        if rgb is None:
-            raise InputError("--op recolor needs --color R G B (0..255).")
-        return recolor(g, sel, rgb)
-    raise InputError(f"unknown edit {op!r}; choose one of {', '.join(OPS)}.")
+    return recolor(g, sel, rgb)
 
 
 def edit_run(run_dir: Path | str, op: str, *, point=None, click=None, object_id: int | None = None,
@@ -68,10 +73,7 @@ def edit_run(run_dir: Path | str, op: str, *, point=None, click=None, object_id:
         plain_name(name, "--name")
     if point is not None and not np.isfinite(np.asarray(point, float)).all():
         raise InputError(f"--point {' '.join(map(str, point))}: give three finite coordinates.")
-    if op not in OPS:
-        raise InputError(f"unknown edit {op!r}; choose one of {', '.join(OPS)}.")
-    if op == "recolor" and color is None:
-        raise InputError("--op recolor needs --color R G B (0..255).")
+    check_edit(op, color)
     if color is not None and not all(0 <= c <= 255 for c in color):
         raise InputError(f"--color {' '.join(map(str, color))}: give three values in 0..255.")
     run = load_run(run_dir)
