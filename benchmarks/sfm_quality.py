@@ -26,7 +26,7 @@ from dataset_tools.image_files import read_image
 from dataset_tools.scene import load_scene
 from dataset_tools.synth import SynthConfig, generate_scene
 from dataset_tools.sfm import SfmConfig, run_sfm
-from eval.metrics import camera_errors
+from eval.metrics import camera_errors, rotation_angle
 from eval.report import markdown_table
 
 
@@ -37,8 +37,7 @@ def flips(poses: dict[str, np.ndarray], degrees: float = 45.0) -> list[str]:
     """Images turned by more than ``degrees`` from the image before them in name order: in a
     capture taken a few degrees apart, a camera mapped to the far side of the object."""
     names = sorted(poses)
-    turns = [np.degrees(np.arccos(np.clip((np.trace(poses[b][:, :3] @ poses[a][:, :3].T) - 1) / 2, -1, 1)))
-             for a, b in zip(names, names[1:])]
+    turns = [rotation_angle(poses[b][:, :3] @ poses[a][:, :3].T) for a, b in zip(names, names[1:])]
     return [b for b, turn in zip(names[1:], turns) if turn > degrees]
 
 

@@ -79,6 +79,11 @@ def similarity_alignment(source: np.ndarray, target: np.ndarray) -> tuple[float,
     return s, R, mu_t - s * R @ mu_s
 
 
+def rotation_angle(R: np.ndarray) -> float:
+    """The angle in degrees of the rotation (3, 3) ``R``."""
+    return float(np.degrees(np.arccos(np.clip((np.trace(R) - 1) / 2, -1, 1))))
+
+
 def camera_errors(estimated: list[np.ndarray], truth: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
     """Per camera, the rotation error in degrees after the rotation that best aligns the
     estimated orientations with the true ones (their chordal mean), and the centre error as a
@@ -100,10 +105,8 @@ def camera_errors(estimated: list[np.ndarray], truth: list[np.ndarray]) -> tuple
     center_error = np.linalg.norm((s * est @ R.T + t) - true, axis=1) / extent
     U, _, Vt = np.linalg.svd(sum(g[:, :3].T @ e[:, :3] for e, g in zip(estimated, truth)))
     align = U @ np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))]) @ Vt  # estimated world -> true world
-    rotation_error = []
-    for e, g in zip(estimated, truth):
-        relative = (e[:, :3] @ align.T) @ g[:, :3].T  # the estimated rotation in the true world, against the truth
-        rotation_error.append(np.degrees(np.arccos(np.clip((np.trace(relative) - 1) / 2, -1, 1))))
+    # each estimated rotation in the true world, against the truth
+    rotation_error = [rotation_angle((e[:, :3] @ align.T) @ g[:, :3].T) for e, g in zip(estimated, truth)]
     return np.array(rotation_error), center_error
 
 

@@ -100,14 +100,18 @@ def depth_priors(scene: Scene, ids: list[np.ndarray], associate: str) -> list[np
     return [depth_from_anchors(v, m, anchors) for v, m in zip(scene.views, ids)]
 
 
+def _check_min_area(min_area: int | None) -> None:
+    if min_area is not None and min_area < 1:
+        raise InputError(f"--min-area {min_area}: give a number of pixels of 1 or more (or leave it out).")
+
+
 def build_masks(scene_dir: Path | str, cfg: BuildConfig, *, progress: bool = True) -> BuildResult:
     """Write consistent, cleaned object-ID maps of every view to ``scene_dir/cfg.out_masks``."""
     scene_dir = Path(scene_dir)
     if cfg.associate not in ASSOCIATIONS:
         raise InputError(f"--associate {cfg.associate}: use auto, flow or tracks.")
     plain_name(cfg.out_masks, "--out-masks")
-    if cfg.min_area is not None and cfg.min_area < 1:
-        raise InputError(f"--min-area {cfg.min_area}: give a number of pixels of 1 or more (or leave it out).")
+    _check_min_area(cfg.min_area)
     if cfg.points_per_side < 1:
         raise InputError(f"--points-per-side {cfg.points_per_side}: give 1 or more points per side of the grid.")
     if cfg.threads < 0:
@@ -164,8 +168,7 @@ def clean_scene_masks(
     """Noise removal alone: ``scene_dir/masks`` -> ``scene_dir/out_masks``."""
     scene_dir = Path(scene_dir)
     src, dst = scene_dir / masks, scene_dir / plain_name(out_masks, "--out-masks")
-    if min_area is not None and min_area < 1:
-        raise InputError(f"--min-area {min_area}: give a number of pixels of 1 or more (or leave it out).")
+    _check_min_area(min_area)
     if not src.is_dir():
         raise InputError(f"{src}: mask folder not found; check --masks.")
     if src == dst:

@@ -18,7 +18,7 @@ from gsseg.segment.regularize import fill_interiors, smooth_weak_labels, weak_ev
 class LabelOptions:
     """How labels are chosen: the reassignment (method, mode, gamma_p, slack) and the 3D
     regularisation after it (``smooth``: neighbours that relabel weak Gaussians, 0 off;
-    ``fill``: objects take the Gaussians they enclose)."""
+    ``fill``: objects take the Gaussians they enclose). Checked when made."""
 
     method: str = "prior"
     mode: str = "multi"
@@ -27,7 +27,7 @@ class LabelOptions:
     smooth: int = 0
     fill: bool = False
 
-    def check(self) -> None:
+    def __post_init__(self) -> None:
         if self.method not in METHODS:
             raise InputError(f"--method {self.method}: choose one of {', '.join(METHODS)}.")
         if self.mode not in MODES:
@@ -51,7 +51,6 @@ def mask_contributions(run: Run, scene_dir: Path | str | None = None, *, masks: 
 
 def label_gaussians(run: Run, contributions: Contributions, options: LabelOptions = LabelOptions()) -> Segmentation:
     """Every Gaussian's label from the contribution matrix and the run's classifier."""
-    options.check()
     prior_labels, prior_probs = classifier_prior(run.gaussians.obj_feat, run.classifier)
     result = reassign(contributions, prior_labels, prior_probs, method=options.method, mode=options.mode,
                       gamma_p=options.gamma_p, slack=options.slack)
@@ -70,7 +69,6 @@ def segment_run(run_dir: Path | str, scene_dir: Path | str | None = None, *, opt
                 progress: bool = True) -> Segmentation:
     """Label every Gaussian of a run from the masks of ``split`` (the training views by
     default) and the run's classifier; write ``RUN/labels.npz``."""
-    options.check()
     run = load_run(run_dir)
     contributions = mask_contributions(run, scene_dir, masks=masks, split=split, backend=backend, progress=progress)
     if not len(contributions.labels) and options.method != "classifier":
