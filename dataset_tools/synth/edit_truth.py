@@ -46,15 +46,19 @@ class EditTruth:
     seen: np.ndarray
 
 
-def scene_layout(scene_dir: Path) -> Layout:
-    """The layout of a synthetic scene folder, rebuilt from the options in its scene.json."""
+def scene_config(scene_dir: Path) -> SynthConfig:
+    """The options a synthetic scene folder was made with, from its scene.json."""
     meta_path = Path(scene_dir) / "scene.json"
     try:
-        config = json.loads(meta_path.read_text())["provenance"]["config"]
+        return SynthConfig(**json.loads(meta_path.read_text())["provenance"]["config"])
     except (OSError, ValueError, KeyError) as e:
         raise InputError(f"{meta_path}: not a synthetic scene of `python -m dataset_tools synth` ({e}); "
                          "edit ground truth exists for synthetic scenes only.") from None
-    cfg = SynthConfig(**config)
+
+
+def scene_layout(scene_dir: Path) -> Layout:
+    """The layout of a synthetic scene folder, rebuilt from the options in its scene.json."""
+    cfg = scene_config(scene_dir)
     return make_layout(cfg, np.random.default_rng(cfg.seed))
 
 
@@ -99,10 +103,11 @@ def write_edit_truth(scene_dir: Path | str, *, images: str = "images", split: st
     copy is the full views area-averaged, so its truth takes N times the generator's samples
     a side); the folder appears whole or not at all."""
     scene_dir = Path(scene_dir)
-    layout = scene_layout(scene_dir)
+    cfg = scene_config(scene_dir)
+    layout = make_layout(cfg, np.random.default_rng(cfg.seed))
     scene = load_scene(scene_dir, images=images, masks=None)
     factor = int(images.rsplit("_", 1)[1]) if "_" in images else 1
-    supersample = json.loads((scene_dir / "scene.json").read_text())["provenance"]["config"]["supersample"] * factor
+    supersample = cfg.supersample * factor
     out = scene_dir / EDIT_TRUTH
     if out.exists() and not overwrite:
         raise InputError(f"{out}: already exists; pass --force to write it again.")
