@@ -115,6 +115,39 @@ def edit(run: Path, point, click_, scene, force: bool, **options) -> None:
 
 
 @cli.command()
+@click.argument("run", type=click.Path(path_type=Path))
+@click.option("--scene", default=None, type=click.Path(path_type=Path), help="The run's scene, where it moved.")
+@click.option("--host", default="127.0.0.1", show_default=True, help="Address to serve on (0.0.0.0: every interface).")
+@click.option("--port", type=click.IntRange(0, 65535), default=8080, show_default=True, help="Port (0: any free one).")
+@click.option("--max-size", type=click.IntRange(16), default=640, show_default=True,
+              help="Frames are rendered at most this many pixels on their long side.")
+@click.option("--backend", type=click.Choice(["auto", "cpu", "torch", "gsplat"]), default="auto", show_default=True)
+def view(run: Path, scene: Path | None, **options) -> None:
+    """Open RUN in the browser: click an object to select it, remove / extract / recolour it, save the edit."""
+    try:
+        from gsseg.viewer.server import serve
+    except ImportError as e:
+        raise click.UsageError(f"the viewer needs viser ({e}); install it with `pip install -e .[viewer]`.") from None
+
+    serve(run, scene_dir=scene, on_ready=click.echo, **options)
+    click.echo("viewer stopped")
+
+
+@cli.command()
+@click.argument("run", type=click.Path(path_type=Path))
+@click.option("--out", required=True, type=click.Path(path_type=Path), help="File to write (.ply or .splat).")
+@click.option("--object", "object_id", type=click.IntRange(0, 255), default=None,
+              help="Export this object's Gaussians alone (its ID in labels.npz).")
+@click.option("--format", "fmt", type=click.Choice(["ply", "splat"]), default=None,
+              help="ply: 3D-GS PLY + a label property; splat: 32-byte records for web viewers (default: from --out).")
+def export(run: Path, out: Path, object_id: int | None, fmt: str | None) -> None:
+    """Write RUN's model, or one object of it, for other 3D-GS viewers and editors."""
+    from gsseg.export import export_run
+
+    click.echo(f"wrote {export_run(run, out, object_id=object_id, fmt=fmt)}")
+
+
+@cli.command()
 @click.option("--out", default="demo", show_default=True, type=click.Path(path_type=Path), help="Folder to write.")
 @click.option("--scene", default=None, type=click.Path(path_type=Path),
               help="Your scene folder, folder of photos or video instead of the synthetic scene (photos and video "
@@ -135,5 +168,6 @@ def demo(out: Path, scene: Path | None, images: str | None, iters: int, max_gaus
     click.echo(f"object {result.object_id} at {np.round(result.point, 3).tolist()} removed, extracted and recoloured "
                f"in {result.out / 'run' / 'edits'}; {score}{result.seconds / 60:.1f} min")
     click.echo(f"report: {result.report}")
+    click.echo(f"in the browser: gsseg view {result.out / 'run'}")
 
 main = run_cli(cli, "gsseg")

@@ -14,10 +14,11 @@ from dataset_tools.atomic import atomic_directory
 from dataset_tools.errors import InputError
 from dataset_tools.image_files import write_png
 from dataset_tools.names import plain_name
+from dataset_tools.scene import Scene
 from gsseg.gaussians import Gaussians
 from gsseg.ply import write_ply
 from gsseg.render import Backend, get_backend
-from gsseg.run import load_run
+from gsseg.run import Run, load_run
 from gsseg.segment.prompts import pick_object, point_from_click
 from gsseg.sh import C0, rgb_to_sh_dc
 
@@ -92,7 +93,18 @@ def edit_run(run_dir: Path | str, op: str, *, point=None, click=None, object_id:
                          "segment the run again.")
     rgb = tuple(c / 255 for c in color) if color is not None else None
     edited = apply_edit(run.gaussians, selected, op, rgb)
-    out = run.folder.edit(name or f"{op}_{object_id}")
+    record = {"op": op, "object_id": int(object_id), "point": None if point is None else np.asarray(point).tolist(),
+              "click": None if click is None else list(map(str, click)), "color": color,
+              "selected_gaussians": int(selected.sum()), "method": segmentation.method}
+    return write_edit(run, edited, run.folder.edit(name or f"{op}_{object_id}"), record, scene=scene, split=split,
+                      fps=fps, backend=backend, overwrite=overwrite, progress=progress)
+
+
+def write_edit(run: Run, edited: Gaussians, out: Path, record: dict, *, scene: Scene, split: str = "test",
+               fps: int = 8, backend: str | Backend = "auto", overwrite: bool = False, progress: bool = True) -> Path:
+    """Write the edit folder ``out`` (inside ``RUN/edits/``) of the ``edited`` model:
+    ``gaussians.ply``, ``renders/<view>.png`` of ``scene``'s ``split`` views, ``video.mp4`` and
+    ``edit.json`` (``record``); whole or not at all."""
     if out.exists() and not overwrite:
         raise InputError(f"{out} exists; pass --force or choose another --name.")
     with run.folder.lock(), atomic_directory(out, overwrite=overwrite) as tmp:
@@ -103,10 +115,7 @@ def edit_run(run_dir: Path | str, op: str, *, point=None, click=None, object_id:
             write_png(tmp / "renders" / f"{view.stem}.png", frame)
             frames.append(frame)
         _write_video(tmp / "video.mp4", frames, fps)
-        (tmp / "edit.json").write_text(json.dumps({
-            "op": op, "object_id": int(object_id), "point": None if point is None else np.asarray(point).tolist(),
-            "click": None if click is None else list(map(str, click)), "color": color,
-            "selected_gaussians": int(selected.sum()), "method": segmentation.method}, indent=2) + "\n")
+        (tmp / "edit.json").write_text(json.dumps(record, indent=2) + "\n")
     return out
 
 

@@ -4,7 +4,8 @@ The vertex layout is the one 3D-GS writes and its viewers read:
 ``x y z nx ny nz f_dc_0..2 f_rest_0..(3K-1) opacity scale_0..2 rot_0..3``, where f_rest
 holds the higher SH bands channel-major (all red coefficients, then green, then blue),
 opacity is a logit, scales are logs and rot is an unnormalised (w, x, y, z) quaternion.
-Object features are extra float properties that other viewers ignore.
+Object features are extra float properties, and an exported model's per-Gaussian object
+``label`` an extra uchar property, that other viewers ignore.
 """
 
 from __future__ import annotations
@@ -25,7 +26,7 @@ REQUIRED = ("x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity",
             "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3")
 
 
-def _vertex_array(g: Gaussians) -> np.ndarray:
+def _vertex_array(g: Gaussians, labels: np.ndarray | None = None) -> np.ndarray:
     n = len(g)
     rest = g.sh_rest.detach().cpu().numpy().transpose(0, 2, 1).reshape(n, -1)  # channel-major
     columns = {
@@ -38,16 +39,20 @@ def _vertex_array(g: Gaussians) -> np.ndarray:
         **{f"rot_{i}": g.quats[:, i] for i in range(4)},
         **{f"obj_feat_{i}": g.obj_feat[:, i] for i in range(g.obj_feat.shape[1])},
     }
-    out = np.empty(n, dtype=[(name, "f4") for name in columns])
+    dtype = [(name, "f4") for name in columns] + ([("label", "u1")] if labels is not None else [])
+    out = np.empty(n, dtype=dtype)
     for name, values in columns.items():
         out[name] = values.detach().cpu().numpy()
+    if labels is not None:
+        out["label"] = labels
     return out
 
 
-def write_ply(g: Gaussians, path: Path | str) -> Path:
-    """Write ``g`` as a binary little-endian 3D-GS PLY, atomically."""
+def write_ply(g: Gaussians, path: Path | str, labels: np.ndarray | None = None) -> Path:
+    """Write ``g`` as a binary little-endian 3D-GS PLY, atomically; ``labels`` (N,) uint8, when
+    given, become a ``label`` property after the object features."""
     buf = io.BytesIO()
-    PlyData([PlyElement.describe(_vertex_array(g), "vertex")], byte_order="<").write(buf)
+    PlyData([PlyElement.describe(_vertex_array(g, labels), "vertex")], byte_order="<").write(buf)
     write_bytes_atomic(Path(path), buf.getvalue())
     return Path(path)
 
@@ -69,7 +74,7 @@ def read_ply(path: Path | str) -> Gaussians:
                          "it must hold x y z f_dc_* opacity scale_* rot_* as 3D-GS writes them.")
 
     def stack(prefix: str, count: int) -> torch.Tensor:
-        return torch.from_numpy(np.stack([np.asarray(vertex[f"{prefix}{i}"], np.float32) for i in range(count)], 1))
+        return torch.from_numpy(np.stack([vertex[f"{prefix}{i}"].astype(np.float32) for i in range(count)], 1))
 
     n = len(vertex)
     n_rest = sum(1 for name in names if name.startswith("f_rest_"))
@@ -88,10 +93,10 @@ def read_ply(path: Path | str) -> Gaussians:
             raise InputError(f"{path}: property {name} holds NaN or infinite values; the model is damaged, "
                              "train it again.")
     return Gaussians(
-        means=torch.from_numpy(np.stack([np.asarray(vertex[c], np.float32) for c in "xyz"], 1)),
+        means=torch.from_numpy(np.stack([vertex[c].astype(np.float32) for c in "xyz"], 1)),
         log_scales=stack("scale_", 3),
         quats=stack("rot_", 4),
-        opacity_logits=torch.from_numpy(np.asarray(vertex["opacity"], np.float32)),
+        opacity_logits=torch.from_numpy(vertex["opacity"].astype(np.float32)),  # a copy: records may be packed
         sh_dc=stack("f_dc_", 3),
         sh_rest=sh_rest,
         obj_feat=obj_feat,

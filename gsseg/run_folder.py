@@ -9,6 +9,7 @@ file of a run is named here and nowhere else.
       checkpoints/      resumable training state, step_NNNNNNN.pt
       metrics.json      the training curve
       labels.npz        per-Gaussian labels (`gsseg segment`)
+      contributions.npz the contribution matrix they were chosen from (`gsseg segment`, `gsseg view`)
       evaluation.json   the scores of `gseval report`, for `gseval compare`
       edits/NAME/       one edit: gaussians.ply, renders/, video.mp4, edit.json
       .lock             held by the command writing the run (an OS file lock)
@@ -68,6 +69,10 @@ class RunFolder:
     @property
     def labels(self) -> Path:
         return self.root / "labels.npz"
+
+    @property
+    def contributions(self) -> Path:
+        return self.root / "contributions.npz"
 
     @property
     def evaluation(self) -> Path:

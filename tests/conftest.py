@@ -45,6 +45,18 @@ def trained(small_scene, tmp_path_factory) -> Path:
     return run
 
 
+@pytest.fixture(scope="session")
+def segmented(trained, small_scene, tmp_path_factory) -> Path:
+    """A copy of ``trained`` with ``labels.npz`` and ``contributions.npz`` from the scene's masks
+    (read-only: copy it before changing it)."""
+    from gsseg.segment.segment_run import segment_run
+
+    run = tmp_path_factory.mktemp("seg") / "run"
+    shutil.copytree(trained, run)
+    segment_run(run, small_scene.root, backend="cpu", progress=False)
+    return run
+
+
 @pytest.fixture
 def beer() -> Path:
     if not (BEER / "sparse" / "0").is_dir():

@@ -242,6 +242,19 @@ CASES = [
     ("gsseg", "edit {w}/no_labels --op remove --object-id 1", "run `gsseg segment`"),
     ("gsseg", "edit {w}/stale_labels --op remove --object-id 1", "labels another model"),
     ("gsseg", "edit {w}/junk_labels --op remove --object-id 1", "damaged labels"),
+    # gsseg view (a port in use: tests/test_viewer.py)
+    ("gsseg", "view {w}/nowhere", "has no config.json"),
+    ("gsseg", "view {w}/cut_ply", "not a readable PLY"),
+    ("gsseg", "view {w}/stale_labels", "labels another model"),
+    ("gsseg", "view {w}/run --port 70000", "70000"),
+    ("gsseg", "view {w}/run --scene {w}/other", "not the scene"),
+    # gsseg export
+    ("gsseg", "export {w}/run --out {w}/new.obj", "cannot tell the format"),
+    ("gsseg", "export {w}/run --out {w}/report", "is a folder"),
+    ("gsseg", "export {w}/run --out {w}/new.ply --object 99", "holds no Gaussian"),
+    ("gsseg", "export {w}/no_labels --out {w}/new.splat --object 1", "run `gsseg segment`"),
+    ("gsseg", "export {w}/nan_ply --out {w}/new.ply", "NaN or infinite"),
+    ("gsseg", "export {w}/run --out {w}/new.ply --format obj", "obj"),
     # gsseg demo
     ("gsseg", "demo --out {w}/new --iters 0", "--iters must be at least 1"),
     ("gsseg", "demo --out {w}/new --max-gaussians 0", "--max-gaussians"),
@@ -299,7 +312,7 @@ def test_the_census_covers_every_command_and_at_least_80_cases():
     assert len(CASES) >= 80
     assert {c for c, _, _ in CASES} == set(ENTRY)
     subcommands = {(c, a.split()[0]) for c, a, _ in CASES}
-    assert {("gsseg", s) for s in ("train", "render", "segment", "edit", "demo")} <= subcommands
+    assert {("gsseg", s) for s in ("train", "render", "segment", "edit", "view", "export", "demo")} <= subcommands
     assert {("hqmask", s) for s in ("build", "clean")} <= subcommands
     assert {("gseval", s) for s in ("report", "compare", "paper-tables")} <= subcommands
 

@@ -123,16 +123,6 @@ def test_visible_and_extracted_differ_only_for_the_occluded_object():
     assert hidden > 100 and per[2]["extracted_iou"] < 0.9  # alone, the back wall shows its hidden part
 
 
-@pytest.fixture(scope="module")
-def segmented(trained, small_scene, tmp_path_factory) -> Path:
-    from gsseg.segment.segment_run import segment_run
-
-    run = tmp_path_factory.mktemp("seg") / "run"
-    shutil.copytree(trained, run)
-    segment_run(run, small_scene.root, backend="cpu", progress=False)
-    return run
-
-
 def test_report_writes_tables_images_and_a_self_contained_page(segmented, small_scene, tmp_path):
     out = tmp_path / "report"
     r = subprocess.run([script("gseval"), "report", str(segmented), "--scene", str(small_scene.root), "--out", str(out),

@@ -54,3 +54,14 @@ def test_ply_missing_required_fields_is_refused(tmp_path):
     (tmp_path / "junk.ply").write_text("not a ply")
     with pytest.raises(InputError, match="not a readable PLY"):
         read_ply(tmp_path / "junk.ply")
+
+
+def test_a_ply_with_a_one_byte_property_loads(tmp_path):
+    """Packed records (a uchar beside the floats, as the exported ``label`` or other tools'
+    colours) are read by value, not through misaligned views."""
+    g = random_gaussians(20, 1)
+    labels = np.arange(20, dtype=np.uint8)
+    back = read_ply(write_ply(g, tmp_path / "g.ply", labels=labels))
+    for name, value in g.tensors().items():
+        assert torch.equal(getattr(back, name), value), name
+    np.testing.assert_array_equal(PlyData.read(str(tmp_path / "g.ply"))["vertex"]["label"], labels)

@@ -8,13 +8,18 @@ computed with the blending rules of training, one pass per view on the chosen ba
 
 from __future__ import annotations
 
+import io
+import zipfile
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import torch
 from tqdm import tqdm
 
+from dataset_tools.atomic import write_bytes_atomic
 from dataset_tools.cameras import PinholeCamera
+from dataset_tools.errors import InputError
 from gsseg.gaussians import Gaussians
 from gsseg.render.backends import Backend, get_backend
 
@@ -30,10 +35,27 @@ class MaskedView:
 
 @dataclass
 class Contributions:
-    """labels: (K,) uint8, the mask labels seen in any view, sorted. weights: (K, N) float32."""
+    """labels: (K,) uint8, the mask labels seen in any view, sorted. weights: (K, N) float32.
+    model: the fingerprint of the model they were computed for, "" when unknown."""
 
     labels: np.ndarray
     weights: torch.Tensor
+    model: str = ""
+
+    def save(self, path: Path) -> None:
+        """Write ``labels``, ``weights`` and ``model`` as an npz file, atomically."""
+        buf = io.BytesIO()
+        np.savez(buf, labels=self.labels, weights=self.weights.numpy(), model=self.model)
+        write_bytes_atomic(Path(path), buf.getvalue())
+
+    @classmethod
+    def load(cls, path: Path) -> Contributions:
+        try:
+            with np.load(path, allow_pickle=False) as f:
+                return cls(labels=f["labels"], weights=torch.from_numpy(f["weights"]), model=str(f["model"]))
+        except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as e:
+            raise InputError(f"{path}: damaged contribution cache ({e}); delete it and run `gsseg segment` "
+                             "again.") from None
 
 
 def contribution_matrix(gaussians: Gaussians, views: list[MaskedView], *, backend: str | Backend = "cpu",

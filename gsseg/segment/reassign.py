@@ -56,6 +56,11 @@ class Segmentation:
                              "pick one of them.")
         return self.selections[hit[0]]
 
+    def subset(self, keep: np.ndarray) -> Segmentation:
+        """The labels and selections of the Gaussians where (N,) bool ``keep`` is true."""
+        return Segmentation(labels=self.labels[keep], objects=self.objects, selections=self.selections[:, keep],
+                            method=self.method, mode=self.mode, gamma_p=self.gamma_p, model=self.model)
+
     def save(self, path: Path) -> None:
         import io
 

@@ -46,7 +46,9 @@ def mask_contributions(run: Run, scene_dir: Path | str | None = None, *, masks: 
     no view of ``split`` has a mask)."""
     views = [MaskedView(v.camera, v.cam_from_world, m) for v in run.scene(scene_dir, masks=masks).split(split)
              if (m := v.load_mask()) is not None]
-    return contribution_matrix(run.gaussians, views, backend=backend, progress=progress)
+    contributions = contribution_matrix(run.gaussians, views, backend=backend, progress=progress)
+    contributions.model = run.fingerprint
+    return contributions
 
 
 def label_gaussians(run: Run, contributions: Contributions, options: LabelOptions = LabelOptions()) -> Segmentation:
@@ -68,7 +70,8 @@ def segment_run(run_dir: Path | str, scene_dir: Path | str | None = None, *, opt
                 masks: str = "object_mask", split: str = "train", backend: str | Backend = "auto",
                 progress: bool = True) -> Segmentation:
     """Label every Gaussian of a run from the masks of ``split`` (the training views by
-    default) and the run's classifier; write ``RUN/labels.npz``."""
+    default) and the run's classifier; write ``RUN/labels.npz`` and the contribution matrix
+    they were chosen from, ``RUN/contributions.npz`` (for relabelling without recomputing it)."""
     run = load_run(run_dir)
     contributions = mask_contributions(run, scene_dir, masks=masks, split=split, backend=backend, progress=progress)
     if not len(contributions.labels) and options.method != "classifier":
@@ -77,4 +80,5 @@ def segment_run(run_dir: Path | str, scene_dir: Path | str | None = None, *, opt
     result = label_gaussians(run, contributions, options)
     with run.folder.lock():
         result.save(run.folder.labels)
+        contributions.save(run.folder.contributions)
     return result

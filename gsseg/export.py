@@ -1,0 +1,79 @@
+"""``gsseg export``: a run's model, or one object of it, in files that other 3D-GS tools open.
+
+Two formats:
+
+- ``ply``: the 3D-GS PLY of :mod:`gsseg.ply` plus a uchar ``label`` per Gaussian (its object
+  in ``labels.npz``; 3D-GS viewers ignore the extra properties).
+- ``splat``: the 32-byte record per Gaussian that web splat viewers load: position (3 x
+  float32), scale (3 x float32, linear), colour and opacity (4 x uint8), rotation (4 x uint8,
+  the normalised (w, x, y, z) quaternion mapped from [-1, 1] to [0, 255]); records sorted by
+  volume times opacity, largest first. Degree-0 colour only: the format has no SH bands.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from dataset_tools.atomic import write_bytes_atomic
+from dataset_tools.errors import InputError
+from gsseg.gaussians import Gaussians
+from gsseg.ply import write_ply
+from gsseg.run import load_run
+from gsseg.sh import C0
+
+FORMATS = ("ply", "splat")
+SPLAT_RECORD = np.dtype([("position", "<f4", 3), ("scale", "<f4", 3), ("rgba", "u1", 4), ("rotation", "u1", 4)])
+
+
+def splat_records(g: Gaussians) -> np.ndarray:
+    """(N,) :data:`SPLAT_RECORD` of ``g``, largest volume x opacity first."""
+    with torch.no_grad():
+        scales = g.scales.cpu().numpy()
+        opacity = g.opacities.cpu().numpy()
+        rgb = (g.sh_dc * C0 + 0.5).clamp(0, 1).cpu().numpy()
+        quats = torch.nn.functional.normalize(g.quats, dim=-1).cpu().numpy()
+    order = np.argsort(-(scales.prod(1) * opacity), kind="stable")
+    out = np.empty(len(g), SPLAT_RECORD)
+    out["position"] = g.means.detach().cpu().numpy()[order]
+    out["scale"] = scales[order]
+    out["rgba"] = np.round(np.concatenate([rgb, opacity[:, None]], 1)[order] * 255)
+    out["rotation"] = np.clip(np.round(quats[order] * 128 + 128), 0, 255)
+    return out
+
+
+def read_splat(path: Path | str) -> np.ndarray:
+    """The (N,) :data:`SPLAT_RECORD` records of a ``.splat`` file."""
+    data = Path(path).read_bytes()
+    if len(data) % SPLAT_RECORD.itemsize:
+        raise InputError(f"{path}: {len(data)} bytes is not a whole number of 32-byte splat records; "
+                         "export it again.")
+    return np.frombuffer(data, SPLAT_RECORD)
+
+
+def export_run(run_dir: Path | str, out: Path | str, *, object_id: int | None = None, fmt: str | None = None) -> Path:
+    """Write a run's model (or the Gaussians of ``object_id`` alone) to ``out`` as ``fmt``
+    (default: from the suffix of ``out``, ``.ply`` or ``.splat``), atomically."""
+    out = Path(out)
+    if out.is_dir():
+        raise InputError(f"{out} is a folder; give a file name for the export.")
+    fmt = fmt or out.suffix.lstrip(".").lower()
+    if fmt not in FORMATS:
+        raise InputError(f"{out}: cannot tell the format; end the name in .ply or .splat, or pass --format.")
+    run = load_run(run_dir)
+    g = run.gaussians
+    labels = None
+    if object_id is not None or run.folder.labels.is_file():
+        labels = run.labels().labels
+    if object_id is not None:
+        keep = labels == object_id
+        if not keep.any():
+            raise InputError(f"object {object_id} holds no Gaussian in {run.folder.labels}; pick one of "
+                             f"{sorted(set(np.unique(labels).tolist()) - {0})}.")
+        g, labels = g.select(torch.from_numpy(keep)), labels[keep]
+    if fmt == "ply":
+        return write_ply(g, out, labels=labels)
+    write_bytes_atomic(out, splat_records(g).tobytes())
+    return out

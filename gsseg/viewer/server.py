@@ -1,0 +1,256 @@
+"""``gsseg view``: a run in the browser, on viser.
+
+Frames are rendered on the server by the project's own rasterizer for each browser's camera
+(as nerfview does) and sent as the scene's background image, so what the browser shows is
+exactly what ``gsseg render`` and ``gsseg edit`` write, learned background included, on a
+CPU-only machine as on a GPU one. viser draws the training cameras over it and reports
+clicks as (u, v) on the canvas; the panel drives a :class:`~gsseg.viewer.session.ViewerSession`.
+"""
+
+from __future__ import annotations
+
+import html
+import socket
+import threading
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from dataset_tools.errors import InputError
+from dataset_tools.image_files import label_palette
+from gsseg.run import load_run
+from gsseg.segment.reassign import METHODS
+from gsseg.viewer.session import ViewCamera, ViewerSession, browser_camera
+
+
+def require_free_port(host: str, port: int) -> None:
+    """Refuse a port another process listens on (viser would silently take the next one)."""
+    with socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET, socket.SOCK_STREAM) as s:
+        try:
+            s.bind((host, port))
+        except OSError as e:
+            raise InputError(f"cannot serve on {host}:{port} ({e.strerror}); pass another --port, or stop the "
+                             "program that uses it.") from None
+
+
+class Viewer:
+    """A running viewer: one viser server, one session, one render thread per browser tab.
+
+    Args:
+        session: what is shown and edited.
+        host, port: where to serve (port 0: any free port).
+        max_size: frames are rendered at most this many pixels on their long side and
+            stretched by the browser.
+    """
+
+    def __init__(self, session: ViewerSession, *, host: str = "127.0.0.1", port: int = 8080,
+                 max_size: int = 640) -> None:
+        import viser
+
+        if port:
+            require_free_port(host, port)
+        self.session = session
+        self.max_size = max_size
+        self.views = session.run.scene(session.scene_dir).split("train")
+        self.server = viser.ViserServer(host=host, port=port, verbose=False)
+        self.host = host
+        self._dirty: dict[int, threading.Event] = {}
+        self._render_lock = threading.Lock()
+        self._stopped = threading.Event()
+        self.server.scene.world_axes.visible = False
+        self.server.gui.configure_theme(show_logo=False, show_share_button=False, control_width="medium")
+        self.server.gui.main_panel.dock_right()
+        self._add_cameras()
+        self._add_panel()
+        self.server.on_client_connect(self._connect)
+        self.server.on_client_disconnect(lambda client: self._dirty.pop(client.client_id, threading.Event()).set())
+        self.server.scene.on_click()(self._click)
+
+    @property
+    def url(self) -> str:
+        return f"http://{self.host}:{self.server.get_port()}"
+
+    def stop(self) -> None:
+        self._stopped.set()
+        for event in list(self._dirty.values()):
+            event.set()
+        self.server.stop()
+
+    def go_to(self, name: str, clients: list | None = None) -> None:
+        """Point the cameras of ``clients`` (default: every browser) along the training view ``name``."""
+        view = next(v for v in self.views if v.name == name)
+        rotation = view.cam_from_world[:3, :3]
+        centre = -rotation.T @ view.cam_from_world[:3, 3]
+        fov_y = 2 * np.arctan(view.camera.height / 2 / view.camera.fy)
+        for client in self.server.get_clients().values() if clients is None else clients:
+            with client.atomic():
+                client.camera.position = centre
+                client.camera.look_at = centre + rotation[2]  # the camera's +z axis in the world
+                client.camera.up_direction = -rotation[1]  # OpenCV's y points down
+                client.camera.fov = fov_y
+        self.refresh()
+
+    def refresh(self) -> None:
+        """Render every browser's frame again (the model or the selection changed)."""
+        for event in list(self._dirty.values()):
+            event.set()
+
+    def client_view(self, client) -> ViewCamera:
+        """The pinhole view of a browser's current camera."""
+        cam = client.camera
+        return browser_camera(cam.wxyz, cam.position, cam.fov, cam.image_width, cam.image_height,
+                              max_size=self.max_size, near=self.session.near)
+
+    # --- browser tabs ---------------------------------------------------------------------
+
+    def _connect(self, client) -> None:
+        dirty = self._dirty[client.client_id] = threading.Event()
+        client.camera.on_update(lambda _: dirty.set())
+        threading.Thread(target=self._render_loop, args=(client, dirty), daemon=True,
+                         name=f"render-{client.client_id}").start()
+        self.go_to(self._view.value, [client])
+
+    def _render_loop(self, client, dirty: threading.Event) -> None:
+        while True:
+            dirty.wait()
+            dirty.clear()
+            if self._stopped.is_set() or client.client_id not in self._dirty:
+                return
+            with self._render_lock:
+                frame = self.session.frame(self.client_view(client))
+            client.scene.set_background_image(frame, format="jpeg", jpeg_quality=92)
+
+    def _click(self, event) -> None:
+        view = self.client_view(event.client)
+        u, v = event.screen_pos[0] * view.camera.width, event.screen_pos[1] * view.camera.height
+        try:
+            with self._render_lock:
+                object_id = self.session.select_at(view, u, v)
+        except InputError as e:
+            self._say(str(e))
+            return
+        self._say("Background: nothing selected." if object_id is None else f"Selected object **{object_id}**.")
+        self.refresh()
+
+    # --- the scene and the panel ----------------------------------------------------------
+
+    def _add_cameras(self) -> None:
+        centres = np.stack([-v.cam_from_world[:3, :3].T @ v.cam_from_world[:3, 3] for v in self.views])
+        scale = 0.05 * float(np.median(np.linalg.norm(centres - centres.mean(0), axis=1)) or 1.0)
+        self._frustums = []
+        for view, centre in zip(self.views, centres):
+            wxyz = Rotation.from_matrix(view.cam_from_world[:3, :3].T).as_quat(scalar_first=True)
+            self._frustums.append(self.server.scene.add_camera_frustum(
+                f"/cameras/{view.stem}", fov=float(2 * np.arctan(view.camera.height / 2 / view.camera.fy)),
+                aspect=view.camera.width / view.camera.height, scale=scale, wxyz=wxyz, position=centre,
+                color=(90, 90, 90)))
+
+    def _add_panel(self) -> None:
+        gui, session = self.server.gui, self.session
+        gui.add_markdown(f"**{html.escape(str(session.run.root))}**: {len(session.run.gaussians):,} Gaussians, "
+                         f"rendered by the `{session.backend.name}` backend.")
+        self._status = gui.add_markdown(session.segments_missing or "Click an object to select it.")
+        self._view = gui.add_dropdown("View", tuple(v.name for v in self.views), initial_value=self.views[0].name)
+        self._view.on_update(lambda _: self.go_to(self._view.value))
+        cameras = gui.add_checkbox("Show cameras", True)
+
+        @cameras.on_update
+        def _(_) -> None:
+            for frustum in self._frustums:
+                frustum.visible = cameras.value
+
+        off = session.segmentation is None
+        segments = gui.add_checkbox("Show segments", False, disabled=off)
+
+        @segments.on_update
+        def _(_) -> None:
+            session.show_segments = segments.value
+            self.refresh()
+
+        with gui.add_folder("Objects"):
+            self._objects = gui.add_html(self._objects_table())
+        with gui.add_folder("Reassignment", expand_by_default=False):
+            labels = session.segmentation
+            method = gui.add_dropdown("Method", METHODS, initial_value=labels.method if labels else "prior",
+                                      disabled=off)
+            gamma = gui.add_slider("gamma_p", 0.0, 2.0, 0.05, labels.gamma_p if labels else 0.2, disabled=off)
+            rerun = gui.add_button("Re-run reassignment", disabled=off)
+
+            @rerun.on_click
+            def _(_) -> None:
+                try:
+                    seconds = session.relabel(method.value, gamma.value)
+                except InputError as e:
+                    self._say(str(e))
+                    return
+                self._say(f"Reassigned by {method.value}, gamma_p {gamma.value:g}, in {seconds:.2f} s.")
+                self._changed()
+
+        with gui.add_folder("Edit"):
+            buttons = {op: gui.add_button(label, disabled=off)
+                       for op, label in (("remove", "Remove"), ("extract", "Extract"), ("recolor", "Recolour"))}
+            colour = gui.add_rgb("Colour", (230, 60, 60), disabled=off)
+            undo = gui.add_button("Undo", disabled=off)
+            name = gui.add_text("Edit name", "viewer", disabled=off)
+            save = gui.add_button("Save", disabled=off)
+        for op, button in buttons.items():
+            button.on_click(lambda _, op=op: self._edit(op, tuple(colour.value) if op == "recolor" else None))
+
+        @undo.on_click
+        def _(_) -> None:
+            step = session.undo()
+            self._say("Nothing to undo." if step is None else f"Undid {step.op} of object {step.object_id}.")
+            self._changed()
+
+        @save.on_click
+        def _(_) -> None:
+            try:
+                out = session.save(name.value, overwrite=True)
+            except InputError as e:
+                self._say(str(e))
+                return
+            self._say(f"Wrote `{out}`.")
+
+    def _edit(self, op: str, color: tuple[int, int, int] | None) -> None:
+        try:
+            step = self.session.edit(op, color)
+        except InputError as e:
+            self._say(str(e))
+            return
+        self._say(f"{op.capitalize()}d object {step.object_id}." if op != "recolor"
+                  else f"Recoloured object {step.object_id}.")
+        self._changed()
+
+    def _changed(self) -> None:
+        self._objects.content = self._objects_table()
+        self.refresh()
+
+    def _say(self, text: str) -> None:
+        self._status.content = text
+
+    def _objects_table(self) -> str:
+        rows = self.session.objects()
+        if not rows:
+            return "<p>No objects.</p>"
+        palette = label_palette()
+        cells = "".join(
+            f"<tr><td>{o}</td><td><span style='display:inline-block;width:1em;height:1em;"
+            f"background:rgb{tuple(int(c) for c in palette[o])}'></span></td><td>{n:,}</td></tr>" for o, n in rows)
+        return f"<table><tr><th>ID</th><th></th><th>Gaussians</th></tr>{cells}</table>"
+
+
+def serve(run_dir: Path | str, *, scene_dir: Path | str | None = None, host: str = "127.0.0.1", port: int = 8080,
+          max_size: int = 640, backend: str = "auto", on_ready=print) -> None:
+    """Serve a run until Ctrl-C; ``on_ready`` is called with a line saying where."""
+    session = ViewerSession(load_run(run_dir), scene_dir=scene_dir, backend=backend)
+    viewer = Viewer(session, host=host, port=port, max_size=max_size)
+    on_ready(f"serving {run_dir} at {viewer.url} (Ctrl-C stops)")
+    if session.segments_missing:
+        on_ready(session.segments_missing)
+    try:
+        threading.Event().wait()
+    except KeyboardInterrupt:
+        pass
+    finally:
+        viewer.stop()

@@ -1,0 +1,224 @@
+"""What ``gsseg view`` does, without the browser: the model as edited so far, its labels, the
+selected object, the frames it renders, relabelling from the cached contribution matrix, and
+saving an edit folder exactly as ``gsseg edit`` writes one."""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+from scipy.spatial.transform import Rotation
+
+from dataset_tools.cameras import PinholeCamera
+from dataset_tools.errors import InputError
+from dataset_tools.image_files import label_palette
+from gsseg.edits import apply_edit, check_edit, write_edit
+from gsseg.gaussians import Gaussians
+from gsseg.render import get_backend
+from gsseg.render.contributions import Contributions
+from gsseg.run import Run
+from gsseg.segment.prompts import object_at_point, point_from_click
+from gsseg.segment.reassign import Segmentation
+from gsseg.segment.segment_run import LabelOptions, label_gaussians, mask_contributions
+from gsseg.sh import rgb_to_sh_dc
+
+HIGHLIGHT = (1.0, 0.85, 0.0)  # the selected object is drawn halfway towards this colour
+
+
+@dataclass(frozen=True)
+class ViewCamera:
+    """A pinhole camera and its (3, 4) world-to-camera pose: what the browser looks through."""
+
+    camera: PinholeCamera
+    cam_from_world: np.ndarray
+
+
+def browser_camera(wxyz: np.ndarray, position: np.ndarray, fov_y: float, width: int, height: int, *,
+                   max_size: int, near: float) -> ViewCamera:
+    """The pinhole view of viser's camera, at most ``max_size`` pixels on its long side.
+
+    Args:
+        wxyz: (4,) the camera-to-world rotation as a (w, x, y, z) quaternion, OpenCV axes
+            (x right, y down, z forward), as viser reports it.
+        position: (3,) the camera centre in world coordinates.
+        fov_y: the vertical field of view in radians.
+        width, height: the browser canvas in pixels.
+    """
+    scale = min(1.0, max_size / max(width, height))
+    w, h = max(1, round(width * scale)), max(1, round(height * scale))
+    f = h / 2 / math.tan(fov_y / 2)
+    world_from_cam = Rotation.from_quat(np.asarray(wxyz, np.float64), scalar_first=True).as_matrix()
+    rotation = world_from_cam.T
+    pose = np.concatenate([rotation, -rotation @ np.asarray(position, np.float64)[:, None]], 1)
+    return ViewCamera(PinholeCamera(w, h, f, f, w / 2, h / 2, near), pose)
+
+
+@dataclass(frozen=True)
+class EditStep:
+    """One edit of the viewer: ``op`` on object ``object_id`` (``color`` R G B for recolour)."""
+
+    op: str
+    object_id: int
+    color: tuple[int, int, int] | None = None
+
+
+class ViewerSession:
+    """The state of one viewer (shared by every browser tab open on it); thread-safe.
+
+    Objects are selected and edited through the labels of ``RUN/labels.npz``; without it the
+    model is shown but ``segments_missing`` says how to make labels and selection is off.
+    """
+
+    def __init__(self, run: Run, *, scene_dir: Path | str | None = None, masks: str | None = None,
+                 backend: str = "auto", k: int = 20) -> None:
+        self.run = run
+        self.scene_dir = scene_dir
+        self.masks = masks or run.config.masks or "object_mask"  # default: the masks the run was trained on
+        self.backend = get_backend(backend)
+        self.k = k
+        self.near = run.scene(scene_dir).views[0].camera.near
+        self.segmentation: Segmentation | None = run.labels() if run.folder.labels.is_file() else None
+        self.steps: list[EditStep] = []
+        self.selected: int | None = None
+        self.show_segments = False
+        self._contributions: Contributions | None = None
+        self._current: tuple[Gaussians, Segmentation | None] | None = None
+        self._lock = threading.RLock()
+
+    @property
+    def segments_missing(self) -> str | None:
+        """The sentence shown while there are no labels, None once there are."""
+        if self.segmentation is not None:
+            return None
+        return (f"{self.run.folder.labels} does not exist: segments are off. Run `gsseg segment {self.run.root}` "
+                "and open the viewer again to select and edit objects.")
+
+    def current(self) -> tuple[Gaussians, Segmentation | None]:
+        """The model after every edit step, and its labels (None without labels)."""
+        with self._lock:
+            if self._current is None:
+                g, seg = self.run.gaussians, self.segmentation
+                for step in self.steps:
+                    selected = seg.selection(step.object_id)
+                    rgb = None if step.color is None else tuple(c / 255 for c in step.color)
+                    g = apply_edit(g, selected, step.op, rgb)
+                    if step.op != "recolor":
+                        seg = seg.subset(~selected if step.op == "remove" else selected)
+                self._current = g, seg
+            return self._current
+
+    def objects(self) -> list[tuple[int, int]]:
+        """(object ID, Gaussian count) of every object of the current model."""
+        _, seg = self.current()
+        if seg is None:
+            return []
+        return [(int(o), int(s.sum())) for o, s in zip(seg.objects, seg.selections) if s.any()]
+
+    def select_at(self, view: ViewCamera, u: float, v: float) -> int | None:
+        """Select the object seen at pixel (u, v) of ``view`` by the rule of ``gsseg edit
+        --click``: the rendered depth there, then the label mode of the ``k`` nearest Gaussians.
+        The object ID, or None (and nothing selected) for the background."""
+        g, seg = self.current()
+        if seg is None:
+            raise InputError(self.segments_missing)
+        point = point_from_click(g, view.camera, view.cam_from_world, u, v, backend=self.backend)
+        object_id = object_at_point(g.means.numpy(), seg.labels, point, self.k)
+        with self._lock:
+            self.selected = object_id or None
+        return self.selected
+
+    def edit(self, op: str, color: tuple[int, int, int] | None = None) -> EditStep:
+        """Apply ``op`` to the selected object; the step is kept for :meth:`undo` and :meth:`save`."""
+        check_edit(op, color)
+        with self._lock:
+            if self.selected is None:
+                raise InputError("select an object first: click on it in the scene.")
+            step = EditStep(op, self.selected, None if color is None else tuple(int(c) for c in color))
+            self.steps.append(step)
+            self._current = None
+            if op == "remove":
+                self.selected = None
+            return step
+
+    def undo(self) -> EditStep | None:
+        """Take back the last edit step (None when there is none)."""
+        with self._lock:
+            if not self.steps:
+                return None
+            self._current = None
+            return self.steps.pop()
+
+    def relabel(self, method: str, gamma_p: float) -> float:
+        """Reassign every Gaussian's label with ``method`` and ``gamma_p`` from the contribution
+        matrix (read from ``RUN/contributions.npz``, computed from the masks and written there
+        when absent). The seconds the reassignment took, the matrix aside."""
+        options = LabelOptions(method=method, gamma_p=gamma_p)
+        contributions = self.contributions()
+        start = time.perf_counter()
+        segmentation = label_gaussians(self.run, contributions, options)
+        seconds = time.perf_counter() - start
+        with self._lock:
+            self.segmentation = segmentation
+            self._current = None
+            if self.selected is not None and self.selected not in segmentation.objects:
+                self.selected = None
+        return seconds
+
+    def contributions(self) -> Contributions:
+        """The run's contribution matrix: the cached one when it belongs to this model."""
+        with self._lock:
+            if self._contributions is None:
+                path = self.run.folder.contributions
+                cached = Contributions.load(path) if path.is_file() else None
+                if cached is not None and cached.model == self.run.fingerprint:
+                    self._contributions = cached
+                else:
+                    computed = mask_contributions(self.run, self.scene_dir, masks=self.masks,
+                                                  backend=self.backend, progress=False)
+                    if not len(computed.labels):
+                        raise InputError(f"the run's scene holds no {self.masks} masks to relabel from; build them "
+                                         "with `hqmask build`.")
+                    with self.run.folder.lock():
+                        computed.save(path)
+                    self._contributions = computed
+            return self._contributions
+
+    def frame(self, view: ViewCamera) -> np.ndarray:
+        """(H, W, 3) uint8: the current model seen from ``view``, coloured by label when
+        ``show_segments``, the selected object highlighted."""
+        g, seg = self.current()
+        if seg is not None and (self.show_segments or self.selected is not None):
+            g = _painted(g, seg, self.show_segments, self.selected)
+        return self.run.render_rgb(view, gaussians=g, backend=self.backend)
+
+    def save(self, name: str, *, split: str = "test", overwrite: bool = False) -> Path:
+        """Write the current model as ``RUN/edits/NAME/`` (as ``gsseg edit`` does)."""
+        with self._lock:
+            steps = list(self.steps)
+        if not steps:
+            raise InputError("nothing to save: remove, extract or recolour an object first.")
+        g, _ = self.current()
+        seg = self.segmentation
+        record = {"steps": [{"op": s.op, "object_id": s.object_id, "color": s.color} for s in steps],
+                  "method": seg.method, "gamma_p": seg.gamma_p, "gaussians": len(g)}
+        return write_edit(self.run, g, self.run.folder.edit(name), record, scene=self.run.scene(self.scene_dir),
+                          split=split, backend=self.backend, overwrite=overwrite, progress=False)
+
+
+def _painted(g: Gaussians, seg: Segmentation, by_label: bool, selected: int | None) -> Gaussians:
+    """``g`` with every Gaussian in its label's colour (``by_label``) and the ``selected``
+    object drawn halfway towards :data:`HIGHLIGHT`; view-dependent colour dropped where painted."""
+    sh_dc, sh_rest = g.sh_dc.clone(), g.sh_rest.clone()
+    if by_label:
+        sh_dc = rgb_to_sh_dc(torch.from_numpy(label_palette()[seg.labels] / 255.0).float())
+        sh_rest.zero_()
+    if selected is not None:
+        mask = torch.from_numpy(seg.selection(selected))
+        sh_dc[mask] = 0.5 * sh_dc[mask] + 0.5 * rgb_to_sh_dc(torch.tensor(HIGHLIGHT))
+        sh_rest[mask] = 0
+    return Gaussians(**{**g.tensors(), "sh_dc": sh_dc, "sh_rest": sh_rest})

@@ -1,0 +1,314 @@
+"""``gsseg view`` and ``gsseg export``: the viewer's session without a browser, the viewer in
+a real headless Chromium, and the exported files."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import shutil
+import socket
+import subprocess
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from helpers import random_gaussians, script
+from plyfile import PlyData
+from scipy import ndimage
+from scipy.spatial.transform import Rotation
+
+from dataset_tools.errors import InputError
+from dataset_tools.scene import load_scene
+from gsseg.export import read_splat, splat_records
+from gsseg.ply import read_ply
+from gsseg.run import load_run
+from gsseg.segment.segment_run import LabelOptions, segment_run
+from gsseg.sh import C0
+from gsseg.viewer.session import ViewCamera, ViewerSession, browser_camera
+
+CHROMIUM, CHROMEDRIVER = shutil.which("chromium"), shutil.which("chromedriver")
+
+
+def _copy(run: Path, tmp_path: Path) -> Path:
+    return Path(shutil.copytree(run, tmp_path / "run"))
+
+
+def _inside_pixel(mask: np.ndarray, label: int) -> tuple[float, float]:
+    """(u, v) of the pixel of ``label`` farthest from any other label: a click that cannot
+    land on an edge."""
+    depth = ndimage.distance_transform_edt(mask == label)
+    row, col = np.unravel_index(depth.argmax(), depth.shape)
+    return col + 0.5, row + 0.5
+
+
+# --- the browser's camera --------------------------------------------------------------------
+
+
+def test_the_browser_camera_of_a_training_view_is_that_view(small_scene):
+    view = load_scene(small_scene.root).views[2]
+    world_from_cam = view.cam_from_world[:3, :3].T
+    wxyz = Rotation.from_matrix(world_from_cam).as_quat(scalar_first=True)
+    centre = -world_from_cam @ view.cam_from_world[:3, 3]
+    fov_y = 2 * math.atan(view.camera.height / 2 / view.camera.fy)
+    for size, scale in ((view.camera.width, 1.0), (view.camera.width // 2, 0.5)):
+        got = browser_camera(wxyz, centre, fov_y, view.camera.width, view.camera.height, max_size=size, near=0.1)
+        np.testing.assert_allclose(got.cam_from_world, view.cam_from_world, atol=1e-6)
+        assert (got.camera.width, got.camera.height) == (round(view.camera.width * scale),
+                                                          round(view.camera.height * scale))
+        np.testing.assert_allclose([got.camera.fy, got.camera.cy], [view.camera.fy * scale, view.camera.cy * scale])
+
+
+# --- exports ---------------------------------------------------------------------------------
+
+
+def test_splat_records_decode_to_the_gaussians():
+    g = random_gaussians(300, 3)
+    records = splat_records(g)
+    assert records.itemsize == 32
+    volume = (g.scales.prod(1) * g.opacities).numpy()
+    order = np.argsort(-volume, kind="stable")
+    assert np.all(np.diff(volume[order]) <= 0)
+    np.testing.assert_array_equal(records["position"], g.means.numpy()[order])
+    np.testing.assert_allclose(records["scale"], g.scales.numpy()[order], rtol=1e-6)
+    rgb = np.clip(g.sh_dc.numpy() * C0 + 0.5, 0, 1)[order]
+    np.testing.assert_allclose(records["rgba"][:, :3] / 255, rgb, atol=0.5 / 255 + 1e-6)
+    np.testing.assert_allclose(records["rgba"][:, 3] / 255, g.opacities.numpy()[order], atol=0.5 / 255 + 1e-6)
+    q = torch.nn.functional.normalize(g.quats, dim=-1).numpy()[order]
+    np.testing.assert_allclose((records["rotation"].astype(float) - 128) / 128, q, atol=1 / 128)
+
+
+@pytest.mark.slow
+def test_export_ply_keeps_the_3dgs_layout_and_adds_the_labels(segmented, tmp_path):
+    out = tmp_path / "model.ply"
+    r = subprocess.run([script("gsseg"), "export", str(segmented), "--out", str(out)], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    names = PlyData.read(str(out))["vertex"].data.dtype.names
+    expected = (["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"] + [f"f_rest_{i}" for i in range(45)]
+                + ["opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"])
+    assert list(names[: len(expected)]) == expected and names[-1] == "label"
+    run = load_run(segmented)
+    back = read_ply(out)
+    for name, value in run.gaussians.tensors().items():
+        assert torch.equal(getattr(back, name), value), name
+    np.testing.assert_array_equal(PlyData.read(str(out))["vertex"]["label"], run.labels().labels)
+
+
+@pytest.mark.slow
+def test_export_one_object_as_splat(segmented, tmp_path):
+    run = load_run(segmented)
+    labels = run.labels().labels
+    obj = int(np.bincount(labels)[1:].argmax() + 1)
+    out = tmp_path / "object.splat"
+    r = subprocess.run([script("gsseg"), "export", str(segmented), "--out", str(out), "--object", str(obj)],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    records = read_splat(out)
+    mine = run.gaussians.means.numpy()[labels == obj]
+    assert len(records) == len(mine)
+    np.testing.assert_array_equal(np.unique(records["position"], axis=0), np.unique(mine, axis=0))
+    out.write_bytes(out.read_bytes()[:-5])
+    with pytest.raises(InputError, match="not a whole number of 32-byte"):
+        read_splat(out)
+
+
+# --- the session: what the panel does --------------------------------------------------------
+
+
+@pytest.mark.slow
+def test_a_click_selects_what_gsseg_edit_click_selects(segmented, small_scene, tmp_path):
+    run = _copy(segmented, tmp_path)
+    session = ViewerSession(load_run(run), scene_dir=small_scene.root, backend="cpu")
+    view = load_scene(small_scene.root, masks="object_mask").split("train")[1]
+    mask = view.load_mask()
+    for label in [int(x) for x in np.unique(mask) if x][:3]:
+        u, v = _inside_pixel(mask, label)
+        chosen = session.select_at(ViewCamera(view.camera, view.cam_from_world), u, v)
+        r = subprocess.run([script("gsseg"), "edit", str(run), "--click", view.stem, str(u), str(v), "--op", "remove",
+                            "--name", f"click_{label}", "--backend", "cpu"], capture_output=True, text=True)
+        assert r.returncode == 0, r.stderr
+        assert chosen == label == json.loads((run / "edits" / f"click_{label}" / "edit.json").read_text())["object_id"]
+
+
+@pytest.mark.slow
+def test_edits_undo_and_save_write_what_gsseg_edit_writes(segmented, small_scene, tmp_path):
+    run = _copy(segmented, tmp_path)
+    session = ViewerSession(load_run(run), scene_dir=small_scene.root, backend="cpu")
+    base, _ = session.current()
+    obj, count = session.objects()[0]
+    session.selected = obj
+    session.edit("remove")
+    assert session.selected is None and len(session.current()[0]) == len(base) - count
+    saved = session.save("viewer")
+    r = subprocess.run([script("gsseg"), "edit", str(run), "--object-id", str(obj), "--op", "remove", "--name", "cli",
+                        "--backend", "cpu"], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    for name, value in read_ply(run / "edits" / "cli" / "gaussians.ply").tensors().items():
+        assert torch.equal(getattr(read_ply(saved / "gaussians.ply"), name), value), name
+    assert sorted(p.name for p in (saved / "renders").iterdir()) == sorted(
+        p.name for p in (run / "edits" / "cli" / "renders").iterdir())
+    assert json.loads((saved / "edit.json").read_text())["steps"] == [{"op": "remove", "object_id": obj, "color": None}]
+    assert session.undo().op == "remove" and session.current()[0] is base and session.undo() is None
+    with pytest.raises(InputError, match="select an object first"):
+        session.edit("extract")
+
+
+@pytest.mark.slow
+def test_relabelling_from_the_cache_equals_gsseg_segment(segmented, small_scene, tmp_path):
+    run = _copy(segmented, tmp_path)
+    session = ViewerSession(load_run(run), scene_dir=small_scene.root, backend="cpu")
+    session.relabel("prior", 1.5)
+    expected = segment_run(run, small_scene.root, options=LabelOptions(gamma_p=1.5), backend="cpu", progress=False)
+    np.testing.assert_array_equal(session.segmentation.labels, expected.labels)
+    # without the cache, the matrix is computed from the masks and written for next time
+    (run / "contributions.npz").unlink()
+    fresh = ViewerSession(load_run(run), scene_dir=small_scene.root, backend="cpu")
+    fresh.relabel("prior", 1.5)
+    np.testing.assert_array_equal(fresh.segmentation.labels, expected.labels)
+    assert (run / "contributions.npz").is_file()
+
+
+@pytest.mark.slow
+def test_a_run_without_labels_opens_with_segments_off(trained, small_scene):
+    session = ViewerSession(load_run(trained), scene_dir=small_scene.root, backend="cpu")
+    assert "gsseg segment" in session.segments_missing and session.objects() == []
+    view = load_scene(small_scene.root).views[0]
+    assert session.frame(ViewCamera(view.camera, view.cam_from_world)).shape == (view.camera.height,
+                                                                                 view.camera.width, 3)
+    with pytest.raises(InputError, match="gsseg segment"):
+        session.select_at(ViewCamera(view.camera, view.cam_from_world), 40, 40)
+
+
+@pytest.mark.slow
+def test_a_port_in_use_is_one_sentence_and_exit_2(segmented):
+    pytest.importorskip("viser")
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        port = busy.getsockname()[1]
+        r = subprocess.run([script("gsseg"), "view", str(segmented), "--port", str(port)], capture_output=True,
+                           text=True, timeout=120)
+    assert r.returncode == 2 and f"cannot serve on 127.0.0.1:{port}" in r.stderr and "--port" in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1, r.stderr
+
+
+# --- the viewer in a real browser ------------------------------------------------------------
+
+
+@pytest.fixture
+def browser():
+    """Headless Chromium driven by selenium (Debian's chromium and chromedriver)."""
+    if not (CHROMIUM and CHROMEDRIVER):
+        pytest.skip("headless Chromium and chromedriver (Debian's chromium, chromium-driver) are not installed")
+    webdriver = pytest.importorskip("selenium.webdriver")
+    from selenium.webdriver.chrome.service import Service
+
+    options = webdriver.ChromeOptions()
+    for flag in ("--headless=new", "--no-sandbox", "--enable-unsafe-swiftshader", "--use-angle=swiftshader"):
+        options.add_argument(flag)
+    options.binary_location = CHROMIUM
+    driver = webdriver.Chrome(options=options, service=Service(CHROMEDRIVER))
+    driver.execute_cdp_cmd("Emulation.setDeviceMetricsOverride",
+                           {"width": 900, "height": 480, "deviceScaleFactor": 1, "mobile": False})
+    yield driver
+    driver.quit()
+
+
+def _canvas_image(driver, canvas) -> np.ndarray:
+    """(H, W, 3) uint8 screenshot of the page cut to ``canvas``."""
+    import cv2
+
+    page = cv2.imdecode(np.frombuffer(driver.get_screenshot_as_png(), np.uint8), cv2.IMREAD_COLOR)[..., ::-1]
+    x, y, w, h = (int(canvas.rect[k]) for k in ("x", "y", "width", "height"))
+    return page[y: y + h, x: x + w]
+
+
+def _wait(condition, seconds: float = 60.0, what: str = ""):
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        if value := condition():
+            return value
+        time.sleep(0.2)
+    raise AssertionError(f"timed out waiting for {what}")
+
+
+class _Canvas:
+    """The browser canvas (w x h CSS pixels) looking along a training view with its vertical
+    field of view: canvas pixels <-> view pixels."""
+
+    def __init__(self, canvas, camera) -> None:
+        self.w, self.h, self.camera = int(canvas.rect["width"]), int(canvas.rect["height"]), camera
+        self.f = camera.fy * self.h / camera.height
+
+    def from_view(self, u: float, v: float) -> tuple[int, int]:
+        c = self.camera
+        return round((u - c.cx) / c.fx * self.f + self.w / 2), round((v - c.cy) / c.fy * self.f + self.h / 2)
+
+    def to_view(self, x, y):
+        """The view pixel (u, v) under canvas pixel centres (x + 0.5, y + 0.5); arrays welcome."""
+        c = self.camera
+        return (x + 0.5 - self.w / 2) / self.f * c.fx + c.cx, (y + 0.5 - self.h / 2) / self.f * c.fy + c.cy
+
+    def region(self, inside: np.ndarray) -> np.ndarray:
+        """(h, w) bool: the canvas pixels whose view pixel is true in (H, W) ``inside``."""
+        u, v = (a.astype(int) for a in self.to_view(*np.meshgrid(np.arange(self.w), np.arange(self.h))))
+        ok = (u >= 0) & (u < self.camera.width) & (v >= 0) & (v < self.camera.height)
+        out = np.zeros((self.h, self.w), bool)
+        out[ok] = inside[v[ok], u[ok]]
+        return out
+
+
+@pytest.mark.slow
+def test_the_viewer_in_headless_chromium_selects_and_removes_by_click(segmented, small_scene, tmp_path, browser):
+    from selenium.webdriver.common.action_chains import ActionChains
+    from selenium.webdriver.common.by import By
+
+    from gsseg.viewer.server import Viewer
+
+    run = _copy(segmented, tmp_path)
+    viewer = Viewer(ViewerSession(load_run(run), scene_dir=small_scene.root, backend="cpu"), port=0)
+    try:
+        browser.get(viewer.url)
+        element = _wait(lambda: browser.find_elements(By.TAG_NAME, "canvas"), what="the canvas")[0]
+        _wait(lambda: viewer.server.get_clients(), what="the browser to connect")
+        view = viewer.views[1]
+        viewer.go_to(view.name)
+        # the scene is drawn: the canvas is not blank
+        _wait(lambda: _canvas_image(browser, element).std() > 20, what="a frame")
+        for close in browser.find_elements(By.CSS_SELECTOR, "[class*='Notification-close']"):
+            close.click()  # the notice that WebGL runs in software covers part of the canvas
+        time.sleep(1)
+        shown = _canvas_image(browser, element)
+
+        def changes(region: np.ndarray, since: np.ndarray) -> bool:
+            now = _canvas_image(browser, element)
+            return np.abs(now[region].astype(int) - since[region].astype(int)).mean() > 25
+
+        # a click on the pixel of the view's largest object selects it, and it is highlighted
+        mask = load_scene(small_scene.root, masks="object_mask").view(view.name).load_mask()
+        label = int(np.bincount(mask.ravel())[1:].argmax() + 1)
+        canvas = _Canvas(element, view.camera)
+        x, y = canvas.from_view(*_inside_pixel(mask, label))
+        offset = (x - canvas.w // 2, y - canvas.h // 2)  # selenium's offsets are from the element's centre
+        ActionChains(browser).move_to_element_with_offset(element, *offset).click().perform()
+        assert _wait(lambda: viewer.session.selected, what="a selection") == label
+        region = canvas.region(ndimage.binary_erosion(mask == label, iterations=2))
+        _wait(lambda: changes(region, shown), what="the highlight")
+        highlighted = _canvas_image(browser, element)
+        # the same pixel through `gsseg edit --click` selects the same object
+        u, v = canvas.to_view(x, y)
+        r = subprocess.run([script("gsseg"), "edit", str(run), "--click", view.stem, str(u), str(v), "--op", "extract",
+                            "--name", "click", "--backend", "cpu"], capture_output=True, text=True)
+        assert r.returncode == 0, r.stderr
+        assert json.loads((run / "edits" / "click" / "edit.json").read_text())["object_id"] == label
+        # "Remove" in the panel: the object's pixels change in the next frames
+        browser.find_element(By.XPATH, "//button[normalize-space(.)='Remove']").click()
+        _wait(lambda: viewer.session.steps, what="the removal")
+        _wait(lambda: changes(region, highlighted) and changes(region, shown), what="the object to go")
+        if target := os.environ.get("VIEWER_SCREENSHOT"):  # the README's picture
+            browser.get_screenshot_as_file(target)
+    finally:
+        browser.get("about:blank")
+        viewer.stop()
