@@ -1,7 +1,8 @@
 """Benchmark: what ``gsseg view`` does per interaction on a trained, segmented run: a frame
 for a training camera (and with segments coloured), a click selection, relabelling from the
-cached contribution matrix, and computing that matrix when no cache exists. Prints and writes
-JSON.
+cached contribution matrix, and computing that matrix when no cache exists; and whether a
+click through the browser's camera picks the object `gsseg edit --click` picks on the same
+pixel, for every object of a training view. Prints and writes JSON.
 
     python -m benchmarks.viewer_speed --run demo/run [--max-size 640] [--out viewer_speed.json]
 """
@@ -10,16 +11,24 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import shutil
+import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
+import torch
+from scipy import ndimage
+from scipy.spatial.transform import Rotation
 
 from benchmarks import record
+from dataset_tools.errors import InputError
+from gsseg.render_views import segment_pixels
 from gsseg.run import load_run
-from gsseg.viewer.session import ViewCamera, ViewerSession
+from gsseg.viewer.session import ViewCamera, ViewerSession, browser_camera
 
 
 def timed(fn, repeats: int = 3) -> float:
@@ -53,10 +62,50 @@ def measure(run_dir: Path, max_size: int) -> dict:
         fresh.relabel("prior", 0.5)
         cached = time.perf_counter() - start
         assert np.array_equal(fresh.segmentation.labels, session.segmentation.labels)
-        return {"run": str(run_dir), "gaussians": len(session.run.gaussians), "size": [camera.width, camera.height],
+        agree, clicks = clicks_agree(run, fresh, view)
+        return {"clicks_agree": agree, "clicks": clicks,"run": str(run_dir), "gaussians": len(session.run.gaussians), "size": [camera.width, camera.height],
                 "backend": session.backend.name, "frame_s": frame, "segments_frame_s": segments, "select_s": select,
                 "relabel_s": relabel, "relabel_new_viewer_s": cached, "contributions_uncached_s": uncached,
                 "train_views": len(session.run.scene().split("train"))}
+
+
+def clicks_agree(run: Path, session: ViewerSession, view) -> tuple[int, int]:
+    """For the pixel deepest inside each object of ``view``'s own labels (rendered segments):
+    (clicks where the viewer and `gsseg edit --click` pick the same object, clicks)."""
+    world_from_cam = view.cam_from_world[:3, :3].T
+    browser = browser_camera(Rotation.from_matrix(world_from_cam).as_quat(scalar_first=True),
+                             -world_from_cam @ view.cam_from_world[:3, 3],
+                             2 * math.atan(view.camera.height / 2 / view.camera.fy), view.camera.width,
+                             view.camera.height, max_size=max(view.camera.width, view.camera.height),
+                             near=view.camera.near)
+    session.show_segments = False
+    labels = _rendered_labels(session, view)
+    agree = clicks = 0
+    for label in (int(x) for x in np.unique(labels) if x):
+        depth = ndimage.distance_transform_edt(labels == label)
+        if depth.max() < 3:
+            continue
+        row, col = np.unravel_index(depth.argmax(), depth.shape)
+        u, v = col + 0.5, row + 0.5
+        try:
+            mine = session.select_at(browser, u, v)
+        except InputError:
+            mine = None
+        name = f"click_{label}"
+        done = subprocess.run([str(Path(sys.executable).parent / "gsseg"), "edit", str(run), "--click", view.stem, str(u), str(v),
+                               "--op", "extract", "--name", name], capture_output=True, text=True)
+        theirs = json.loads((run / "edits" / name / "edit.json").read_text())["object_id"] if done.returncode == 0 \
+            else None
+        agree += mine == theirs
+        clicks += 1
+    return agree, clicks
+
+
+def _rendered_labels(session: ViewerSession, view) -> np.ndarray:
+    """(H, W) the label whose Gaussians weigh most at each pixel."""
+    pose = torch.as_tensor(view.cam_from_world, dtype=torch.float32)
+    return segment_pixels(session.run.gaussians, session.segmentation.labels, view.camera, pose,
+                          backend=session.backend)
 
 
 def main() -> None:
@@ -71,7 +120,7 @@ def main() -> None:
 
 
 def report(r: dict) -> tuple[str, str]:
-    headline = (f"relabel from the cache {r['relabel_s']:.2f} s ({r['relabel_new_viewer_s']:.2f} s in a new viewer), "
+    headline = (f"clicks agree with gsseg edit --click {r['clicks_agree']}/{r['clicks']}; relabel from the cache {r['relabel_s']:.2f} s ({r['relabel_new_viewer_s']:.2f} s in a new viewer), "
                 f"frame {r['frame_s']:.2f} s at {r['size'][0]}x{r['size'][1]}, click {r['select_s']:.2f} s")
     rows = [("frame for a training camera", f"{r['frame_s']:.3f} s"),
             ("frame, segments coloured", f"{r['segments_frame_s']:.3f} s"),

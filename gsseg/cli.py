@@ -39,8 +39,11 @@ def cli() -> None:
 @click.option("--resume", is_flag=True, help="Continue the run in --out from its latest checkpoint.")
 @click.option("--allow-other-scene", is_flag=True, help="With --resume, continue on another scene than the run's.")
 @click.option("--stop-after", type=int, default=None, help="Checkpoint and stop at this step; continue with --resume.")
+@click.option("--cache-views", type=click.Choice(["auto", "memory", "disk"]), default="auto", show_default=True,
+              help="Keep the views in memory (uint8) or read them from disk a few steps ahead; auto: memory while "
+                   "they take at most a quarter of the RAM.")
 def train(scene: Path, run: Path, schedule: str, resume: bool, allow_other_scene: bool, stop_after: int | None,
-          **options) -> None:
+          cache_views: str, **options) -> None:
     """Train 3D-GS jointly with 16-d object features on SCENE."""
     from gsseg.render import get_backend
     from gsseg.train import TrainConfig, train as run_training
@@ -48,7 +51,7 @@ def train(scene: Path, run: Path, schedule: str, resume: bool, allow_other_scene
     if schedule == "auto":
         schedule = get_backend(options["backend"]).default_schedule
     result = run_training(scene, run, TrainConfig(schedule=schedule, **options), resume=resume, stop_after=stop_after,
-                          other_scene=allow_other_scene)
+                          other_scene=allow_other_scene, cache_views=cache_views)
     state = "finished" if result.finished else f"stopped at step {result.step}; continue with --resume"
     click.echo(f"{result.run}: {state}, {result.num_gaussians} Gaussians, {result.seconds:.0f} s")
 

@@ -12,6 +12,7 @@ import torch
 
 from dataset_tools.errors import InputError
 from dataset_tools.image_files import read_mask
+from dataset_tools.scene import load_scene
 from gsseg.ply import read_ply
 from gsseg.render_views import render_run
 from gsseg.train import TrainConfig, TrainingDiverged, train
@@ -19,6 +20,7 @@ from gsseg.train import trainer as trainer_module
 from gsseg.train.config import LearningRates
 from gsseg.train.strategy import DensifyOptions, DensifyStats, densify_and_prune
 from gsseg.train.optim import GaussianOptimizer
+from gsseg.train.views import TrainViews, view_bytes
 from helpers import random_gaussians
 
 
@@ -118,3 +120,29 @@ def test_bad_input_is_refused(small_scene, tmp_path):
     train(small_scene.root, tmp_path / "c", TrainConfig(iters=2, backend="cpu"), progress=False)
     with pytest.raises(InputError, match="already holds a run"):
         train(small_scene.root, tmp_path / "c", TrainConfig(iters=2, backend="cpu"), progress=False)
+
+
+def test_views_in_memory_are_uint8_and_on_disk_are_read_ahead(small_scene):
+    scene = load_scene(small_scene.root, masks="object_mask")
+    views = scene.split("train")
+    order = [3, 0, 2, 1, 4, 5, 6, 2, 1, 0]
+    memory = TrainViews(views, lambda step: order[step % len(order)], mode="memory", progress=False)
+    assert memory.resident_bytes == view_bytes(views) == 4 * 96 * 96 * len(views)
+    disk = TrainViews(views, lambda step: order[step % len(order)], mode="disk", prefetch=2, progress=False)
+    assert disk.resident_bytes == 0
+    for step in range(1, 8):
+        a, b = memory.at_step(step), disk.at_step(step)
+        assert a.name == b.name == views[order[step]].name
+        assert a.image.dtype == torch.float32 and torch.equal(a.image, b.image) and torch.equal(a.mask, b.mask)
+        assert torch.equal(a.image, torch.from_numpy(views[order[step]].load_image().astype(np.float32) / 255.0))
+    disk.close()
+    assert disk.resident_bytes == 0
+    with pytest.raises(InputError, match="--cache-views swap"):
+        TrainViews(views, lambda step: 0, mode="swap", progress=False)
+
+
+def test_training_from_disk_writes_the_bytes_of_training_from_memory(small_scene, tmp_path):
+    cfg = TrainConfig(iters=30, backend="cpu")
+    for mode in ("memory", "disk"):
+        train(small_scene.root, tmp_path / mode, cfg, cache_views=mode, progress=False)
+    assert (tmp_path / "memory" / "gaussians.ply").read_bytes() == (tmp_path / "disk" / "gaussians.ply").read_bytes()

@@ -194,6 +194,31 @@ def test_a_port_in_use_is_one_sentence_and_exit_2(segmented):
     assert len(r.stderr.strip().splitlines()) == 1, r.stderr
 
 
+@pytest.mark.slow
+def test_gsseg_view_serves_the_page_and_stops_cleanly_on_ctrl_c(segmented):
+    pytest.importorskip("viser")
+    import re
+    import signal
+    import urllib.request
+
+    proc = subprocess.Popen([script("gsseg"), "view", str(segmented), "--port", "0"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    try:
+        url = None
+        for line in proc.stdout:
+            if found := re.search(r"serving .* at (http://\S+)", line):
+                url = found.group(1)
+                break
+        assert url, proc.stderr.read()
+        with urllib.request.urlopen(url, timeout=30) as page:
+            assert page.status == 200 and b"<html" in page.read().lower()
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    assert proc.returncode == 0 and "viewer stopped" in out, err
+
+
 # --- the viewer in a real browser ------------------------------------------------------------
 
 
@@ -261,14 +286,17 @@ class _Canvas:
 
 
 @pytest.mark.slow
-def test_the_viewer_in_headless_chromium_selects_and_removes_by_click(segmented, small_scene, tmp_path, browser):
+def test_the_viewer_in_headless_chromium_selects_and_removes_by_click(segmented, tmp_path, browser):
+    """On the test run, or on VIEWER_RUN (a segmented run, e.g. demo/run); VIEWER_SCREENSHOT
+    names a file for the page after the removal (the README's picture)."""
     from selenium.webdriver.common.action_chains import ActionChains
     from selenium.webdriver.common.by import By
 
+    from gsseg.render_views import segment_pixels
     from gsseg.viewer.server import Viewer
 
-    run = _copy(segmented, tmp_path)
-    viewer = Viewer(ViewerSession(load_run(run), scene_dir=small_scene.root, backend="cpu"), port=0)
+    run = _copy(Path(os.environ.get("VIEWER_RUN", segmented)), tmp_path)
+    viewer = Viewer(ViewerSession(load_run(run), backend="cpu"), port=0)
     try:
         browser.get(viewer.url)
         element = _wait(lambda: browser.find_elements(By.TAG_NAME, "canvas"), what="the canvas")[0]
@@ -287,7 +315,9 @@ def test_the_viewer_in_headless_chromium_selects_and_removes_by_click(segmented,
             return np.abs(now[region].astype(int) - since[region].astype(int)).mean() > 25
 
         # a click on the pixel of the view's largest object selects it, and it is highlighted
-        mask = load_scene(small_scene.root, masks="object_mask").view(view.name).load_mask()
+        session = viewer.session
+        mask = segment_pixels(session.run.gaussians, session.segmentation.labels, view.camera,
+                              torch.as_tensor(view.cam_from_world, dtype=torch.float32), backend="cpu")
         label = int(np.bincount(mask.ravel())[1:].argmax() + 1)
         canvas = _Canvas(element, view.camera)
         x, y = canvas.from_view(*_inside_pixel(mask, label))
@@ -307,7 +337,7 @@ def test_the_viewer_in_headless_chromium_selects_and_removes_by_click(segmented,
         browser.find_element(By.XPATH, "//button[normalize-space(.)='Remove']").click()
         _wait(lambda: viewer.session.steps, what="the removal")
         _wait(lambda: changes(region, highlighted) and changes(region, shown), what="the object to go")
-        if target := os.environ.get("VIEWER_SCREENSHOT"):  # the README's picture
+        if target := os.environ.get("VIEWER_SCREENSHOT"):
             browser.get_screenshot_as_file(target)
     finally:
         browser.get("about:blank")

@@ -34,7 +34,7 @@ from gsseg.train.config import RunRecord, TrainConfig
 from gsseg.train.losses import knn_identity_loss, object_loss, photometric_loss, psnr
 from gsseg.train.optim import GaussianOptimizer
 from gsseg.train.strategy import DensifyOptions, DensifyStrategy
-from gsseg.train.views import TrainView, camera_extent, load_views
+from gsseg.train.views import TrainView, TrainViews, camera_extent
 
 LOG_EVERY = 10
 KEEP_CHECKPOINTS = 2
@@ -225,7 +225,8 @@ def _loss_and_backward(state: _State, view: TrainView, cfg: TrainConfig, backend
 
 
 def train(scene_dir: Path | str, run: Path | str, cfg: TrainConfig, *, resume: bool = False,
-          stop_after: int | None = None, other_scene: bool = False, progress: bool = True) -> TrainResult:
+          stop_after: int | None = None, other_scene: bool = False, cache_views: str = "auto",
+          progress: bool = True) -> TrainResult:
     """Train 3D-GS with object features on a scene folder and write the run folder.
 
     Args:
@@ -235,6 +236,8 @@ def train(scene_dir: Path | str, run: Path | str, cfg: TrainConfig, *, resume: b
         resume: continue from the latest checkpoint of ``run``.
         stop_after: write a checkpoint and stop at this step (continue later with ``resume``).
         other_scene: let ``resume`` continue on another scene than the run's.
+        cache_views: ``memory``, ``disk`` or ``auto``: where the views wait between the steps
+            that use them (:class:`gsseg.train.views.TrainViews`); the result is the same.
         progress: show a progress bar.
 
     Raises:
@@ -248,7 +251,8 @@ def train(scene_dir: Path | str, run: Path | str, cfg: TrainConfig, *, resume: b
     created = not folder.root.exists()
     try:
         with folder.lock():
-            return _train_locked(folder, Path(scene_dir), cfg, resume, stop_after, other_scene, progress)
+            return _train_locked(folder, Path(scene_dir), cfg, resume, stop_after, other_scene, cache_views,
+                                 progress)
     except BaseException:
         if created and not folder.config.exists():  # a start that wrote nothing leaves nothing
             shutil.rmtree(folder.root, ignore_errors=True)
@@ -256,7 +260,7 @@ def train(scene_dir: Path | str, run: Path | str, cfg: TrainConfig, *, resume: b
 
 
 def _train_locked(folder: RunFolder, scene_dir: Path, cfg: TrainConfig, resume: bool, stop_after: int | None,
-                  other_scene: bool, progress: bool) -> TrainResult:
+                  other_scene: bool, cache_views: str, progress: bool) -> TrainResult:
     cfg, restore = _settled_config(folder, cfg, resume)
     backend = get_backend(cfg.backend)
     scene = load_scene(scene_dir, images=cfg.images, masks=cfg.masks)
@@ -270,16 +274,20 @@ def _train_locked(folder: RunFolder, scene_dir: Path, cfg: TrainConfig, resume: 
                              "pass that scene, or --allow-other-scene to continue on this one.")
     train_views = scene.split("train") or scene.views
     extent = camera_extent(scene.views)
-    views = load_views(train_views, progress=progress, device=backend.device)
-    state = _new_state(scene, cfg, train_views, extent, backend.device)
-    if restore:
-        state.load_state_dict(_latest_good_checkpoint(folder, backend.device))
-    write_json(folder.config, RunRecord(cfg, str(scene_dir.resolve()), backend.name, extent,
-                                        scene.views[0].camera.near, tuple(v.name for v in views)).to_json())
-    return _loop(folder, state, views, cfg, backend, stop_after, progress)
+    views = TrainViews(train_views, lambda step: _view_at(step, len(train_views), cfg.seed), mode=cache_views,
+                       device=backend.device, progress=progress)
+    try:
+        state = _new_state(scene, cfg, train_views, extent, backend.device)
+        if restore:
+            state.load_state_dict(_latest_good_checkpoint(folder, backend.device))
+        write_json(folder.config, RunRecord(cfg, str(scene_dir.resolve()), backend.name, extent,
+                                            scene.views[0].camera.near, views.names).to_json())
+        return _loop(folder, state, views, cfg, backend, stop_after, progress)
+    finally:
+        views.close()
 
 
-def _loop(folder: RunFolder, state: _State, views: list[TrainView], cfg: TrainConfig, backend: Backend,
+def _loop(folder: RunFolder, state: _State, views: TrainViews, cfg: TrainConfig, backend: Backend,
           stop_after: int | None, progress: bool) -> TrainResult:
     timing = cfg.timing
     last = min(timing.iters, stop_after) if stop_after is not None else timing.iters
@@ -288,7 +296,7 @@ def _loop(folder: RunFolder, state: _State, views: list[TrainView], cfg: TrainCo
                                        disable=not progress, dynamic_ncols=True) as bar:
         while state.step < last:
             step = state.step + 1
-            losses = _train_step(state, views[_view_at(step, len(views), cfg.seed)], cfg, backend, step)
+            losses = _train_step(state, views.at_step(step), cfg, backend, step)
             if not math.isfinite(losses["loss"]):
                 kept = folder.checkpoint_files()
                 raise TrainingDiverged(

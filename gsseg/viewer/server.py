@@ -12,6 +12,7 @@ from __future__ import annotations
 import html
 import socket
 import threading
+import time
 from pathlib import Path
 
 import numpy as np
@@ -19,6 +20,7 @@ from scipy.spatial.transform import Rotation
 
 from dataset_tools.errors import InputError
 from dataset_tools.image_files import label_palette
+from dataset_tools.interrupts import stop_requests
 from gsseg.run import load_run
 from gsseg.segment.reassign import METHODS
 from gsseg.viewer.session import ViewCamera, ViewerSession, browser_camera
@@ -151,66 +153,75 @@ class Viewer:
         gui.add_markdown(f"**{html.escape(str(session.run.root))}**: {len(session.run.gaussians):,} Gaussians, "
                          f"rendered by the `{session.backend.name}` backend.")
         self._status = gui.add_markdown(session.segments_missing or "Click an object to select it.")
-        self._view = gui.add_dropdown("View", tuple(v.name for v in self.views), initial_value=self.views[0].name)
-        self._view.on_update(lambda _: self.go_to(self._view.value))
-        cameras = gui.add_checkbox("Show cameras", True)
-
-        @cameras.on_update
-        def _(_) -> None:
-            for frustum in self._frustums:
-                frustum.visible = cameras.value
-
         off = session.segmentation is None
-        segments = gui.add_checkbox("Show segments", False, disabled=off)
-
-        @segments.on_update
-        def _(_) -> None:
-            session.show_segments = segments.value
-            self.refresh()
-
+        with gui.add_folder("Edit"):
+            self._add_edit_controls(off)
+        with gui.add_folder("Display"):
+            self._add_display_controls(off)
+        with gui.add_folder("Reassignment", expand_by_default=False):
+            self._add_reassignment_controls(off)
         with gui.add_folder("Objects"):
             self._objects = gui.add_html(self._objects_table())
-        with gui.add_folder("Reassignment", expand_by_default=False):
-            labels = session.segmentation
-            method = gui.add_dropdown("Method", METHODS, initial_value=labels.method if labels else "prior",
-                                      disabled=off)
-            gamma = gui.add_slider("gamma_p", 0.0, 2.0, 0.05, labels.gamma_p if labels else 0.2, disabled=off)
-            rerun = gui.add_button("Re-run reassignment", disabled=off)
 
-            @rerun.on_click
-            def _(_) -> None:
-                try:
-                    seconds = session.relabel(method.value, gamma.value)
-                except InputError as e:
-                    self._say(str(e))
-                    return
-                self._say(f"Reassigned by {method.value}, gamma_p {gamma.value:g}, in {seconds:.2f} s.")
-                self._changed()
-
-        with gui.add_folder("Edit"):
-            buttons = {op: gui.add_button(label, disabled=off)
-                       for op, label in (("remove", "Remove"), ("extract", "Extract"), ("recolor", "Recolour"))}
-            colour = gui.add_rgb("Colour", (230, 60, 60), disabled=off)
-            undo = gui.add_button("Undo", disabled=off)
-            name = gui.add_text("Edit name", "viewer", disabled=off)
-            save = gui.add_button("Save", disabled=off)
+    def _add_edit_controls(self, off: bool) -> None:
+        gui, session = self.server.gui, self.session
+        buttons = {op: gui.add_button(label, disabled=off)
+                   for op, label in (("remove", "Remove"), ("extract", "Extract"), ("recolor", "Recolour"))}
+        colour = gui.add_rgb("Colour", (230, 60, 60), disabled=off)
+        undo = gui.add_button("Undo", disabled=off)
+        name = gui.add_text("Edit name", "viewer", disabled=off)
+        save = gui.add_button("Save", disabled=off)
         for op, button in buttons.items():
             button.on_click(lambda _, op=op: self._edit(op, tuple(colour.value) if op == "recolor" else None))
 
         @undo.on_click
         def _(_) -> None:
             step = session.undo()
-            self._say("Nothing to undo." if step is None else f"Undid {step.op} of object {step.object_id}.")
+            self._say("Nothing to undo." if step is None else f"Took back: {step.op} of object {step.object_id}.")
             self._changed()
 
         @save.on_click
         def _(_) -> None:
             try:
-                out = session.save(name.value, overwrite=True)
+                out = session.save(name.value)
             except InputError as e:
                 self._say(str(e))
                 return
             self._say(f"Wrote `{out}`.")
+
+    def _add_display_controls(self, off: bool) -> None:
+        gui, session = self.server.gui, self.session
+        self._view = gui.add_dropdown("View", tuple(v.name for v in self.views), initial_value=self.views[0].name)
+        self._view.on_update(lambda _: self.go_to(self._view.value))
+        cameras = gui.add_checkbox("Show cameras", True)
+        segments = gui.add_checkbox("Show segments", False, disabled=off)
+
+        @cameras.on_update
+        def _(_) -> None:
+            for frustum in self._frustums:
+                frustum.visible = cameras.value
+
+        @segments.on_update
+        def _(_) -> None:
+            session.show_segments = segments.value
+            self.refresh()
+
+    def _add_reassignment_controls(self, off: bool) -> None:
+        gui, session = self.server.gui, self.session
+        labels = session.segmentation
+        method = gui.add_dropdown("Method", METHODS, initial_value=labels.method if labels else "prior", disabled=off)
+        gamma = gui.add_slider("gamma_p", 0.0, 2.0, 0.05, labels.gamma_p if labels else 0.2, disabled=off)
+        rerun = gui.add_button("Re-run reassignment", disabled=off)
+
+        @rerun.on_click
+        def _(_) -> None:
+            try:
+                seconds = session.relabel(method.value, gamma.value)
+            except InputError as e:
+                self._say(str(e))
+                return
+            self._say(f"Reassigned by {method.value}, gamma_p {gamma.value:g}, in {seconds:.2f} s.")
+            self._changed()
 
     def _edit(self, op: str, color: tuple[int, int, int] | None) -> None:
         try:
@@ -218,8 +229,8 @@ class Viewer:
         except InputError as e:
             self._say(str(e))
             return
-        self._say(f"{op.capitalize()}d object {step.object_id}." if op != "recolor"
-                  else f"Recoloured object {step.object_id}.")
+        done = {"remove": "Removed", "extract": "Extracted", "recolor": "Recoloured"}[op]
+        self._say(f"{done} object {step.object_id}; Undo takes it back, Save writes it.")
         self._changed()
 
     def _changed(self) -> None:
@@ -230,7 +241,7 @@ class Viewer:
         self._status.content = text
 
     def _objects_table(self) -> str:
-        rows = self.session.objects()
+        rows = sorted(self.session.objects(), key=lambda row: -row[1])
         if not rows:
             return "<p>No objects.</p>"
         palette = label_palette()
@@ -242,15 +253,15 @@ class Viewer:
 
 def serve(run_dir: Path | str, *, scene_dir: Path | str | None = None, host: str = "127.0.0.1", port: int = 8080,
           max_size: int = 640, backend: str = "auto", on_ready=print) -> None:
-    """Serve a run until Ctrl-C; ``on_ready`` is called with a line saying where."""
+    """Serve a run until Ctrl-C or SIGTERM; ``on_ready`` is called with a line saying where."""
     session = ViewerSession(load_run(run_dir), scene_dir=scene_dir, backend=backend)
     viewer = Viewer(session, host=host, port=port, max_size=max_size)
     on_ready(f"serving {run_dir} at {viewer.url} (Ctrl-C stops)")
     if session.segments_missing:
         on_ready(session.segments_missing)
     try:
-        threading.Event().wait()
-    except KeyboardInterrupt:
-        pass
+        with stop_requests() as stop:
+            while not stop.requested:
+                time.sleep(0.2)
     finally:
         viewer.stop()
