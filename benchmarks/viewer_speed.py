@@ -45,7 +45,7 @@ def measure(run_dir: Path, max_size: int) -> dict:
         run = Path(shutil.copytree(run_dir, Path(tmp) / "run"))  # the cache is written into the copy
         (run / "contributions.npz").unlink(missing_ok=True)
         session = ViewerSession(load_run(run))
-        view = session.run.scene().split("train")[0]
+        view = session.scene.split("train")[0]
         scale = min(1.0, max_size / max(view.camera.width, view.camera.height))
         camera = view.camera.resized(round(view.camera.width * scale), round(view.camera.height * scale))
         at = ViewCamera(camera, view.cam_from_world)
@@ -66,7 +66,7 @@ def measure(run_dir: Path, max_size: int) -> dict:
         return {"clicks_agree": agree, "clicks": clicks,"run": str(run_dir), "gaussians": len(session.run.gaussians), "size": [camera.width, camera.height],
                 "backend": session.backend.name, "frame_s": frame, "segments_frame_s": segments, "select_s": select,
                 "relabel_s": relabel, "relabel_new_viewer_s": cached, "contributions_uncached_s": uncached,
-                "train_views": len(session.run.scene().split("train"))}
+                "train_views": len(session.scene.split("train"))}
 
 
 def clicks_agree(run: Path, session: ViewerSession, view) -> tuple[int, int]:

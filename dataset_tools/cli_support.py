@@ -4,6 +4,7 @@ and exit code 2, interruptions exit 130 saying how to continue, and ``--version`
 from __future__ import annotations
 
 import errno
+import functools
 import sys
 from collections.abc import Callable
 from importlib.metadata import PackageNotFoundError, version
@@ -13,6 +14,7 @@ from tqdm import tqdm
 
 from dataset_tools.errors import InputError
 from dataset_tools.interrupts import Interrupted
+from dataset_tools.threads import configure_threads
 
 # What to do about an operating-system error, by errno.
 OS_FIXES = {
@@ -70,13 +72,32 @@ def _failure(e: BaseException, prog_name: str) -> tuple[str, int]:
     return f"error: {e.format_message()}", e.exit_code  # any other click.ClickException
 
 
+def engine_options(command: Callable) -> Callable:
+    """``--engine local|ray`` and ``--address``, handed to ``command`` as one ``engine``
+    (:class:`dataset_tools.engine.Engine`)."""
+
+    @functools.wraps(command)
+    def with_engine(*args, engine_name: str, address: str | None, **kwargs):
+        from dataset_tools.engine import Engine
+
+        return command(*args, engine=Engine(engine_name, address), **kwargs)
+
+    with_engine = click.option("--address", default=None,
+                               help="A Ray cluster's address (default: start a local one); with --engine ray.")(with_engine)
+    return click.option("--engine", "engine_name", type=click.Choice(["local", "ray"]), default="local",
+                        show_default=True, help="Run the independent tasks here one by one, or as tasks on Ray "
+                                                "(pip install -e .[ray]).")(with_engine)
+
+
 def run_cli(group: click.Group, prog_name: str) -> Callable[[], None]:
     """An entry point that runs ``group`` and turns an ``InputError`` or an ``OSError`` into
     ``error: ...`` on stderr and exit code 2, without a traceback; interrupted work exits 130
-    with its own message (a checkpoint written, how to continue)."""
+    with its own message (a checkpoint written, how to continue). Threads are configured
+    first (:func:`dataset_tools.threads.configure_threads`)."""
     group = click.version_option(package_version(), "--version", prog_name=prog_name)(group)
 
     def main() -> None:
+        configure_threads()
         try:
             group.main(prog_name=prog_name, standalone_mode=False)
         except (InputError, OSError, Interrupted, click.exceptions.Abort, KeyboardInterrupt,

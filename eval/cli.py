@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from dataset_tools.cli_support import none_means_off, run_cli
+from dataset_tools.cli_support import engine_options, none_means_off, run_cli
 
 
 @click.group(name="gseval", context_settings={"help_option_names": ["-h", "--help"]})
@@ -60,13 +60,14 @@ def compare(runs: tuple[Path, ...], out: Path | None) -> None:
 @click.option("--out", required=True, type=click.Path(path_type=Path), help="Folder for the tables and the work.")
 @click.option("--quick", is_flag=True, help="Two small scenes and a short schedule (about 10 minutes on 2 cores).")
 @click.option("--backend", default="auto", show_default=True, help="auto, cpu, torch or gsplat.")
-def paper_tables(out: Path, quick: bool, backend: str) -> None:
+@engine_options
+def paper_tables(out: Path, quick: bool, backend: str, engine) -> None:
     """The analogs of the paper's tables on synthetic scenes (markdown and JSON); rerunning
     reuses the finished work in OUT/work."""
     from pipeline.paper_tables import SETUPS
     from pipeline.paper_tables import paper_tables as run_tables
 
-    path = run_tables(out, setup=SETUPS["quick" if quick else "full"], backend=backend)
+    path = run_tables(out, setup=SETUPS["quick" if quick else "full"], backend=backend, engine=engine)
     click.echo(path.read_text())
     click.echo(f"wrote {path} and {path.with_suffix('.json')}")
 

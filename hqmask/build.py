@@ -105,6 +105,12 @@ def _check_min_area(min_area: int | None) -> None:
         raise InputError(f"--min-area {min_area}: give a number of pixels of 1 or more (or leave it out).")
 
 
+def build_scene(job: tuple[Path, BuildConfig]) -> BuildResult:
+    """:func:`build_masks` of one (scene, options) pair without progress bars: a task for
+    :meth:`dataset_tools.engine.Engine.map` over several scenes."""
+    return build_masks(job[0], job[1], progress=False)
+
+
 def build_masks(scene_dir: Path | str, cfg: BuildConfig, *, progress: bool = True) -> BuildResult:
     """Write consistent, cleaned object-ID maps of every view to ``scene_dir/cfg.out_masks``."""
     scene_dir = Path(scene_dir)

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from dataset_tools.cli_support import run_cli
+from dataset_tools.cli_support import engine_options, run_cli
 
 
 @click.group(name="hqmask", context_settings={"help_option_names": ["-h", "--help"]})
@@ -15,7 +15,7 @@ def cli() -> None:
 
 
 @cli.command()
-@click.argument("scene", type=click.Path(path_type=Path))
+@click.argument("scenes", nargs=-1, required=True, type=click.Path(path_type=Path))
 @click.option("--proposer", default="graph", show_default=True, help="graph, sam-hq or existing.")
 @click.option("--from-masks", default=None, help="Mask folder read by --proposer existing.")
 @click.option("--model", default=None, help="SAM-HQ ONNX model folder (--proposer sam-hq).")
@@ -36,13 +36,23 @@ def cli() -> None:
 @click.option("--threads", type=int, default=0, show_default=True, help="ONNX Runtime threads for sam-hq (0: its choice).")
 @click.option("--points-per-side", type=int, default=32, show_default=True, help="Point grid of the sam-hq generator.")
 @click.option("--cache-embeddings", is_flag=True, help="Keep sam-hq image embeddings under SCENE/.hqmask_cache.")
-def build(scene: Path, **options) -> None:
-    """Propose, clean and associate consistent object masks for every view of SCENE."""
-    from hqmask.build import BuildConfig, build_masks
+@engine_options
+def build(scenes: tuple[Path, ...], engine, **options) -> None:
+    """Propose, clean and associate consistent object masks for every view of each SCENE."""
+    from dataset_tools.scene import load_scene
+    from hqmask.build import BuildConfig, build_masks, build_scene
 
-    result = build_masks(scene, BuildConfig(**options))
-    click.echo(f"wrote {result.out_dir}: {result.views} views, {result.n_objects} objects (associated by "
-               f"{result.associate})")
+    cfg = BuildConfig(**options)
+    if len(scenes) > 1:  # every scene is checked before any work: a bad last scene must not cost the first ones
+        for scene in scenes:
+            load_scene(scene, images=cfg.images)
+    if len(scenes) == 1 and engine.name == "local":
+        results = [build_masks(scenes[0], cfg)]
+    else:
+        results = engine.map(build_scene, [(scene, cfg) for scene in scenes], desc="scenes")
+    for result in results:
+        click.echo(f"wrote {result.out_dir}: {result.views} views, {result.n_objects} objects (associated by "
+                   f"{result.associate})")
 
 
 @cli.command()

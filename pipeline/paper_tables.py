@@ -30,13 +30,13 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
-from tqdm import tqdm
 
 from dataset_tools.atomic import require_folder_path, write_bytes_atomic
+from dataset_tools.engine import Engine
 from eval.report import markdown_table
 from gsseg.render import Backend, get_backend
 from gsseg.train import TrainConfig
@@ -96,39 +96,47 @@ def _prepare_scene(root: Path, path: str, seed: int, setup: TableSetup) -> Path:
     return scene
 
 
-def _train(scene: Path, run: Path, masks: str, setup: TableSetup, backend: Backend) -> float | None:
-    return train_run(scene, run, TrainConfig(iters=setup.iters, images=setup.images, masks=masks,
-                                             backend=backend.name, max_gaussians=setup.max_gaussians))
+@dataclass(frozen=True)
+class _Task:
+    """One piece of the tables' work on one scene (``kind``: a training mask kind, for the
+    training tasks)."""
+
+    root: Path
+    path: str
+    seed: int
+    setup: TableSetup
+    backend: str
+    kind: str = ""
 
 
-def scene_tables(root: Path, path: str, seed: int, setup: TableSetup, backend: Backend, bar: tqdm) -> dict:
-    """Every number of one scene; each step advances ``bar``."""
-    bar.set_postfix_str(f"{path}-{seed}: scene and masks")
-    scene = _prepare_scene(root, path, seed, setup)
-    bar.update(1)
-    masks = {name: mask_scores(scene, name) for name in MASK_SCORES}
-    result: dict = {"masks": masks, "training": {}, "methods": {}, "gamma_p": {}}
-    for kind in TRAINING_MASKS:
-        bar.set_postfix_str(f"{path}-{seed}: training on {kind} masks")
-        run = root / f"run_{kind}"
-        seconds = _train(scene, run, MASK_FOLDERS[kind], setup, backend)
-        # The pipeline segments with the masks it trained on; `noisy` ones cannot be voted
-        # with (their IDs differ per view), so that run is segmented by its classifier alone.
-        method = ("classifier", 0.0) if kind == "noisy" else ("prior", 0.2)
-        summary, = segmentation_scores(run, scene, MASK_FOLDERS[kind], [method], backend=backend)
-        result["training"][kind] = {"psnr": summary["psnr"], "ssim": summary["ssim"],
-                                    "miou": summary["visible"]["miou"], "method": method[0],
-                                    "train_seconds": seconds}
-        bar.update(1)
-    bar.set_postfix_str(f"{path}-{seed}: reassignment methods")
+def _scene_task(task: _Task) -> dict:
+    """Make the scene and its masks; score the masks."""
+    scene = _prepare_scene(task.root, task.path, task.seed, task.setup)
+    return {name: mask_scores(scene, name) for name in MASK_SCORES}
+
+
+def _training_task(task: _Task) -> dict:
+    """Train on one kind of masks and score the run."""
+    scene, run = task.root / "scene", task.root / f"run_{task.kind}"
+    setup = task.setup
+    seconds = train_run(scene, run, TrainConfig(iters=setup.iters, images=setup.images, masks=MASK_FOLDERS[task.kind],
+                                                backend=task.backend, max_gaussians=setup.max_gaussians))
+    # The pipeline segments with the masks it trained on; `noisy` ones cannot be voted
+    # with (their IDs differ per view), so that run is segmented by its classifier alone.
+    method = ("classifier", 0.0) if task.kind == "noisy" else ("prior", 0.2)
+    summary, = segmentation_scores(run, scene, MASK_FOLDERS[task.kind], [method], backend=task.backend)
+    return {"psnr": summary["psnr"], "ssim": summary["ssim"], "miou": summary["visible"]["miou"],
+            "method": method[0], "train_seconds": seconds}
+
+
+def _methods_task(task: _Task) -> dict:
+    """The reassignment methods and the gamma_p ablation on the ``hqmask`` run."""
     settings = list(METHODS) + [("prior", g) for g in GAMMAS]
-    summaries = segmentation_scores(root / "run_hqmask", scene, MASK_FOLDERS["hqmask"], settings, backend=backend)
-    for (method, _), s in zip(METHODS, summaries):
-        result["methods"][method] = {p: s[p] for p in ("visible", "extracted")}
-    for gamma_p, s in zip(GAMMAS, summaries[len(METHODS):]):
-        result["gamma_p"][f"{gamma_p:g}"] = {p: s[p] for p in ("visible", "extracted")}
-    bar.update(1)
-    return result
+    summaries = segmentation_scores(task.root / "run_hqmask", task.root / "scene", MASK_FOLDERS["hqmask"], settings,
+                                    backend=task.backend)
+    return {"methods": {m: {p: s[p] for p in ("visible", "extracted")} for (m, _), s in zip(METHODS, summaries)},
+            "gamma_p": {f"{g:g}": {p: s[p] for p in ("visible", "extracted")}
+                        for g, s in zip(GAMMAS, summaries[len(METHODS):])}}
 
 
 def _f(x: float | None, digits: int = 3) -> str:
@@ -185,21 +193,28 @@ def render_tables(scenes: dict[str, dict], setup: TableSetup) -> str:
 
 
 def paper_tables(out: Path | str, *, setup: TableSetup = SETUPS["full"], backend: str | Backend = "auto",
-                 progress: bool = True) -> Path:
+                 engine: Engine = Engine(), progress: bool = True) -> Path:
     """Run the tables' experiments on ``setup`` (one of :data:`SETUPS` or your own), reusing
     finished work in ``out/work``, and write ``out/paper_tables.md`` and
-    ``out/paper_tables.json``. Returns the markdown path."""
+    ``out/paper_tables.json``. Returns the markdown path.
+
+    The work is three rounds of independent tasks on ``engine``: the scenes and their masks,
+    then one training per scene and mask kind, then the reassignment methods per scene."""
     out = Path(out)
     require_folder_path(out)
     backend = get_backend(backend)
-    steps_per_scene = 2 + len(TRAINING_MASKS)
     start = time.perf_counter()
+    names = [f"{path}-{seed}" for path, seed in setup.scenes]
+    tasks = [_Task(out / "work" / name, path, seed, setup, backend.name) for name, (path, seed) in
+             zip(names, setup.scenes)]
+    masks = engine.map(_scene_task, tasks, desc="scenes and masks", progress=progress)
+    trainings = engine.map(_training_task, [replace(t, kind=k) for t in tasks for k in TRAINING_MASKS],
+                           desc="trainings", progress=progress)
+    methods = engine.map(_methods_task, tasks, desc="reassignment methods", progress=progress)
     scenes = {}
-    with tqdm(total=steps_per_scene * len(setup.scenes), desc="paper tables", unit="step",
-              disable=not progress, dynamic_ncols=True) as bar:
-        for path, seed in setup.scenes:
-            name = f"{path}-{seed}"
-            scenes[name] = scene_tables(out / "work" / name, path, seed, setup, backend, bar)
+    for i, name in enumerate(names):
+        done = trainings[i * len(TRAINING_MASKS): (i + 1) * len(TRAINING_MASKS)]
+        scenes[name] = {"masks": masks[i], "training": dict(zip(TRAINING_MASKS, done)), **methods[i]}
     markdown = "## Paper tables\n\n" + render_tables(scenes, setup)
     write_bytes_atomic(out / "paper_tables.md", markdown.encode())
     data = {"setup": {**asdict(setup), "backend": backend.name},

@@ -155,6 +155,9 @@ CASES = [
     ("dataset_tools", "hq --out {w}/hq --local {w}/a_file", ""),
     # hqmask
     ("hqmask", "build {w}/nowhere", "scene folder not found"),
+    ("hqmask", "build {w}/scene {w}/nowhere --out-masks n", "scene folder not found"),
+    ("hqmask", "build {w}/scene --engine spark", "spark"),
+    ("hqmask", "build {w}/scene --address 10.0.0.1:6379", "with --engine ray"),
     ("hqmask", "build {w}/scene --proposer nope", "nope"),
     ("hqmask", "build {w}/scene --associate nope", "nope"),
     ("hqmask", "build {w}/scene --min-area -5", "--min-area -5"),
@@ -274,6 +277,7 @@ CASES = [
     ("gseval", "compare {w}/cut_evaluation", "damaged"),
     ("gseval", "compare {w}/run --out {w}/run", ""),
     ("gseval", "paper-tables --out {w}/a_file --quick", "a file stands there"),
+    ("gseval", "paper-tables --out {w}/new --quick --address 10.0.0.1:6379", "with --engine ray"),
 ]
 
 

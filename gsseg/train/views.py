@@ -49,6 +49,17 @@ class _Pixels:
     def read(cls, view: View) -> _Pixels:
         return cls(view.load_image(), view.load_mask())
 
+    def moved_into(self, store: np.ndarray, offset: int) -> _Pixels:
+        """The same pixels as views of ``store`` from ``offset`` (4 bytes a pixel: colour, then IDs)."""
+        h, w = self.image.shape[:2]
+        image = store[offset: offset + 3 * h * w].reshape(h, w, 3)
+        image[:] = self.image
+        mask = None
+        if self.mask is not None:
+            mask = store[offset + 3 * h * w: offset + 4 * h * w].reshape(h, w)
+            mask[:] = self.mask
+        return _Pixels(image, mask)
+
 
 def view_bytes(views: list[View]) -> int:
     """The bytes the views' uint8 colour and IDs take: 4 a pixel."""
@@ -93,10 +104,15 @@ class TrainViews:
         self._kept: list[_Pixels] = []
         self._ahead: dict[int, Future] = {}
         self._pool = ThreadPoolExecutor(1, thread_name_prefix="views") if self.mode == "disk" else None
+        # memory: every view's pixels in one block allocated once, so that the decoders'
+        # temporary buffers are not left as holes between the views that stay
+        store = np.empty(view_bytes(views) if self.mode == "memory" else 0, np.uint8)
+        offset = 0
         for v in tqdm(views, desc="loading views", unit="view", disable=not progress, leave=False):
             pixels = _Pixels.read(v)
             if self.mode == "memory":
-                self._kept.append(pixels)
+                self._kept.append(pixels.moved_into(store, offset))
+                offset += 4 * v.camera.width * v.camera.height
 
     def __len__(self) -> int:
         return len(self.views)

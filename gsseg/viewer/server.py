@@ -54,7 +54,7 @@ class Viewer:
             require_free_port(host, port)
         self.session = session
         self.max_size = max_size
-        self.views = session.run.scene(session.scene_dir).split("train")
+        self.views = session.scene.split("train")
         self.server = viser.ViserServer(host=host, port=port, verbose=False)
         self.host = host
         self._dirty: dict[int, threading.Event] = {}
@@ -102,7 +102,7 @@ class Viewer:
         """The pinhole view of a browser's current camera."""
         cam = client.camera
         return browser_camera(cam.wxyz, cam.position, cam.fov, cam.image_width, cam.image_height,
-                              max_size=self.max_size, near=self.session.near)
+                              max_size=self.max_size, near=self.session.scene.views[0].camera.near)
 
     # --- browser tabs ---------------------------------------------------------------------
 

@@ -81,7 +81,7 @@ class ViewerSession:
         self.masks = masks or run.config.masks or "object_mask"  # default: the masks the run was trained on
         self.backend = get_backend(backend)
         self.k = k
-        self.near = run.scene(scene_dir).views[0].camera.near
+        self.scene = run.scene(scene_dir)
         self.segmentation: Segmentation | None = run.labels() if run.folder.labels.is_file() else None
         self.steps: list[EditStep] = []
         self.selected: int | None = None
@@ -206,8 +206,8 @@ class ViewerSession:
         seg = self.segmentation
         record = {"steps": [{"op": s.op, "object_id": s.object_id, "color": s.color} for s in steps],
                   "method": seg.method, "gamma_p": seg.gamma_p, "gaussians": len(g)}
-        return write_edit(self.run, g, self.run.folder.edit(name), record, scene=self.run.scene(self.scene_dir),
-                          split=split, backend=self.backend, overwrite=overwrite, progress=False)
+        return write_edit(self.run, g, self.run.folder.edit(name), record, scene=self.scene, split=split,
+                          backend=self.backend, overwrite=overwrite, progress=False)
 
 
 def _painted(g: Gaussians, seg: Segmentation, by_label: bool, selected: int | None) -> Gaussians:

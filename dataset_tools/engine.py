@@ -1,0 +1,80 @@
+"""Where independent pieces of work run: here, one after another (``local``), or as tasks on
+a Ray cluster (``ray``, the optional ``ray`` extra): a local one started for the command, or
+the cluster at ``--address``.
+
+Each Ray task asks for the CPUs of one local piece of work (:func:`task_cpus`) and runs with
+the same thread counts, so results equal the local ones; a cluster with more CPUs runs more
+tasks at once.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from tqdm import tqdm
+
+from dataset_tools.errors import InputError
+
+ENGINES = ("local", "ray")
+
+
+def task_cpus() -> int:
+    """The CPUs a piece of work uses here: the entry point's thread count, else every usable CPU."""
+    from dataset_tools.threads import usable_cpus
+
+    return int(os.environ.get("OMP_NUM_THREADS") or usable_cpus())
+
+
+@dataclass(frozen=True)
+class Engine:
+    """``name``: ``local`` or ``ray``; ``address``: a Ray cluster (None: start a local one);
+    ``cpus``: CPUs per task (default :func:`task_cpus`)."""
+
+    name: str = "local"
+    address: str | None = None
+    cpus: int | None = None
+
+    def __post_init__(self) -> None:
+        if self.name not in ENGINES:
+            raise InputError(f"--engine {self.name}: choose local or ray.")
+        if self.address is not None and self.name != "ray":
+            raise InputError("--address names a Ray cluster; pass it with --engine ray.")
+
+    def map(self, fn: Callable[[Any], Any], items: Sequence[Any], *, desc: str = "tasks",
+            progress: bool = True) -> list[Any]:
+        """``[fn(x) for x in items]``, in order; ``fn`` must be importable by name (a module
+        function) for ``ray``. The first task that fails raises its error here."""
+        if self.name == "local" or not items:
+            return [fn(x) for x in tqdm(items, desc=desc, unit="task", disable=not progress, leave=False)]
+        ray = _init_ray(self.address)
+        cpus = self.cpus or task_cpus()
+        env = {"OMP_NUM_THREADS": str(cpus), "MKL_NUM_THREADS": str(cpus), "NUMBA_NUM_THREADS": str(cpus),
+               "OMP_WAIT_POLICY": os.environ.get("OMP_WAIT_POLICY", "PASSIVE")}
+        remote = ray.remote(num_cpus=cpus, runtime_env={"env_vars": env})(fn)
+        refs = [remote.remote(x) for x in items]
+        pending = list(refs)
+        with tqdm(total=len(refs), desc=f"{desc} (ray)", unit="task", disable=not progress, leave=False) as bar:
+            while pending:
+                done, pending = ray.wait(pending, num_returns=1)
+                bar.update(len(done))
+        try:
+            return ray.get(refs)
+        except ray.exceptions.RayTaskError as e:  # the task's own error, without the remote traceback
+            raise e.cause from None
+
+
+def _init_ray(address: str | None):
+    try:
+        import ray
+    except ImportError:
+        raise InputError("--engine ray needs Ray; install it with `pip install -e .[ray]`.") from None
+    if not ray.is_initialized():
+        try:
+            ray.init(address=address, include_dashboard=False, log_to_driver=False, configure_logging=False)
+        except ConnectionError as e:
+            raise InputError(f"--address {address}: no Ray cluster answers there ({e}); start one with "
+                             "`ray start --head` or leave --address out for a local one.") from None
+    return ray

@@ -1,0 +1,61 @@
+"""Independent work on ``local`` and on a real local Ray cluster: the same results, in order,
+and a task's error is the task's own error."""
+
+from __future__ import annotations
+
+import filecmp
+import shutil
+import subprocess
+
+import pytest
+from helpers import script
+
+from dataset_tools.engine import Engine
+from dataset_tools.errors import InputError
+
+
+def _square_or_refuse(x: int) -> int:
+    if x < 0:
+        raise InputError(f"{x} is negative; give a natural number.")
+    return x * x
+
+
+@pytest.fixture(scope="module")
+def ray_engine():
+    ray = pytest.importorskip("ray", reason="Ray is not installed (pip install -e .[ray])")
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False, configure_logging=False)
+    yield Engine("ray", cpus=1)
+    ray.shutdown()
+
+
+def test_an_engine_is_checked_when_made():
+    with pytest.raises(InputError, match="--engine spark"):
+        Engine("spark")
+    with pytest.raises(InputError, match="with --engine ray"):
+        Engine("local", address="10.0.0.1:6379")
+
+
+@pytest.mark.slow
+def test_ray_maps_in_order_and_raises_the_tasks_own_error(ray_engine):
+    items = list(range(7, -1, -1))
+    assert ray_engine.map(_square_or_refuse, items, progress=False) == Engine().map(_square_or_refuse, items,
+                                                                                    progress=False)
+    with pytest.raises(InputError, match="-3 is negative"):
+        ray_engine.map(_square_or_refuse, [1, -3, 2], progress=False)
+
+
+@pytest.mark.slow
+def test_hqmask_build_of_two_scenes_on_ray_writes_the_masks_of_local(small_scene, tmp_path):
+    pytest.importorskip("ray", reason="Ray is not installed (pip install -e .[ray])")
+    scenes = {engine: [shutil.copytree(small_scene.root, tmp_path / engine / name) for name in ("a", "b")]
+              for engine in ("local", "ray")}
+    for engine, paths in scenes.items():
+        r = subprocess.run([script("hqmask"), "build", *map(str, paths), "--out-masks", "built", "--engine", engine],
+                           capture_output=True, text=True)
+        assert r.returncode == 0, r.stderr
+        assert r.stdout.count("wrote") == 2
+    for local, ray in zip(scenes["local"], scenes["ray"]):
+        names = sorted(p.name for p in (local / "built").iterdir())
+        assert names and names == sorted(p.name for p in (ray / "built").iterdir())
+        match, mismatch, errors = filecmp.cmpfiles(local / "built", ray / "built", names, shallow=False)
+        assert not mismatch and not errors
