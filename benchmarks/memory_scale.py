@@ -111,16 +111,17 @@ def slopes(rows: list[dict]) -> dict:
 
 
 def report(r: dict) -> tuple[str, str]:
-    headline = (f"{r['size'][0]}x{r['size'][1]}: memory mode +{r.get('memory_mb_per_view', float('nan')):.1f} MB a "
-                f"view ({r['view_uint8_mb']:.1f} MB of uint8 pixels); disk mode peak "
-                f"{r['disk_peak_rss_mb_largest'] / 1024:.2f} GB at {max(x['views'] for x in r['rows'])} views, "
+    headline = (f"{r['size'][0]}x{r['size'][1]}: memory mode +{r.get('memory_mb_per_view', float('nan')):.1f} MiB a "
+                f"view ({r['view_uint8_mb']:.1f} MiB of uint8 pixels); disk mode peak "
+                f"{r['disk_peak_rss_mb_largest'] / 1024:.2f} GiB at {max(x['views'] for x in r['rows'])} views, "
                 f"step {r['disk_over_memory_step']:.2f}x memory's")
     rows = [f"| {x['views']} ({x['train_views']} train) | {x['mode']} | {x['peak_rss_mb']:.0f} | "
             f"{x['seconds_per_step']:.2f} | {x['gaussians']:,} |" for x in r["rows"]]
-    table = "\n".join(["| views | mode | peak RSS, MB | s a step | Gaussians |", "| --- | --- | --- | --- | --- |", *rows])
+    table = "\n".join(["| views | mode | peak RSS, MiB | s a step | Gaussians |", "| --- | --- | --- | --- | --- |", *rows])
     return headline, (f"{r['steps']} training steps per run on the cpu backend, each run in a fresh process. A view "
-                      f"held as float32 colour and int64 IDs took {r['view_float_mb']:.1f} MB; as uint8 it takes "
-                      f"{r['view_uint8_mb']:.1f} MB.\n\n{table}")
+                      f"held as float32 colour and int64 IDs took {r['view_float_mb']:.1f} MiB; as uint8 it takes "
+                      f"{r['view_uint8_mb']:.1f} MiB; growth a view is the least-squares slope of peak RSS over the "
+                      "training views.\n\n{table}")
 
 
 if __name__ == "__main__":

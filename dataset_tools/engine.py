@@ -45,16 +45,17 @@ class Engine:
 
     def map(self, fn: Callable[[Any], Any], items: Sequence[Any], *, desc: str = "tasks",
             progress: bool = True) -> list[Any]:
-        """``[fn(x) for x in items]``, in order; ``fn`` must be importable by name (a module
-        function) for ``ray``. The first task that fails raises its error here."""
+        """``[fn(x) for x in items]``, in order; for ``ray``, ``fn`` must be importable by the
+        workers (a module function, or a partial of one). The first task that fails raises its
+        error here."""
         if self.name == "local" or not items:
             return [fn(x) for x in tqdm(items, desc=desc, unit="task", disable=not progress, leave=False)]
         ray = _init_ray(self.address)
         cpus = self.cpus or task_cpus()
         env = {"OMP_NUM_THREADS": str(cpus), "MKL_NUM_THREADS": str(cpus), "NUMBA_NUM_THREADS": str(cpus),
                "OMP_WAIT_POLICY": os.environ.get("OMP_WAIT_POLICY", "PASSIVE")}
-        remote = ray.remote(num_cpus=cpus, runtime_env={"env_vars": env})(fn)
-        refs = [remote.remote(x) for x in items]
+        remote = ray.remote(num_cpus=cpus, runtime_env={"env_vars": env})(_call)
+        refs = [remote.remote(fn, x) for x in items]
         pending = list(refs)
         with tqdm(total=len(refs), desc=f"{desc} (ray)", unit="task", disable=not progress, leave=False) as bar:
             while pending:
@@ -64,6 +65,11 @@ class Engine:
             return ray.get(refs)
         except ray.exceptions.RayTaskError as e:  # the task's own error, without the remote traceback
             raise e.cause from None
+
+
+def _call(fn: Callable[[Any], Any], item: Any) -> Any:
+    """A Ray task: ``fn(item)`` (``fn`` travels by reference, so any importable callable works)."""
+    return fn(item)
 
 
 def _init_ray(address: str | None):

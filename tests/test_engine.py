@@ -4,6 +4,7 @@ and a task's error is the task's own error."""
 from __future__ import annotations
 
 import filecmp
+import functools
 import shutil
 import subprocess
 
@@ -12,12 +13,11 @@ from helpers import script
 
 from dataset_tools.engine import Engine
 from dataset_tools.errors import InputError
+from dataset_tools.names import plain_name
 
 
-def _square_or_refuse(x: int) -> int:
-    if x < 0:
-        raise InputError(f"{x} is negative; give a natural number.")
-    return x * x
+# Ray workers import a task's function by name: a library function, not one of this module.
+CHECK_NAME = functools.partial(plain_name, option="--name")
 
 
 @pytest.fixture(scope="module")
@@ -37,11 +37,10 @@ def test_an_engine_is_checked_when_made():
 
 @pytest.mark.slow
 def test_ray_maps_in_order_and_raises_the_tasks_own_error(ray_engine):
-    items = list(range(7, -1, -1))
-    assert ray_engine.map(_square_or_refuse, items, progress=False) == Engine().map(_square_or_refuse, items,
-                                                                                    progress=False)
-    with pytest.raises(InputError, match="-3 is negative"):
-        ray_engine.map(_square_or_refuse, [1, -3, 2], progress=False)
+    items = [f"scene_{i}" for i in range(7, -1, -1)]
+    assert ray_engine.map(CHECK_NAME, items, progress=False) == Engine().map(CHECK_NAME, items, progress=False) == items
+    with pytest.raises(InputError, match="'../up': give a plain folder name"):
+        ray_engine.map(CHECK_NAME, ["a", "../up", "b"], progress=False)
 
 
 @pytest.mark.slow

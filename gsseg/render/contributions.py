@@ -10,8 +10,10 @@ from __future__ import annotations
 
 import io
 import zipfile
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Protocol
 
 import numpy as np
 import torch
@@ -24,13 +26,25 @@ from gsseg.gaussians import Gaussians
 from gsseg.render.backends import Backend, get_backend
 
 
+class Masked(Protocol):
+    """A posed view whose object-ID map can be read: a scene's View, or a MaskedView."""
+
+    camera: PinholeCamera
+    cam_from_world: np.ndarray
+
+    def load_mask(self) -> np.ndarray | None: ...
+
+
 @dataclass
 class MaskedView:
-    """A view with its object-ID map: camera, (3, 4) cam_from_world, (H, W) uint8 mask."""
+    """A view with its object-ID map in memory: camera, (3, 4) cam_from_world, (H, W) uint8 mask."""
 
     camera: PinholeCamera
     cam_from_world: np.ndarray
     mask: np.ndarray
+
+    def load_mask(self) -> np.ndarray:
+        return self.mask
 
 
 @dataclass
@@ -58,22 +72,23 @@ class Contributions:
                              "again.") from None
 
 
-def contribution_matrix(gaussians: Gaussians, views: list[MaskedView], *, backend: str | Backend = "cpu",
+def contribution_matrix(gaussians: Gaussians, views: Sequence[Masked], *, backend: str | Backend = "cpu",
                         progress: bool = True) -> Contributions:
     """Sum alpha * T per Gaussian and mask label over ``views``.
 
     ``cpu`` accumulates in a numba forward pass; ``torch`` and ``gsplat`` obtain the same sums
     as a gradient, on the backend's device. Memory: (K, N) float32 plus one such buffer per
-    CPU thread.
+    CPU thread, and one mask at a time (masks are read twice: once for the label set, once
+    to accumulate).
     """
     backend = get_backend(backend)
-    labels = np.unique(np.concatenate([np.unique(v.mask) for v in views])) if views else np.zeros(0, np.uint8)
+    labels = np.unique(np.concatenate([np.unique(v.load_mask()) for v in views])) if views else np.zeros(0, np.uint8)
     rows = np.full(256, -1, np.int64)
     rows[labels] = np.arange(len(labels))
     g = gaussians.detach().to(backend.device)
     total = torch.zeros(len(labels), len(g))
     for view in tqdm(views, desc="contributions", unit="view", disable=not progress, leave=False):
         pose = torch.as_tensor(view.cam_from_world, dtype=torch.float32, device=backend.device)
-        total += backend.contributions(g.means, g.quats, g.scales, g.opacities, pose, view.camera, rows[view.mask],
-                                       len(labels))
+        total += backend.contributions(g.means, g.quats, g.scales, g.opacities, pose, view.camera,
+                                       rows[view.load_mask()], len(labels))
     return Contributions(labels=labels.astype(np.uint8), weights=total)

@@ -8,7 +8,7 @@ from pathlib import Path
 
 from dataset_tools.errors import InputError
 from gsseg.render import Backend
-from gsseg.render.contributions import Contributions, MaskedView, contribution_matrix
+from gsseg.render.contributions import Contributions, contribution_matrix
 from gsseg.run import Run, load_run
 from gsseg.segment.reassign import METHODS, MODES, Segmentation, classifier_prior, reassign
 from gsseg.segment.regularize import fill_interiors, smooth_weak_labels, weak_evidence
@@ -44,8 +44,7 @@ def mask_contributions(run: Run, scene_dir: Path | str | None = None, *, masks: 
                        split: str = "train", backend: str | Backend = "cpu", progress: bool = True) -> Contributions:
     """The contribution matrix of a loaded run over the masks of ``split`` (no labels where
     no view of ``split`` has a mask)."""
-    views = [MaskedView(v.camera, v.cam_from_world, m) for v in run.scene(scene_dir, masks=masks).split(split)
-             if (m := v.load_mask()) is not None]
+    views = [v for v in run.scene(scene_dir, masks=masks).split(split) if v.mask_path is not None]
     contributions = contribution_matrix(run.gaussians, views, backend=backend, progress=progress)
     contributions.model = run.fingerprint
     return contributions
