@@ -121,7 +121,7 @@ def report(r: dict) -> tuple[str, str]:
     return headline, (f"{r['steps']} training steps per run on the cpu backend, each run in a fresh process. A view "
                       f"held as float32 colour and int64 IDs took {r['view_float_mb']:.1f} MiB; as uint8 it takes "
                       f"{r['view_uint8_mb']:.1f} MiB; growth a view is the least-squares slope of peak RSS over the "
-                      "training views.\n\n{table}")
+                      f"training views.\n\n{table}")
 
 
 if __name__ == "__main__":
