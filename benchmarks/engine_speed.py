@@ -43,7 +43,10 @@ def report(r: dict) -> tuple[str, str]:
     headline = (f"paper-tables --quick: local {r['local_s'] / 60:.1f} min, ray {r['ray_s'] / 60:.1f} min "
                 f"({r['speedup']:.2f}x); same tables: {r['same_tables']}")
     return headline, ("Both on this machine, the Ray cluster a local one started by the command; each task asks for "
-                      "the CPUs of a local run, so on one machine the tasks run one or two at a time.\n\n"
+                      "the CPUs of a local run, so on one machine the tasks run one at a time. The mask folders of the "
+                      "two runs are byte-equal; trainings on the CPU backend are not bit-deterministic from run to "
+                      "run (two local runs of one training can differ), so the tables can differ in the third "
+                      "decimal.\n\n"
                       f"| engine | minutes |\n| --- | --- |\n| local | {r['local_s'] / 60:.1f} |\n"
                       f"| ray | {r['ray_s'] / 60:.1f} ({r['speedup']:.2f}x) |\n\nSame tables: {r['same_tables']}.")
 
