@@ -20,6 +20,7 @@ import math
 
 import numpy as np
 import torch
+import torch.nn.functional as F
 
 from dataset_tools.cameras import PinholeCamera
 from dataset_tools.errors import InputError
@@ -78,7 +79,9 @@ class Environment(torch.nn.Module):
         lo = x.floor().clamp(0, bins - 1)
         w = (x - lo).clamp(0.0, 1.0)[:, None]
         lo = lo.long()
-        return (1 - w) * self.profile[lo] + w * self.profile[(lo + 1).clamp_max(bins - 1)]
+        # embedding, not indexing: its CPU backward sums each bin's gradient in pixel order,
+        # where indexing's adds with atomics in whatever order the threads reach them.
+        return (1 - w) * F.embedding(lo, self.profile) + w * F.embedding((lo + 1).clamp_max(bins - 1), self.profile)
 
     def forward(self, camera: PinholeCamera, cam_from_world: torch.Tensor) -> torch.Tensor:
         """The background image of one camera, (H, W, 3)."""

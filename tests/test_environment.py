@@ -68,6 +68,25 @@ def test_elevation_profile_is_linear_between_bin_centres():
     assert profile_bins(1.0 / np.tan(np.pi / 180)) == 180  # one-degree pixels
 
 
+
+def test_profile_gradient_is_the_in_order_sum_of_its_pixels():
+    """Each bin's gradient is the float32 sum of its rays' gradients taken in ray order (as
+    ``np.add.at`` takes them), the same bits however the threads are scheduled."""
+    bins = 16
+    env = Environment(degree=0, up=np.array([0.0, 0.0, 1.0]), bins=bins)
+    gen = torch.Generator().manual_seed(0)
+    dirs = torch.nn.functional.normalize(torch.randn(20_000, 3, generator=gen), dim=-1)
+    grad = torch.randn(20_000, 3, generator=gen)
+    env.elevation_colour(dirs).backward(grad)
+    x = (torch.asin((dirs @ env.up).clamp(-1.0, 1.0)) / np.pi + 0.5) * bins - 0.5
+    lo = x.floor().clamp(0, bins - 1)
+    w = (x - lo).clamp(0.0, 1.0)[:, None]
+    lo = lo.long().numpy()
+    lower, upper = np.zeros((bins, 3), np.float32), np.zeros((bins, 3), np.float32)
+    np.add.at(lower, lo, ((1 - w) * grad).numpy())
+    np.add.at(upper, np.minimum(lo + 1, bins - 1), (w * grad).numpy())
+    assert np.array_equal(env.profile.grad.numpy(), lower + upper)
+
 @pytest.mark.slow
 def test_a_sharp_horizon_is_learned_by_the_profile_and_not_by_sh_alone():
     """An environment that is the sky's gradient above the horizon and a flat ground colour

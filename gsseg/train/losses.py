@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import kornia
 import torch
+import torch.nn.functional as F
 
 
 def photometric_loss(rendered: torch.Tensor, target: torch.Tensor, lambda_dssim: float = 0.2) -> torch.Tensor:
@@ -44,6 +45,7 @@ def knn_identity_loss(means: torch.Tensor, obj_feat: torch.Tensor, classifier: t
     points = means.detach().cpu().numpy()
     _, nearest = cKDTree(points).query(points[pick.cpu().numpy()], k=k + 1)
     nearest = torch.as_tensor(nearest[:, 1:], device=means.device)  # (m, k), itself left out
+    # embedding, not indexing, for a backward pass that sums repeated rows in a fixed order
     log_p = torch.log_softmax(classifier(obj_feat[pick]), dim=-1)  # (m, C)
-    log_q = torch.log_softmax(classifier(obj_feat[nearest]), dim=-1)  # (m, k, C)
+    log_q = torch.log_softmax(classifier(F.embedding(nearest, obj_feat)), dim=-1)  # (m, k, C)
     return (log_p.exp()[:, None] * (log_p[:, None] - log_q)).sum(-1).mean()
