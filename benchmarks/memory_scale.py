@@ -20,6 +20,7 @@ import cv2
 import numpy as np
 
 from benchmarks import record
+from eval.report import markdown_table
 from dataset_tools import colmap
 from dataset_tools.atomic import atomic_directory
 from dataset_tools.image_files import write_png
@@ -115,9 +116,9 @@ def report(r: dict) -> tuple[str, str]:
                 f"view ({r['view_uint8_mb']:.1f} MiB of uint8 pixels); disk mode peak "
                 f"{r['disk_peak_rss_mb_largest'] / 1024:.2f} GiB at {max(x['views'] for x in r['rows'])} views, "
                 f"step {r['disk_over_memory_step']:.2f}x memory's")
-    rows = [f"| {x['views']} ({x['train_views']} train) | {x['mode']} | {x['peak_rss_mb']:.0f} | "
-            f"{x['seconds_per_step']:.2f} | {x['gaussians']:,} |" for x in r["rows"]]
-    table = "\n".join(["| views | mode | peak RSS, MiB | s a step | Gaussians |", "| --- | --- | --- | --- | --- |", *rows])
+    table = markdown_table(["views", "mode", "peak RSS, MiB", "s a step", "Gaussians"],
+                           [[f"{x['views']} ({x['train_views']} train)", x["mode"], f"{x['peak_rss_mb']:.0f}",
+                             f"{x['seconds_per_step']:.2f}", f"{x['gaussians']:,}"] for x in r["rows"]])
     return headline, (f"{r['steps']} training steps per run on the cpu backend, each run in a fresh process. A view "
                       f"held as float32 colour and int64 IDs took {r['view_float_mb']:.1f} MiB; as uint8 it takes "
                       f"{r['view_uint8_mb']:.1f} MiB; growth a view is the least-squares slope of peak RSS over the "

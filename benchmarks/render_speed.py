@@ -19,6 +19,7 @@ import torch
 from dataset_tools.cameras import PinholeCamera
 from gsseg.gaussians import Gaussians
 from benchmarks import record
+from eval.report import markdown_table
 from gsseg.render import BACKENDS, get_backend, render
 
 
@@ -90,7 +91,7 @@ def report(r: dict) -> tuple[str, str]:
             ("peak RSS", f"cpu {r['cpu_peak_rss_mb'] / 1024:.2f} GB, torch {r['torch_peak_rss_mb'] / 1024:.2f} GB")]
     if "gsplat_s" in r:
         rows.append(("gsplat", f"{r['gsplat_s']:.4f} s, {r['gpu_peak_mb']:.0f} MB GPU"))
-    table = "\n".join(["| forward + backward | seconds |", "| --- | --- |"] + [f"| {a} | {b} |" for a, b in rows])
+    table = markdown_table(["forward + backward", "seconds"], [list(row) for row in rows])
     return headline, (f"{r['gaussians']} Gaussians at {r['size'][0]}x{r['size'][1]}, {r['channels']}, "
                       f"{r['threads']} threads, median of repeats.\n\n{table}")
 

@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks import record
+from eval.report import markdown_table
 from dataset_tools.scene import load_scene
 from dataset_tools.synth import SynthConfig, generate_scene
 from hqmask.sam_hq import AutomaticMaskGenerator, GeneratorConfig, SamHQ
@@ -103,7 +104,7 @@ def report(r: dict) -> tuple[str, str]:
             ("decoder, one prompt a call", f"{r['decoder_prompts_per_s_single']} prompts/s"),
             (f"automatic generator, {r['generator_points']} points", f"{r['generator_s']} s, {r['generator_masks']} masks"),
             ("share of the generator's time outside ONNX Runtime", f"{100 * r['generator_share_outside_runtime']:.1f}%")]
-    table = "\n".join(["| what | result |", "| --- | --- |"] + [f"| {a} | {b} |" for a, b in rows])
+    table = markdown_table(["what", "result"], [list(row) for row in rows])
     return headline, f"{r['model']}; {r['image']}; {r['cpu_count']} CPUs.\n\n{table}"
 
 

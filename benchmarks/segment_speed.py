@@ -17,6 +17,7 @@ import numpy as np
 import torch
 
 from benchmarks import record
+from eval.report import markdown_table
 from benchmarks.render_speed import scene
 from gsseg.render import BACKENDS, get_backend, render
 from gsseg.render.contributions import Contributions, MaskedView, contribution_matrix
@@ -116,7 +117,7 @@ def report(r: dict) -> tuple[str, str]:
              ("binary", f"{a['binary_s']:.2f} s"),
              ("binary, a per-label Python loop", f"{a['seed_style_loop_s']:.1f} s ({a['loop_over_binary']:.1f}x); "
                                                   f"same selections: {a['binary_equals_loop']}")]
-    return headline, "\n".join(["| what | result |", "| --- | --- |"] + [f"| {x} | {y} |" for x, y in rows])
+    return headline, markdown_table(["what", "result"], [list(row) for row in rows])
 
 
 if __name__ == "__main__":

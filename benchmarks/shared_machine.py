@@ -21,6 +21,7 @@ import time
 from pathlib import Path
 
 from benchmarks import record
+from eval.report import markdown_table
 
 POLICIES = {"passive (the entry points' default)": {}, "spin first (GNU OpenMP's default)": {"OMP_WAIT_POLICY": ""}}
 
@@ -69,11 +70,11 @@ def report(r: dict) -> tuple[str, str]:
     first, p = next(iter(r["policies"].items()))
     headline = (f"two demos at once: {p['wall_ratio']:.2f}x the wall time of one (bound 2.3x), CPU seconds "
                 f"{p['cpu_ratio']:.2f}x twice one's (bound 1.3x)")
-    rows = [f"| {name} | {x['alone']['wall_s']:.0f} s / {x['alone']['cpu_s']:.0f} s | {x['two_at_once']['wall_s']:.0f} s "
-            f"/ {x['two_at_once']['cpu_s']:.0f} s | {x['wall_ratio']:.2f}x | {x['cpu_ratio']:.2f}x |"
-            for name, x in r["policies"].items()]
-    table = "\n".join(["| idle OpenMP workers | one demo: wall / CPU | two at once: wall / CPU | wall ratio | "
-                       "CPU ratio |", "| --- | --- | --- | --- | --- |", *rows])
+    table = markdown_table(
+        ["idle OpenMP workers", "one demo: wall / CPU", "two at once: wall / CPU", "wall ratio", "CPU ratio"],
+        [[name, f"{x['alone']['wall_s']:.0f} s / {x['alone']['cpu_s']:.0f} s",
+          f"{x['two_at_once']['wall_s']:.0f} s / {x['two_at_once']['cpu_s']:.0f} s", f"{x['wall_ratio']:.2f}x",
+          f"{x['cpu_ratio']:.2f}x"] for name, x in r["policies"].items()])
     return headline, f"`gsseg demo --iters {r['iters']}`, alone and two at once, per wait policy.\n\n{table}"
 
 

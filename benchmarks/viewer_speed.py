@@ -25,6 +25,7 @@ from scipy import ndimage
 from scipy.spatial.transform import Rotation
 
 from benchmarks import record
+from eval.report import markdown_table
 from dataset_tools.errors import InputError
 from gsseg.render_views import segment_pixels
 from gsseg.run import load_run
@@ -122,17 +123,17 @@ def main() -> None:
 def report(r: dict) -> tuple[str, str]:
     headline = (f"clicks agree with gsseg edit --click {r['clicks_agree']}/{r['clicks']}; relabel from the cache {r['relabel_s']:.2f} s ({r['relabel_new_viewer_s']:.2f} s in a new viewer), "
                 f"frame {r['frame_s']:.2f} s at {r['size'][0]}x{r['size'][1]}, click {r['select_s']:.2f} s")
-    rows = [("frame for a training camera", f"{r['frame_s']:.3f} s"),
-            ("frame, segments coloured", f"{r['segments_frame_s']:.3f} s"),
-            ("click selection (depth render + 20-nearest mode)", f"{r['select_s']:.3f} s"),
-            ("re-run reassignment, matrix in memory", f"{r['relabel_s']:.3f} s"),
-            ("re-run reassignment in a new viewer (matrix read from contributions.npz)",
-             f"{r['relabel_new_viewer_s']:.3f} s"),
-            (f"contribution matrix without a cache ({r['train_views']} views)",
-             f"{r['contributions_uncached_s']:.2f} s")]
+    rows = [["frame for a training camera", f"{r['frame_s']:.3f} s"],
+            ["frame, segments coloured", f"{r['segments_frame_s']:.3f} s"],
+            ["click selection (depth render + 20-nearest mode)", f"{r['select_s']:.3f} s"],
+            ["re-run reassignment, matrix in memory", f"{r['relabel_s']:.3f} s"],
+            ["re-run reassignment in a new viewer (matrix read from contributions.npz)",
+             f"{r['relabel_new_viewer_s']:.3f} s"],
+            [f"contribution matrix without a cache ({r['train_views']} views)",
+             f"{r['contributions_uncached_s']:.2f} s"]]
     intro = (f"`{r['run']}`: {r['gaussians']:,} Gaussians, frames at {r['size'][0]}x{r['size'][1]} on the "
              f"`{r['backend']}` backend, best of 3.\n\n")
-    return headline, intro + "\n".join(["| what | seconds |", "| --- | --- |"] + [f"| {x} | {y} |" for x, y in rows])
+    return headline, intro + markdown_table(["what", "seconds"], rows)
 
 
 if __name__ == "__main__":
