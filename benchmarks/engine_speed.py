@@ -16,6 +16,7 @@ import time
 from pathlib import Path
 
 from benchmarks import record
+from eval.report import markdown_table
 
 
 def tables(out: Path, engine: str) -> tuple[float, str]:
@@ -43,13 +44,10 @@ def report(r: dict) -> tuple[str, str]:
     headline = (f"paper-tables --quick: local {r['local_s'] / 60:.1f} min, ray {r['ray_s'] / 60:.1f} min "
                 f"({r['speedup']:.2f}x); same tables: {r['same_tables']}")
     return headline, ("Both on this machine, the Ray cluster a local one started by the command; each task asks for "
-                      "the CPUs of a local run, so on one machine the tasks run one at a time. The mask folders of the "
-                      "two runs are byte-equal; trainings on the CPU backend are not bit-deterministic from run to "
-                      "run (two local runs of one training can differ), so the tables can differ in the third "
-                      "decimal.\n\n"
-                      f"| engine | minutes |\n| --- | --- |\n| local | {r['local_s'] / 60:.1f} |\n"
-                      f"| ray | {r['ray_s'] / 60:.1f} ({r['speedup']:.2f}x) |\n\nSame tables: {r['same_tables']}.")
-
+                      "the CPUs of a local run, so on one machine the tasks run one at a time.\n\n"
+                      + markdown_table(["engine", "minutes"], [["local", f"{r['local_s'] / 60:.1f}"],
+                                                               ["ray", f"{r['ray_s'] / 60:.1f} ({r['speedup']:.2f}x)"]])
+                      + f"\n\nSame tables: {r['same_tables']}.")
 
 if __name__ == "__main__":
     main()

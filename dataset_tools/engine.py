@@ -4,7 +4,8 @@ the cluster at ``--address``.
 
 Each Ray task asks for the CPUs of one local piece of work (:func:`task_cpus`) and runs with
 the same thread counts, so results equal the local ones; a cluster with more CPUs runs more
-tasks at once.
+tasks at once. Work that needs an expensive object first (an ONNX Runtime session) runs on
+actors that make it once each (:meth:`Engine.map_stateful`).
 """
 
 from __future__ import annotations
@@ -51,25 +52,67 @@ class Engine:
         if self.name == "local" or not items:
             return [fn(x) for x in tqdm(items, desc=desc, unit="task", disable=not progress, leave=False)]
         ray = _init_ray(self.address)
+        remote = ray.remote(**self._resources())(_call)
+        return _gather(ray, [remote.remote(fn, x) for x in items], desc, progress)
+
+    def map_stateful(self, setup: Callable[[], Any], fn: Callable[[Any, Any], Any], items: Sequence[Any], *,
+                     local_state: Any = None, desc: str = "items", progress: bool = True) -> list[Any]:
+        """``[fn(state, x) for x in items]``, in order, where each worker makes ``state = setup()``
+        once: here one state (``local_state`` when given: one already made); on Ray one actor
+        per task slot of the cluster (its CPUs over the CPUs of a task, at most one per item),
+        the items spread over them. ``setup`` and ``fn`` must be importable by the workers, as
+        for :meth:`map`."""
+        if self.name == "local" or not items:
+            state = setup() if local_state is None else local_state
+            return [fn(state, x) for x in tqdm(items, desc=desc, unit="item", disable=not progress, leave=False)]
+        ray = _init_ray(self.address)
+        resources = self._resources()
+        slots = int(ray.cluster_resources().get("CPU", 1)) // resources["num_cpus"]
+        actors = [ray.remote(**resources)(_Worker).remote(setup) for _ in range(max(1, min(slots, len(items))))]
+        try:
+            return _gather(ray, [actors[k % len(actors)].run.remote(fn, x) for k, x in enumerate(items)], desc,
+                           progress)
+        finally:
+            for actor in actors:
+                ray.kill(actor)
+
+    def _resources(self) -> dict:
+        """Ray options of one task or actor: the CPUs of a local piece of work, the same thread counts."""
         cpus = self.cpus or task_cpus()
         env = {"OMP_NUM_THREADS": str(cpus), "MKL_NUM_THREADS": str(cpus), "NUMBA_NUM_THREADS": str(cpus),
                "OMP_WAIT_POLICY": os.environ.get("OMP_WAIT_POLICY", "PASSIVE")}
-        remote = ray.remote(num_cpus=cpus, runtime_env={"env_vars": env})(_call)
-        refs = [remote.remote(fn, x) for x in items]
-        pending = list(refs)
-        with tqdm(total=len(refs), desc=f"{desc} (ray)", unit="task", disable=not progress, leave=False) as bar:
-            while pending:
-                done, pending = ray.wait(pending, num_returns=1)
-                bar.update(len(done))
-        try:
-            return ray.get(refs)
-        except ray.exceptions.RayTaskError as e:  # the task's own error, without the remote traceback
-            raise e.cause from None
+        return {"num_cpus": cpus, "runtime_env": {"env_vars": env}}
+
+
+def _gather(ray, refs: list, desc: str, progress: bool) -> list[Any]:
+    """The results of ``refs`` in order, with a progress bar; the first failure raises its own error."""
+    pending = list(refs)
+    with tqdm(total=len(refs), desc=f"{desc} (ray)", unit="task", disable=not progress, leave=False) as bar:
+        while pending:
+            done, pending = ray.wait(pending, num_returns=1)
+            bar.update(len(done))
+    try:
+        return ray.get(refs)
+    except ray.exceptions.RayTaskError as e:  # the task's own error, without the remote traceback
+        raise e.cause from None
 
 
 def _call(fn: Callable[[Any], Any], item: Any) -> Any:
     """A Ray task: ``fn(item)`` (``fn`` travels by reference, so any importable callable works)."""
     return fn(item)
+
+
+class _Worker:
+    """A Ray actor holding ``setup()``'s result for the items sent to it (made by the first
+    item, so that a failing setup is that item's error, raised as any task's)."""
+
+    def __init__(self, setup: Callable[[], Any]):
+        self.setup, self.state = setup, None
+
+    def run(self, fn: Callable[[Any, Any], Any], item: Any) -> Any:
+        if self.setup is not None:
+            self.state, self.setup = self.setup(), None
+        return fn(self.state, item)
 
 
 def _init_ray(address: str | None):

@@ -9,17 +9,20 @@ output mask folder appears whole, atomically, at the end.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 
 import numpy as np
 from tqdm import tqdm
 
 from dataset_tools.atomic import atomic_directory, write_bytes_atomic
+from dataset_tools.engine import Engine
 from dataset_tools.errors import InputError
 from dataset_tools.names import plain_name
 from dataset_tools.image_files import encode_png, read_mask
-from dataset_tools.scene import Scene, load_scene
+from dataset_tools.scene import Scene, View, load_scene
 from hqmask.association import associate_flow, associate_tracks
 from hqmask.association.anchors import sighting, triangulate
 from hqmask.cleanup import clean_mask
@@ -66,25 +69,32 @@ def association_for(scene: Scene, associate: str) -> str:
     return "tracks" if len(scene.points) and any(len(v.point_ids) for v in scene.views) else "flow"
 
 
-def _segments(
-    scene: Scene, proposer: Proposer, cfg: BuildConfig, images: list[np.ndarray], progress: bool
-) -> list[np.ndarray]:
-    """Per view, the painted proposals as an (H, W) uint8 segment map, cleaned."""
+def propose_view(proposer: Proposer, job: tuple[np.ndarray, View, Path | None]) -> np.ndarray:
+    """The painted proposals of one (image, view, cache file or None) as an (H, W) uint8
+    segment map, written to the cache file when there is one."""
+    image, view, cached = job
+    seg = proposer.propose(image, view).paint()
+    if seg.max() > 255:
+        raise InputError(f"{view.image_path}: the proposer made {seg.max()} segments, more than 255; raise --min-area.")
+    seg = seg.astype(np.uint8)
+    if cached is not None:
+        write_bytes_atomic(cached, encode_png(seg))
+    return seg
+
+
+def _segments(scene: Scene, proposer: Proposer, make: Callable[[], Proposer], cfg: BuildConfig,
+              images: list[np.ndarray], engine: Engine, progress: bool) -> list[np.ndarray]:
+    """Per view, the painted proposals as an (H, W) uint8 segment map, cleaned: read from the
+    cache, or proposed on ``engine`` (where each Ray worker makes its proposer once with
+    ``make``) and cached view by view, so that an interrupted build resumes."""
     cache = None if proposer.cache_name is None else scene.root / CACHE / proposer.cache_name
-    out = []
-    for view, image in zip(tqdm(scene.views, desc=f"proposing ({cfg.proposer})", disable=not progress), images):
-        cached = cache / f"{view.stem}.png" if cache else None
-        if cached is not None and cached.exists() and not cfg.force:
-            seg = read_mask(cached)
-        else:
-            seg = proposer.propose(image, view).paint()
-            if seg.max() > 255:
-                raise InputError(f"{view.image_path}: the proposer made {seg.max()} segments, more than 255; raise --min-area.")
-            seg = seg.astype(np.uint8)
-            if cached is not None:
-                write_bytes_atomic(cached, encode_png(seg))
-        out.append(clean_mask(seg, cfg.min_area))
-    return out
+    paths = [None if cache is None else cache / f"{view.stem}.png" for view in scene.views]
+    todo = [k for k, path in enumerate(paths) if path is None or cfg.force or not path.exists()]
+    fresh = engine.map_stateful(make, propose_view, [(images[k], scene.views[k], paths[k]) for k in todo],
+                                local_state=proposer, desc=f"proposing ({cfg.proposer})", progress=progress)
+    segments = dict(zip(todo, fresh))
+    return [clean_mask(segments[k] if k in segments else read_mask(path), cfg.min_area)
+            for k, path in enumerate(paths)]
 
 
 def depth_priors(scene: Scene, ids: list[np.ndarray], associate: str) -> list[np.ndarray | None]:
@@ -111,8 +121,10 @@ def build_scene(job: tuple[Path, BuildConfig]) -> BuildResult:
     return build_masks(job[0], job[1], progress=False)
 
 
-def build_masks(scene_dir: Path | str, cfg: BuildConfig, *, progress: bool = True) -> BuildResult:
-    """Write consistent, cleaned object-ID maps of every view to ``scene_dir/cfg.out_masks``."""
+def build_masks(scene_dir: Path | str, cfg: BuildConfig, *, engine: Engine = Engine(),
+                progress: bool = True) -> BuildResult:
+    """Write consistent, cleaned object-ID maps of every view to ``scene_dir/cfg.out_masks``;
+    the views' proposals are made on ``engine``."""
     scene_dir = Path(scene_dir)
     if cfg.associate not in ASSOCIATIONS:
         raise InputError(f"--associate {cfg.associate}: use auto, flow or tracks.")
@@ -128,14 +140,10 @@ def build_masks(scene_dir: Path | str, cfg: BuildConfig, *, progress: bool = Tru
         raise InputError("--proposer existing needs --from-masks NAME, the mask folder to re-associate.")
     if cfg.from_masks is not None and cfg.from_masks == cfg.out_masks:
         raise InputError(f"--out-masks {cfg.out_masks}: would overwrite the input masks; choose another name.")
-    proposer = make_proposer(  # an unknown or unavailable one fails before any work
-        cfg.proposer,
-        cfg.model,
-        device=cfg.device,
-        threads=cfg.threads,
-        points_per_side=cfg.points_per_side,
-        embedding_cache=scene_dir / CACHE / "sam-hq-embeddings" if cfg.cache_embeddings else None,
-    )
+    make = partial(make_proposer, cfg.proposer, cfg.model, device=cfg.device, threads=cfg.threads,
+                   points_per_side=cfg.points_per_side,
+                   embedding_cache=scene_dir / CACHE / "sam-hq-embeddings" if cfg.cache_embeddings else None)
+    proposer = make()  # an unknown or unavailable one fails before any work
     out_dir = scene_dir / cfg.out_masks
     if out_dir.exists() and not cfg.force:
         raise InputError(f"{out_dir}: already exists; pass --force to rebuild it.")
@@ -145,7 +153,7 @@ def build_masks(scene_dir: Path | str, cfg: BuildConfig, *, progress: bool = Tru
     if cfg.proposer == "existing" and scene.mask_dir is None:
         raise InputError(f"{scene_dir / cfg.from_masks}: mask folder not found; check --from-masks.")
     images = [v.load_image() for v in tqdm(scene.views, desc="loading images", disable=not progress)]
-    segments = [s.astype(np.int32) for s in _segments(scene, proposer, cfg, images, progress)]
+    segments = [s.astype(np.int32) for s in _segments(scene, proposer, make, cfg, images, engine, progress)]
     associate = association_for(scene, cfg.associate)
     if associate == "flow":
         ids = associate_flow(images, segments, scene.views)

@@ -38,7 +38,10 @@ def cli() -> None:
 @click.option("--cache-embeddings", is_flag=True, help="Keep sam-hq image embeddings under SCENE/.hqmask_cache.")
 @engine_options
 def build(scenes: tuple[Path, ...], engine, **options) -> None:
-    """Propose, clean and associate consistent object masks for every view of each SCENE."""
+    """Propose, clean and associate consistent object masks for every view of each SCENE.
+
+    With --engine ray, one SCENE has its views' proposals spread over Ray workers (each loads
+    the model once); several SCENEs are a task each."""
     from dataset_tools.scene import load_scene
     from hqmask.build import BuildConfig, build_masks, build_scene
 
@@ -46,9 +49,9 @@ def build(scenes: tuple[Path, ...], engine, **options) -> None:
     if len(scenes) > 1:  # every scene is checked before any work: a bad last scene must not cost the first ones
         for scene in scenes:
             load_scene(scene, images=cfg.images)
-    if len(scenes) == 1 and engine.name == "local":
-        results = [build_masks(scenes[0], cfg)]
-    else:
+    if len(scenes) == 1:  # its views' proposals on the engine
+        results = [build_masks(scenes[0], cfg, engine=engine)]
+    else:  # one task per scene
         results = engine.map(build_scene, [(scene, cfg) for scene in scenes], desc="scenes")
     for result in results:
         click.echo(f"wrote {result.out_dir}: {result.views} views, {result.n_objects} objects (associated by "

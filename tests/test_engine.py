@@ -1,5 +1,6 @@
 """Independent work on ``local`` and on a real local Ray cluster: the same results, in order,
-and a task's error is the task's own error."""
+and a task's error is the task's own error; work that needs a state first (a proposer) on
+actors that make it once."""
 
 from __future__ import annotations
 
@@ -14,6 +15,9 @@ from helpers import script
 from dataset_tools.engine import Engine
 from dataset_tools.errors import InputError
 from dataset_tools.names import plain_name
+from dataset_tools.scene import load_scene
+from hqmask.build import CACHE, BuildConfig, build_masks, propose_view
+from hqmask.proposers import make_proposer
 
 
 # Ray workers import a task's function by name: a library function, not one of this module.
@@ -58,3 +62,22 @@ def test_hqmask_build_of_two_scenes_on_ray_writes_the_masks_of_local(small_scene
         assert names and names == sorted(p.name for p in (ray / "built").iterdir())
         match, mismatch, errors = filecmp.cmpfiles(local / "built", ray / "built", names, shallow=False)
         assert not mismatch and not errors
+
+
+@pytest.mark.slow
+def test_one_scene_has_its_views_proposed_by_ray_workers_as_here(ray_engine, small_scene, tmp_path):
+    scenes = {}
+    for name, engine in (("local", Engine()), ("ray", ray_engine)):
+        scenes[name] = shutil.copytree(small_scene.root, tmp_path / name)
+        build_masks(scenes[name], BuildConfig(out_masks="built"), engine=engine, progress=False)
+    for folder in ("built", f"{CACHE}/graph"):  # the masks, and the proposals the workers cached
+        names = sorted(p.name for p in (scenes["local"] / folder).iterdir())
+        assert len(names) == len(list((small_scene.root / "images").iterdir()))
+        match, mismatch, errors = filecmp.cmpfiles(scenes["local"] / folder, scenes["ray"] / folder, names,
+                                                   shallow=False)
+        assert match == names
+    # A worker whose proposer cannot be made raises that error here.
+    view = load_scene(small_scene.root).views[0]
+    with pytest.raises(InputError, match="encoder.onnx: missing"):
+        ray_engine.map_stateful(functools.partial(make_proposer, "sam-hq", str(tmp_path / "no-model")), propose_view,
+                                [(view.load_image(), view, None)], progress=False)
