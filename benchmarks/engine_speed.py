@@ -1,6 +1,6 @@
 """Benchmark: ``gseval paper-tables --quick`` with ``--engine local`` and ``--engine ray`` (a
-local Ray cluster started by the command) side by side: wall time, speed-up, and whether the
-two tables are the same. Prints and writes JSON.
+local Ray cluster started by the command) side by side: wall time, speed-up, whether the two
+tables are the same, and the tables. Prints and writes JSON.
 
     python -m benchmarks.engine_speed [--work /tmp/gsseg-engine] [--out engine_speed.json]
 """
@@ -35,7 +35,8 @@ def main() -> None:
     args = parser.parse_args()
     local_s, local_md = tables(args.work / "local", "local")
     ray_s, ray_md = tables(args.work / "ray", "ray")
-    out = {"local_s": local_s, "ray_s": ray_s, "speedup": local_s / ray_s, "same_tables": local_md == ray_md}
+    out = {"local_s": local_s, "ray_s": ray_s, "speedup": local_s / ray_s, "same_tables": local_md == ray_md,
+           "tables": local_md}
     print(json.dumps(out, indent=2))
     record.save("engine_speed", out, out=args.out)
 
@@ -47,7 +48,15 @@ def report(r: dict) -> tuple[str, str]:
                       "the CPUs of a local run, so on one machine the tasks run one at a time.\n\n"
                       + markdown_table(["engine", "minutes"], [["local", f"{r['local_s'] / 60:.1f}"],
                                                                ["ray", f"{r['ray_s'] / 60:.1f} ({r['speedup']:.2f}x)"]])
-                      + f"\n\nSame tables: {r['same_tables']}.")
+                      + f"\n\nSame tables: {r['same_tables']}."
+                      + (_tables(r["tables"]) if "tables" in r else ""))
+
+
+def _tables(md: str) -> str:
+    """The tables of the local run, their headings one level under this benchmark's."""
+    lines = [line for line in md.splitlines() if not line.startswith("## ")]
+    return "\n\nThe tables (`--engine local`):\n\n" + "\n".join(
+        "#" + line if line.startswith("### ") else line for line in lines).strip()
 
 if __name__ == "__main__":
     main()
