@@ -16,8 +16,10 @@ The default run measures a part of the grid that fits in under 45 minutes on 2 c
 view count at 128 px, 16 and 32 views at 192 and 256 px, 16 views at 512 px, and 16 views at
 1024 px on the orbit and forward paths of the first seed; ``--all-cells`` measures every
 cell (several hours). Scenes and their corrupted masks are generated once into ``--cache``
-and reused; every build is recomputed. Prints a markdown table with the worst seed of every
-cell and the cells that miss their targets; writes JSON.
+and reused; every build is recomputed. Each scene's result is also kept in the cache with the
+commit it was measured at, so that an interrupted run, started again on the same clean
+commit, measures only the scenes it had not finished. Prints a markdown table with the worst
+seed of every cell and the cells that miss their targets; writes JSON.
 
     python -m benchmarks.association_grid [--seeds 11,12,13] [--views 8,16,32,64]
         [--res 128,192,256,512,1024] [--workers 2] [--cache DIR] [--out FILE]
@@ -37,6 +39,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks import record
+from dataset_tools.atomic import write_bytes_atomic
 from dataset_tools.scene import load_scene
 from eval.metrics import segment_ceiling
 from eval.report import markdown_table
@@ -104,6 +107,19 @@ def measure_scene(cache: str, views: int, res: int, path: str, seed: int) -> dic
     return out
 
 
+def measured(cache: str, views: int, res: int, path: str, seed: int) -> dict:
+    """:func:`measure_scene`, reused from the cache where a run at this clean commit measured it."""
+    commit = record.commit()
+    kept = Path(cache) / "results" / f"{views}-{res}-{path}-{seed}.json"
+    if kept.exists() and not commit.endswith("+changes"):
+        saved = json.loads(kept.read_text())
+        if saved["commit"] == commit:
+            return saved["result"]
+    result = measure_scene(cache, views, res, path, seed)
+    write_bytes_atomic(kept, json.dumps({"commit": commit, "result": result}).encode())
+    return result
+
+
 def misses(results: dict) -> list[str]:
     """The cells of 16 views or more whose worst seed misses a target."""
     found = []
@@ -148,7 +164,7 @@ def main() -> None:
     start = time.perf_counter()
     results: dict = {"scenes": {}, "setup": vars(args)}
     with ProcessPoolExecutor(args.workers) as pool:
-        futures = {job: pool.submit(measure_scene, args.cache, *job) for job in jobs}
+        futures = {job: pool.submit(measured, args.cache, *job) for job in jobs}
         for (views, res, path, seed), future in futures.items():
             result = future.result()
             results["scenes"].setdefault(f"{views}/{res}/{path}", {})[str(seed)] = result

@@ -21,7 +21,7 @@ from dataset_tools.atomic import write_bytes_atomic
 RESULTS = Path(__file__).resolve().parent / "results"
 
 
-def _commit() -> str:
+def commit() -> str:
     """The checked-out commit, with ``+changes`` when the tree differs from it."""
     root = Path(__file__).resolve().parents[1]
     try:
@@ -54,7 +54,7 @@ def provenance() -> dict:
     module = Path(sys.argv[0]).with_suffix("").name
     command = " ".join(["python -m benchmarks." + module, *map(shlex.quote, sys.argv[1:])])
     return {"command": command, "date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d"),
-            "machine": machine(), "commit": _commit()}
+            "machine": machine(), "commit": commit()}
 
 
 def save(benchmark: str, results: dict, *, tag: str = "", out: str | Path | None = None) -> Path:
