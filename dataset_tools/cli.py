@@ -53,6 +53,8 @@ def synth(out: Path, seed: int, views: int, res: int, objects: int, path_kind: s
 @click.option("--single-camera/--camera-per-folder", default=None,
               help="One camera for every image (default for a video) or one per folder of photos (default).")
 @click.option("--max-image-size", type=int, default=3200, show_default=True, help="SIFT runs on images at most this large.")
+@click.option("--peak-threshold", type=float, default=None,
+              help="SIFT's peak threshold (default: COLMAP's 0.0067 for images of 1000 px and more, lower for smaller).")
 @click.option("--seed", type=int, default=0, show_default=True)
 @click.option("--force", is_flag=True, help="Make the scene again where --out already holds one.")
 def sfm(photos: Path, out: Path, force: bool, **options) -> None:

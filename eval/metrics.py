@@ -84,30 +84,45 @@ def rotation_angle(R: np.ndarray) -> float:
     return float(np.degrees(np.arccos(np.clip((np.trace(R) - 1) / 2, -1, 1))))
 
 
-def camera_errors(estimated: list[np.ndarray], truth: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-    """Per camera, the rotation error in degrees after the rotation that best aligns the
-    estimated orientations with the true ones (their chordal mean), and the centre error as a
-    share of the true cameras' extent (their largest distance from their mean) after the
-    similarity that best aligns the centres (:func:`similarity_alignment`). The orientations,
-    not the centres, fix the rotation errors' frame: centres along an arc fix a rotation badly.
+def camera_errors(estimated: list[np.ndarray], truth: list[np.ndarray], *,
+                  inlier_degrees: float = 5.0) -> tuple[np.ndarray, np.ndarray]:
+    """Per camera, the rotation error in degrees and the centre error as a share of the true
+    cameras' extent (their largest distance from their mean), after a robust alignment of the
+    estimated world to the true one.
+
+    The alignment's rotation is the one that agrees with the most cameras to within
+    ``inlier_degrees`` (each camera's own alignment tried in turn), refined as the chordal mean
+    over those cameras; the centres are aligned by the similarity that best maps those
+    cameras' centres (:func:`similarity_alignment`). A few cameras posed wrongly (in either
+    model: a capture of a symmetric or repetitive scene can put some on the far side) then
+    show their own error without moving the frame in which the others are scored, as in
+    COLMAP's RANSAC model aligner. The orientations, not the centres, fix the rotation:
+    centres along an arc fix it badly.
 
     Args:
         estimated, truth: per camera, (3, 4) world-to-camera [R | t], in the same order.
     Returns:
         (rotation errors (N,), centre errors (N,)).
     """
+    est_R = np.stack([p[:, :3] for p in estimated])
+    true_R = np.stack([p[:, :3] for p in truth])
+
+    def errors(align: np.ndarray) -> np.ndarray:  # align: estimated world -> true world
+        cos = (np.einsum("nij,kj,nik->n", est_R, align, true_R) - 1) / 2  # trace(e align^T g^T)
+        return np.degrees(np.arccos(np.clip(cos, -1, 1)))
+
+    candidates = [g.T @ e for e, g in zip(est_R, true_R)]  # the alignment that makes camera i exact
+    agree = max((errors(a) < inlier_degrees for a in candidates), key=np.count_nonzero)
+    U, _, Vt = np.linalg.svd(np.einsum("nji,njk->ik", true_R[agree], est_R[agree]))
+    align = U @ np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))]) @ Vt
+
     def centers(poses: list[np.ndarray]) -> np.ndarray:
         return np.stack([-p[:, :3].T @ p[:, 3] for p in poses])
 
     est, true = centers(estimated), centers(truth)
-    s, R, t = similarity_alignment(est, true)
+    s, R, t = similarity_alignment(est[agree], true[agree])
     extent = float(np.linalg.norm(true - true.mean(0), axis=1).max())
-    center_error = np.linalg.norm((s * est @ R.T + t) - true, axis=1) / extent
-    U, _, Vt = np.linalg.svd(sum(g[:, :3].T @ e[:, :3] for e, g in zip(estimated, truth)))
-    align = U @ np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))]) @ Vt  # estimated world -> true world
-    # each estimated rotation in the true world, against the truth
-    rotation_error = [rotation_angle((e[:, :3] @ align.T) @ g[:, :3].T) for e, g in zip(estimated, truth)]
-    return np.array(rotation_error), center_error
+    return errors(align), np.linalg.norm((s * est @ R.T + t) - true, axis=1) / extent
 
 
 def removal_scores(removed: np.ndarray, truth: np.ndarray, region: np.ndarray, seen: np.ndarray) -> dict[str, float]:

@@ -12,6 +12,7 @@ import pytest
 
 from dataset_tools import InputError, load_scene
 from dataset_tools.sfm import SfmConfig, run_sfm
+from dataset_tools.sfm.pipeline import sift_peak_threshold
 from dataset_tools.image_files import read_image
 from dataset_tools.synth import SynthConfig, generate_scene
 from eval.metrics import camera_errors, similarity_alignment
@@ -33,13 +34,35 @@ def test_camera_errors_are_zero_for_a_similar_copy_and_see_a_turned_camera():
     copy = [np.concatenate([p[:, :3] @ Q.T, 0.5 * p[:, 3:]], 1) for p in poses]  # a turned world at half scale
     rot, ctr = camera_errors(copy, poses)
     assert np.allclose(rot, 0, atol=1e-5) and np.allclose(ctr, 0, atol=1e-9)
-    turn = np.deg2rad(5)
+    turn = np.deg2rad(3)
     turned = np.array([[np.cos(turn), 0, np.sin(turn)], [0, 1, 0], [-np.sin(turn), 0, np.cos(turn)]])
-    copy[0] = np.concatenate([turned @ copy[0][:, :3], turned @ copy[0][:, 3:]], 1)  # turned about its centre
-    rot, ctr = camera_errors(copy, poses)
-    shift = np.degrees(np.arctan2(np.sin(turn), 4 + np.cos(turn)))  # the chordal mean of 0, 0, 0, 0 and 5 degrees
-    assert rot[0] == pytest.approx(5.0 - shift, abs=1e-6) and np.allclose(rot[1:], shift, atol=1e-6)
+    small = [np.concatenate([turned @ copy[0][:, :3], turned @ copy[0][:, 3:]], 1), *copy[1:]]  # about its centre
+    rot, ctr = camera_errors(small, poses)
+    shift = np.degrees(np.arctan2(np.sin(turn), 4 + np.cos(turn)))  # the chordal mean of 0, 0, 0, 0 and 3 degrees
+    assert rot[0] == pytest.approx(3.0 - shift, abs=1e-6) and np.allclose(rot[1:], shift, atol=1e-6)
     assert np.allclose(ctr, 0, atol=1e-9)
+
+
+def test_camera_errors_leave_a_camera_on_the_far_side_out_of_the_alignment():
+    """A camera mapped to the far side (turned 180 degrees about the vertical through the
+    scene's centre) shows its whole error; the other cameras stay exact."""
+    poses = [np.concatenate([np.eye(3), [[k], [0.3 * k * k], [3.0]]], 1) for k in range(-3, 4)]
+    half = np.diag([-1.0, 1.0, -1.0])  # 180 degrees about y, through the world origin
+    copy = list(poses)
+    copy[1] = np.concatenate([poses[1][:, :3] @ half.T, poses[1][:, 3:]], 1)
+    rot, ctr = camera_errors(copy, poses)
+    assert rot[1] == pytest.approx(180.0) and np.allclose(np.delete(rot, 1), 0, atol=1e-5)
+    centre = -poses[1][:, :3].T @ poses[1][:, 3]
+    extent = max(np.linalg.norm(-p[:, :3].T @ p[:, 3] - np.mean([-q[:, :3].T @ q[:, 3] for q in poses], 0))
+                 for p in poses)
+    assert ctr[1] == pytest.approx(np.linalg.norm(half @ centre - centre) / extent)
+    assert np.allclose(np.delete(ctr, 1), 0, atol=1e-9)
+
+
+def test_sift_threshold_is_colmaps_for_large_images_and_lower_for_small_ones():
+    assert sift_peak_threshold(1000) == sift_peak_threshold(4000) == pytest.approx(0.02 / 3)  # COLMAP's default
+    assert sift_peak_threshold(320) == pytest.approx(0.32 * 0.02 / 3)
+    assert sift_peak_threshold(64) == pytest.approx(0.25 * 0.02 / 3)  # a quarter at most
 
 
 def photos_of(beer: Path, out: Path, count: int) -> Path:
