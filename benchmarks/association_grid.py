@@ -18,8 +18,10 @@ view count at 128 px, 16 and 32 views at 192 and 256 px, 16 views at 512 px, and
 cell (several hours). Scenes and their corrupted masks are generated once into ``--cache``
 and reused; every build is recomputed. Each scene's result is also kept in the cache with the
 commit it was measured at, so that an interrupted run, started again on the same clean
-commit, measures only the scenes it had not finished. Prints a markdown table with the worst
-seed of every cell and the cells that miss their targets; writes JSON.
+commit, measures only the scenes it had not finished (``--reuse-any-commit`` takes them from
+any commit; the JSON names the commits). A scene the generator cannot lay out (six objects
+on a forward path's narrower ground, for some seeds) is listed as skipped. Prints a markdown
+table with the worst seed of every cell and the cells that miss their targets; writes JSON.
 
     python -m benchmarks.association_grid [--seeds 11,12,13] [--views 8,16,32,64]
         [--res 128,192,256,512,1024] [--workers 2] [--cache DIR] [--out FILE]
@@ -40,6 +42,7 @@ import numpy as np
 
 from benchmarks import record
 from dataset_tools.atomic import write_bytes_atomic
+from dataset_tools.errors import InputError
 from dataset_tools.scene import load_scene
 from eval.metrics import segment_ceiling
 from eval.report import markdown_table
@@ -107,17 +110,22 @@ def measure_scene(cache: str, views: int, res: int, path: str, seed: int) -> dic
     return out
 
 
-def measured(cache: str, views: int, res: int, path: str, seed: int) -> dict:
-    """:func:`measure_scene`, reused from the cache where a run at this clean commit measured it."""
+def measured(cache: str, views: int, res: int, path: str, seed: int, any_commit: bool = False) -> dict:
+    """:func:`measure_scene` with the commit that measured it, reused from the cache where a run
+    at this clean commit (or, with ``any_commit``, at any) measured it; ``{"skipped": reason}``
+    for a scene the generator cannot lay out."""
     commit = record.commit()
     kept = Path(cache) / "results" / f"{views}-{res}-{path}-{seed}.json"
-    if kept.exists() and not commit.endswith("+changes"):
+    if kept.exists() and (any_commit or not commit.endswith("+changes")):
         saved = json.loads(kept.read_text())
-        if saved["commit"] == commit:
-            return saved["result"]
-    result = measure_scene(cache, views, res, path, seed)
+        if any_commit or saved["commit"] == commit:
+            return {**saved["result"], "commit": saved["commit"]}
+    try:
+        result = measure_scene(cache, views, res, path, seed)
+    except InputError as e:
+        return {"skipped": str(e)}
     write_bytes_atomic(kept, json.dumps({"commit": commit, "result": result}).encode())
-    return result
+    return {**result, "commit": commit}
 
 
 def misses(results: dict) -> list[str]:
@@ -156,17 +164,23 @@ def main() -> None:
                         help="Folder the scenes are generated into once and reused from.")
     parser.add_argument("--out", default=None, help="JSON file (default: benchmarks/results/association_grid.json).")
     parser.add_argument("--tag", default="", help="Suffix of the default JSON file name.")
+    parser.add_argument("--reuse-any-commit", action="store_true",
+                        help="Reuse the cache's per-scene results whatever commit measured them (the JSON names it).")
     args = parser.parse_args()
     seeds = [int(x) for x in args.seeds.split(",")]
     jobs = [(v, r, p, s) for v in map(int, args.views.split(",")) for r in map(int, args.res.split(","))
             for p in args.paths.split(",") for s in seeds if args.all_cells or included(v, r, p, s == seeds[0])]
     jobs.sort(key=lambda j: -j[0] * j[1] ** 2)  # largest first: the pool ends evenly
     start = time.perf_counter()
-    results: dict = {"scenes": {}, "setup": vars(args)}
+    results: dict = {"scenes": {}, "skipped": [], "setup": vars(args)}
     with ProcessPoolExecutor(args.workers) as pool:
-        futures = {job: pool.submit(measured, args.cache, *job) for job in jobs}
+        futures = {job: pool.submit(measured, args.cache, *job, args.reuse_any_commit) for job in jobs}
         for (views, res, path, seed), future in futures.items():
             result = future.result()
+            if "skipped" in result:
+                results["skipped"].append(f"{views}/{res}/{path} seed {seed}: {result['skipped']}")
+                print(results["skipped"][-1], flush=True)
+                continue
             results["scenes"].setdefault(f"{views}/{res}/{path}", {})[str(seed)] = result
             print(views, res, path, seed, f"exact {result['exact']:.3f}",
                   json.dumps({k: {m: round(v, 3) for m, v in c.items()} for k, c in result["cells"].items()}),
@@ -199,9 +213,12 @@ def report(r: dict) -> tuple[str, str]:
     table = markdown_table(["views", "res", "path", "errors", "severity", "seeds", "input", "exact", "tracks", "flow",
                             "ceiling"], rows)
     listed = "\n".join(f"- {m}" for m in r["misses"]) or "none"
+    skipped = "\n".join(f"- {m}" for m in r.get("skipped", [])) or "none"
+    commits = sorted({s["commit"] for by_seed in r["scenes"].values() for s in by_seed.values() if "commit" in s})
     return headline, ("The worst of the scene seeds of every cell (consistency: share of ground-truth object "
                       f"pixels with their ID after one matching per scene).\n\n{table}\n\nCells of 16 views or "
-                      f"more that miss a target:\n\n{listed}")
+                      f"more that miss a target:\n\n{listed}\n\nScenes the generator could not lay out (not "
+                      f"measured):\n\n{skipped}\n\nMeasured at: {', '.join(commits) or 'n/a'}.")
 
 
 if __name__ == "__main__":
