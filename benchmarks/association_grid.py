@@ -207,9 +207,11 @@ def report(r: dict) -> tuple[str, str]:
                 for c in ("tracks", "flow"):
                     worst[f"{sev} {c}"] = min(worst.get(f"{sev} {c}", 1.0), values[c])
                 worst["exact"] = min(worst.get("exact", 1.0), exact)
+    work = sum(s["seconds"] for by_seed in r["scenes"].values() for s in by_seed.values())  # reused ones too
     headline = ("worst cell of >= 16 views: exact " + f"{worst.get('exact', float('nan')):.3f}; " + ", ".join(
         f"{k} {v:.3f}" for k, v in sorted(worst.items()) if k != "exact") + f"; {len(r['misses'])} misses; "
-        f"{r['wall_seconds'] / 60:.0f} min")
+        f"{work / 60:.0f} min of scene work, {work / 60 / r['setup']['workers']:.0f} min on {r['setup']['workers']} "
+        "workers")
     table = markdown_table(["views", "res", "path", "errors", "severity", "seeds", "input", "exact", "tracks", "flow",
                             "ceiling"], rows)
     listed = "\n".join(f"- {m}" for m in r["misses"]) or "none"
