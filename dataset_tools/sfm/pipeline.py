@@ -104,8 +104,8 @@ def _input_images(photos: Path) -> list[str]:
 def sift_peak_threshold(side: int) -> float:
     """SIFT's peak (contrast) threshold for images whose longest side is ``side`` pixels:
     COLMAP's default at ``REFERENCE_SIDE`` px and above, lowered in proportion below it (to a
-    quarter at most). A small image holds fewer blobs above a fixed contrast: the beer photos
-    at 320 px give 60-300 keypoints each at the default and lose a tenth of their views."""
+    quarter at most). A small image holds fewer blobs above a fixed contrast: at the default,
+    the beer photos at 320 px give 60-300 keypoints each and leave views unregistered."""
     return SIFT_PEAK_THRESHOLD * min(1.0, max(0.25, side / REFERENCE_SIDE))
 
 
