@@ -23,23 +23,16 @@ import cv2
 import numpy as np
 
 from benchmarks import record
+from dataset_tools.cameras import turned_frames
 from dataset_tools.image_files import read_image
 from dataset_tools.scene import load_scene
 from dataset_tools.synth import SynthConfig, generate_scene
 from dataset_tools.sfm import SfmConfig, run_sfm
-from eval.metrics import camera_errors, rotation_angle
+from eval.metrics import camera_errors
 from eval.report import markdown_table
 
 
 SYNTHETIC = SynthConfig(views=40, res=320, objects=5, seed=3, ground="speckle")
-
-
-def flips(poses: dict[str, np.ndarray], names: list[str], degrees: float = 45.0) -> list[str]:
-    """Images turned by more than ``degrees`` from the photo just before them in ``names`` (the
-    capture's order), where both are posed: in a capture taken a few degrees apart, a camera
-    mapped to the far side of the object."""
-    pairs = [(a, b) for a, b in zip(names, names[1:]) if a in poses and b in poses]
-    return [b for a, b in pairs if rotation_angle(poses[b][:, :3] @ poses[a][:, :3].T) > degrees]
 
 
 def score(photos: Path, truth: Path, work: Path, images: str, frames: int = 150) -> dict:
@@ -54,7 +47,7 @@ def score(photos: Path, truth: Path, work: Path, images: str, frames: int = 150)
     rot, ctr = camera_errors([made[n] for n in names], [known[n] for n in names])
     order = sorted(known)
     out = {"images": result.images, "registered": result.registered, "registered_share": result.registered / result.images,
-           "flips": flips(made, order), "flips_in_truth": flips(known, order),
+           "flips": turned_frames(made, order), "flips_in_truth": turned_frames(known, order),
            "off_by_5_deg": [n for n, r in zip(names, rot) if r > 5],
            "rotation_deg_median": float(np.median(rot)), "rotation_deg_max": float(rot.max()),
            "center_error_median": float(np.median(ctr)), "center_error_max": float(ctr.max()),

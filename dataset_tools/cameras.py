@@ -11,6 +11,20 @@ PINHOLE_MODELS = ("PINHOLE", "SIMPLE_PINHOLE")
 DEFAULT_NEAR = 0.2
 
 
+def rotation_angle(R: np.ndarray) -> float:
+    """The angle in degrees of the rotation (3, 3) ``R``."""
+    return float(np.degrees(np.arccos(np.clip((np.trace(R) - 1) / 2, -1, 1))))
+
+
+def turned_frames(cam_from_world: dict[str, np.ndarray], order: list[str], degrees: float = 45.0) -> list[str]:
+    """The images of ``order`` turned by more than ``degrees`` from the image just before them,
+    where both are posed (``cam_from_world``: name -> (3, 4) [R | t]). Along a video or any
+    capture taken a few degrees apart, such a turn is a camera mapped to the far side of the
+    object (a *flip*: the scene looks alike from two sides)."""
+    pairs = [(a, b) for a, b in zip(order, order[1:]) if a in cam_from_world and b in cam_from_world]
+    return [b for a, b in pairs if rotation_angle(cam_from_world[b][:, :3] @ cam_from_world[a][:, :3].T) > degrees]
+
+
 @dataclass(frozen=True)
 class PinholeCamera:
     """An undistorted pinhole camera. Pixel centres lie at half-integer coordinates

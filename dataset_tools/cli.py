@@ -66,6 +66,8 @@ def sfm(photos: Path, out: Path, force: bool, **options) -> None:
     others = f"; other models: {result.other_models}" if result.other_models else ""
     click.echo(f"wrote {result.scene}: {result.registered} of {result.images} images registered in "
                f"{result.seconds:.0f} s{others}")
+    if result.warning():
+        click.echo(f"warning: {result.warning()}", err=True)
 
 
 @cli.command()

@@ -79,11 +79,6 @@ def similarity_alignment(source: np.ndarray, target: np.ndarray) -> tuple[float,
     return s, R, mu_t - s * R @ mu_s
 
 
-def rotation_angle(R: np.ndarray) -> float:
-    """The angle in degrees of the rotation (3, 3) ``R``."""
-    return float(np.degrees(np.arccos(np.clip((np.trace(R) - 1) / 2, -1, 1))))
-
-
 def camera_errors(estimated: list[np.ndarray], truth: list[np.ndarray], *,
                   inlier_degrees: float = 5.0) -> tuple[np.ndarray, np.ndarray]:
     """Per camera, the rotation error in degrees and the centre error as a share of the true

@@ -172,5 +172,7 @@ def demo(out: Path, scene: Path | None, images: str | None, iters: int, max_gaus
                f"in {result.out / 'run' / 'edits'}; {score}{result.seconds / 60:.1f} min")
     click.echo(f"report: {result.report}")
     click.echo(f"in the browser: gsseg view {result.out / 'run'}")
+    if result.warning:
+        click.echo(f"warning: {result.warning}", err=True)
 
 main = run_cli(cli, "gsseg")

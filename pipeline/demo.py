@@ -58,6 +58,7 @@ class DemoResult:
     point: np.ndarray
     miou: float | None
     seconds: float
+    warning: str | None = None  # structure from motion's, on cameras posed on the far side
 
 
 def _demo_object(scene_dir: Path, run: Run, labels: np.ndarray, default: int, synth_point: np.ndarray | None,
@@ -115,7 +116,7 @@ def run_demo(out: Path | str, *, scene: Path | str | None = None, images: str | 
             (out / owned).unlink()
         elif (out / owned).exists():
             shutil.rmtree(out / owned)
-    synth_point = None
+    synth_point, warning = None, None
     if scene is None:
         result = generate_scene(DEMO_SCENE, out / "scene", progress=progress)
         write_downsampled(result.root / "images", result.root / DEMO_IMAGES, 2)
@@ -127,7 +128,8 @@ def run_demo(out: Path | str, *, scene: Path | str | None = None, images: str | 
         if scene.is_dir() and (scene / "sparse").is_dir():
             scene_dir = linked_scene(scene, out / "scene")
         else:  # photos or a video: structure from motion first
-            scene_dir = run_sfm(scene, out / "scene", progress=progress).scene
+            posed = run_sfm(scene, out / "scene", progress=progress)
+            scene_dir, warning = posed.scene, posed.warning()
         gt_masks = None
         images = images or demo_images(scene_dir)
         mask_images = images
@@ -148,4 +150,4 @@ def run_demo(out: Path | str, *, scene: Path | str | None = None, images: str | 
         ev = report_run(run_dir, scene_dir, report, gt_masks=gt_masks, object_id=object_id, backend=backend,
                         progress=progress)
     miou = ev.summary()["visible"]["miou"]
-    return DemoResult(out, report / "report.html", object_id, point, miou, time.perf_counter() - start)
+    return DemoResult(out, report / "report.html", object_id, point, miou, time.perf_counter() - start, warning)

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from dataset_tools import InputError, load_scene
+from dataset_tools.cameras import turned_frames
 from dataset_tools.sfm import SfmConfig, run_sfm
 from dataset_tools.sfm.pipeline import sift_peak_threshold
 from dataset_tools.image_files import read_image
@@ -59,6 +60,17 @@ def test_camera_errors_leave_a_camera_on_the_far_side_out_of_the_alignment():
                  for p in poses)
     assert ctr[1] == pytest.approx(np.linalg.norm(half @ centre - centre) / extent)
     assert np.allclose(np.delete(ctr, 1), 0, atol=1e-9)
+
+
+def test_turned_frames_are_those_far_from_the_posed_frame_before():
+    def turned(degrees: float) -> np.ndarray:
+        a = np.deg2rad(degrees)
+        return np.array([[np.cos(a), 0, np.sin(a), 0], [0, 1, 0, 0], [-np.sin(a), 0, np.cos(a), 0]])
+
+    poses = {"f0": turned(0), "f1": turned(10), "f2": turned(170), "f3": turned(180), "f5": turned(235)}
+    order = ["f0", "f1", "f2", "f3", "f4", "f5"]  # f4 unposed: f5 is not compared with f3
+    assert turned_frames(poses, order) == ["f2"]
+    assert turned_frames(poses, order, degrees=5) == ["f1", "f2", "f3"]
 
 
 def test_sift_threshold_is_colmaps_for_large_images_and_lower_for_small_ones():

@@ -12,7 +12,7 @@ changed, with every step after it):
    sequential (each image with its next ``overlap`` and at powers of two further) plus every
    pair of keyframes spread over the sequence, which closes loops without a vocabulary tree;
 4. ``mapping``: incremental (or global) mapping; the model with the most images is kept and
-   the others reported;
+   the others reported, with a video's frames turned far from the frame before (flips);
 5. ``undistort``: the kept model undistorted to PINHOLE cameras.
 
 Then the scene folder is written: ``images/`` (undistorted), ``images_2/``, ``images_4/`` (and
@@ -33,6 +33,7 @@ from PIL import Image
 from tqdm import tqdm
 
 from dataset_tools.atomic import require_folder_path, write_bytes_atomic
+from dataset_tools.cameras import turned_frames
 from dataset_tools.errors import InputError
 from dataset_tools.image_files import IMAGE_SUFFIXES, write_downsampled
 from dataset_tools.sfm.frames import VIDEO_SUFFIXES, sample_frames
@@ -83,6 +84,15 @@ class SfmResult:
     registered: int
     seconds: float
     other_models: list[int]
+    flips: list[str]  # a video's frames turned > 45 degrees from the frame before (see turned_frames)
+
+    def warning(self) -> str | None:
+        """One sentence on the frames posed on the far side, or None."""
+        if not self.flips:
+            return None
+        return (f"{', '.join(self.flips)}: turned more than 45 degrees from the frame before, so probably posed on the "
+                "far side of the object (the scene looks alike from two sides); check these cameras, or film with "
+                "texture off the repeated surface in view (docs/sfm.md).")
 
 
 def _input_images(photos: Path) -> list[str]:
@@ -236,9 +246,11 @@ def run_sfm(photos: Path | str, out: Path | str, cfg: SfmConfig = SfmConfig(), *
             raise InputError(f"{photos}: {registered} of {len(names)} images registered; the photos need more overlap "
                              "(take them 10-20 degrees apart around the object, with texture in view).")
         model = models[best]
+        poses = {image.name: image.cam_from_world().matrix() for image in model.images.values() if image.has_pose}
         steps.record("mapping", options, model=str(best), registered=registered, other_models=sorted(
             (s for k, s in sizes.items() if k != best), reverse=True), points=model.num_points3D(),
-            mean_reprojection_error=model.compute_mean_reprojection_error())
+            mean_reprojection_error=model.compute_mean_reprojection_error(),
+            flips=turned_frames(poses, names) if video else [])
     mapped = steps.done["mapping"]
     bar.update(1)
 
@@ -256,7 +268,8 @@ def run_sfm(photos: Path | str, out: Path | str, cfg: SfmConfig = SfmConfig(), *
                  overwrite)
     bar.update(1)
     bar.close()
-    return SfmResult(out, len(names), mapped["registered"], time.perf_counter() - start, mapped["other_models"])
+    return SfmResult(out, len(names), mapped["registered"], time.perf_counter() - start, mapped["other_models"],
+                     mapped.get("flips", []))
 
 
 def _rebuild_database_without_matches(pycolmap, database: Path) -> None:
