@@ -5,7 +5,8 @@ alone decide; the cameras stand on a line in the order of the list."""
 import numpy as np
 
 from dataset_tools.cameras import CameraPose, PinholeCamera
-from hqmask.association.flow import associate_flow, pose_order
+from dataset_tools.synth.camera_paths import orbit
+from hqmask.association.flow import FlowOptions, _join_by_anchors, associate_flow, pose_order
 
 
 def on_a_line(n: int, shape: tuple[int, int]) -> list[CameraPose]:
@@ -116,3 +117,43 @@ def test_the_path_through_the_views_depends_on_the_poses_alone():
     shuffle = np.random.default_rng(0).permutation(12)
     shuffled = pose_order(centers[shuffle], directions[shuffle])
     assert [int(shuffle[k]) for k in shuffled] == path
+
+
+def handed_over(first: range, second: range, gap: int = 0) -> list[np.ndarray]:
+    """One object (a disc at the centre of every view of a 12-view orbit around it) given as
+    track 0 in the views ``first`` and track 1 in the views ``second``; where both are seen,
+    the disc is split into a left piece (track 0) and a right piece (track 1), ``gap`` pixels
+    apart. Returns, per view, the track of each local segment after :func:`_join_by_anchors`."""
+    camera = PinholeCamera(64, 64, 60.0, 60.0, 32.0, 32.0)
+    views = [CameraPose(camera, pose) for pose in orbit(12, 4.0, np.zeros(3))]
+    rows, cols = np.indices((64, 64))
+    disc = (rows - 31.5) ** 2 + (cols - 31.5) ** 2 <= 8**2
+    segments, tracks_of = [], []
+    for v in range(12):
+        if v in first and v in second:
+            segments.append(np.where(disc & (cols < 32), 1, np.where(disc & (cols >= 32 + gap), 2, 0)))
+            tracks_of.append(np.array([-1, 0, 1]))
+        else:
+            segments.append(disc.astype(np.int32))
+            tracks_of.append(np.array([-1, 0 if v in first else 1]))
+    images = [np.full((64, 64, 3), 128, np.uint8) for _ in range(12)]
+    return _join_by_anchors(tracks_of, segments, images, views, FlowOptions())
+
+
+def test_a_track_handed_over_at_a_split_is_joined_to_the_one_before():
+    """Track 0 in views 0-6, track 1 in views 5-11, two touching pieces of the disc in views 5
+    and 6 (where the propagation went on with the new piece's ID): one object."""
+    joined = handed_over(range(0, 7), range(5, 12))
+    assert {int(t) for g in joined for t in g[1:]} == {0}
+
+
+def test_tracks_seen_apart_in_most_of_their_views_stay_apart():
+    """Views 3-6 show the two tracks apart, more than the 3 views track 0 has alone: two
+    objects side by side, however close their anchors."""
+    joined = handed_over(range(0, 7), range(3, 12))
+    assert {int(t) for g in joined for t in g[1:]} == {0, 1}
+
+
+def test_pieces_that_do_not_touch_are_not_a_split_mask():
+    joined = handed_over(range(0, 7), range(5, 12), gap=3)
+    assert {int(t) for g in joined for t in g[1:]} == {0, 1}

@@ -42,7 +42,10 @@ track's anchor, the point nearest to the rays through its segments' centroids
 its object and lies within the object's size of their anchors. Two tracks that never share a
 view are joined when each one's anchor falls in the other's segments in at least
 ``anchor_inside`` of its views (a track seen once, which has no anchor of its own, when the
-other's anchor falls in its segment and their colours agree), nearest anchors first.
+other's anchor falls in its segment and their colours agree), nearest anchors first. So are
+two tracks handed over at a split mask: where one view gives an object as two pieces, the
+propagation may go on with the new piece's ID; such tracks share a few views, in each of which
+their segments touch, and are seen together in fewer views than each is seen alone.
 Tracks seen in fewer than ``min_views`` views are dropped.
 """
 
@@ -51,6 +54,7 @@ from __future__ import annotations
 from collections import Counter
 from dataclasses import dataclass, field
 
+import cv2
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 from scipy.sparse.csgraph import minimum_spanning_tree, shortest_path
@@ -423,6 +427,20 @@ def _track_views(tracks_of: list[np.ndarray], segments: list[np.ndarray], images
     return found
 
 
+def _handed_over(a: _TrackViews, b: _TrackViews, shared: set[int]) -> bool:
+    """Whether two tracks seen together in the views ``shared`` may be one object handed over
+    at a split mask: they are apart in fewer views than each is seen without the other, and
+    in every view they share their masks touch (the two pieces of one split segment)."""
+    alone = min(len(a.masks), len(b.masks)) - len(shared)
+    return len(shared) < alone and all(_touch(a.masks[v], b.masks[v]) for v in shared)
+
+
+def _touch(a: np.ndarray, b: np.ndarray) -> bool:
+    """Whether the (H, W) bool masks ``a`` and ``b`` are 8-neighbours somewhere."""
+    grown = cv2.dilate(a.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
+    return bool(np.any(grown & b))
+
+
 def _join_by_anchors(tracks_of: list[np.ndarray], segments: list[np.ndarray], images: list[np.ndarray],
                      views: list[CameraPose], options: FlowOptions) -> list[np.ndarray]:
     """Tracks of one object that the flow could not link, joined by their anchors (see the
@@ -433,22 +451,23 @@ def _join_by_anchors(tracks_of: list[np.ndarray], segments: list[np.ndarray], im
     for i, a in enumerate(ids):
         for b in ids[i + 1:]:
             ta, tb = tracks[a], tracks[b]
-            if ta.masks.keys() & tb.masks.keys() or (ta.anchor is None and tb.anchor is None):
+            shared = ta.masks.keys() & tb.masks.keys()
+            if (shared and not _handed_over(ta, tb, shared)) or (ta.anchor is None and tb.anchor is None):
                 continue
             if ta.anchor is not None and tb.anchor is not None:
                 gap = np.linalg.norm(ta.anchor.point - tb.anchor.point) / max(ta.anchor.radius, tb.anchor.radius)
                 if gap <= 1.0 and min(tb.holds(ta.anchor.point, views), ta.holds(tb.anchor.point, views)) \
                         >= options.anchor_inside:
-                    pairs.append((gap, a, b))
+                    pairs.append((gap, len(shared), a, b))
                 continue
             seen_once, anchored = (ta, tb) if ta.anchor is None else (tb, ta)
             colors = np.minimum(seen_once.colors, anchored.colors).sum()
             if seen_once.holds(anchored.anchor.point, views) == 1.0 and colors >= options.reid_colors:
-                pairs.append((1.0, a, b))
+                pairs.append((1.0, 0, a, b))
     union = ViewExclusiveUnion([set(tracks[t].masks) for t in ids])
     index = {t: k for k, t in enumerate(ids)}
-    for _, a, b in sorted(pairs):
-        union.union(index[a], index[b])
+    for _, shared_views, a, b in sorted(pairs):
+        union.union(index[a], index[b], tolerate=shared_views)
     root = union.roots()
     joined = np.full(max(ids, default=-1) + 1, -1, np.int64)
     joined[ids] = [ids[r] for r in root]
