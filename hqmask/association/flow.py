@@ -451,8 +451,10 @@ def _join_by_anchors(tracks_of: list[np.ndarray], segments: list[np.ndarray], im
     for i, a in enumerate(ids):
         for b in ids[i + 1:]:
             ta, tb = tracks[a], tracks[b]
+            if ta.anchor is None and tb.anchor is None:
+                continue
             shared = ta.masks.keys() & tb.masks.keys()
-            if (shared and not _handed_over(ta, tb, shared)) or (ta.anchor is None and tb.anchor is None):
+            if shared and not _handed_over(ta, tb, shared):
                 continue
             if ta.anchor is not None and tb.anchor is not None:
                 gap = np.linalg.norm(ta.anchor.point - tb.anchor.point) / max(ta.anchor.radius, tb.anchor.radius)
