@@ -224,7 +224,8 @@ def report(r: dict) -> tuple[str, str]:
     return headline, ("The worst of the scene seeds of every cell (consistency: share of ground-truth object "
                       f"pixels with their ID after one matching per scene).\n\n{table}\n\nCells of 16 views or "
                       f"more that miss a target (the diagnosis of the others: docs/masks.md):\n\n{listed}\n\n"
-                      f"Scenes the generator could not lay out (not measured):\n\n{skipped}\n\nMeasured at: {', '.join(commits) or 'n/a'}.")
+                      f"Scenes the generator could not lay out (not measured):\n\n{skipped}\n\n"
+                      f"Measured at: {', '.join(commits) or 'n/a'}.")
 
 
 if __name__ == "__main__":
