@@ -5,6 +5,7 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 
@@ -148,6 +149,30 @@ def test_tracks_splits_a_mask_that_merges_two_objects(tmp_path):
     mapping = match_ids(sum(overlap(o.load_mask(), g) for o, g in zip(load_scene(scene, masks="out").views, gt)))
     for obj in (a, b):
         assert np.mean(mapping[out[gt[3] == obj]] == obj) > 0.8, obj
+
+
+def test_tracks_keeps_an_object_whose_mask_bleeds_into_the_floor(tmp_path):
+    """View 3's mask of an object bleeds into the background around it until most SfM points
+    of the segment lie on the floor: the segment is split by nearest point, the object keeps
+    its pixels and the floor goes back to background (not the whole segment to background)."""
+    scene = generate_scene(SynthConfig(views=12, res=128, path="orbit", seed=1), tmp_path / "s", progress=False).root
+    views = load_scene(scene).views
+    gt = [v.load_mask() for v in views]
+    counts = np.bincount(gt[3].ravel(), minlength=256)
+    obj = int(np.argsort(counts[1:])[-2] + 1)  # the second largest object of view 3
+    grown = cv2.dilate((gt[3] == obj).astype(np.uint8), np.ones((25, 25), np.uint8)).astype(bool)
+    bleed = grown & (gt[3] == 0)
+    for k, v in enumerate(views):
+        m = gt[k].copy()
+        if k == 3:
+            m[bleed] = obj
+        write_png(scene / "bleed" / f"{v.stem}.png", m)
+    build_masks(scene, BuildConfig(proposer="existing", from_masks="bleed", associate="tracks", min_area=20,
+                                   out_masks="out"), progress=False)
+    out = [o.load_mask() for o in load_scene(scene, masks="out").views]
+    mapping = match_ids(sum(overlap(o, g) for o, g in zip(out, gt)))
+    assert np.mean(mapping[out[3][gt[3] == obj]] == obj) > 0.85
+    assert np.mean(out[3][bleed] == 0) > 0.8
 
 
 def test_tracks_joins_the_pieces_of_a_mask_split_alike_in_two_views(tmp_path):

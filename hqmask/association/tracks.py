@@ -11,7 +11,8 @@
    inside one other object is a piece of that object (the halves of a mask cut alike in
    two views link to each other) and takes its ID.
 4. Merges repaired: a segment whose points belong to two or more objects (each with a fair
-   share of them) is split between them by nearest point.
+   share of its object points), or to an object and background (a fair share of all its
+   points), is split between them by nearest point.
 5. Conflicts and leftovers: a segment outside every core object of two or more segments
    (a split half, a merged blob, a speck) joins the object, or background, that holds most
    of its points in the other views; a segment with no points stays background.
@@ -41,13 +42,20 @@ def _segment_of_points(view: View, seg: np.ndarray, n_points: int) -> np.ndarray
 
 def _split_by_points(view: View, region: np.ndarray, pts: np.ndarray, objs: np.ndarray,
                      ratio: float, min_points: int) -> list[tuple[int, np.ndarray]]:
-    """[(object, pixel mask)] partitioning ``region`` by the object of the nearest SfM point
-    when two or more objects each hold ``ratio`` of its points (and ``min_points``); else []."""
+    """[(object, pixel mask)] partitioning ``region`` by the object (-2: background) of the
+    nearest SfM point when it has two or more parts; else []. An object is a part when it
+    holds ``ratio`` of the segment's object points, background when it holds ``ratio`` of all
+    its points (both at least ``min_points``): a mask that bleeds into the floor keeps its
+    object however much floor it covers."""
     known = objs != -1
     if ratio <= 0 or known.sum() < 2 * min_points:
         return []
-    values, counts = np.unique(objs[known], return_counts=True)
-    strong = values[(counts >= ratio * known.sum()) & (counts >= min_points)]
+    on_object = known & (objs != -2)
+    values, counts = np.unique(objs[on_object], return_counts=True)
+    strong = values[(counts >= ratio * on_object.sum()) & (counts >= min_points)]
+    n_background = int((objs == -2).sum())
+    if n_background >= ratio * known.sum() and n_background >= min_points:
+        strong = np.append(strong, -2)
     if len(strong) < 2:
         return []
     keep = np.isin(objs, strong)
@@ -112,9 +120,10 @@ def associate_tracks(
         n_points: number of SfM points (rows of ``Scene.points``).
         link_ratio: two segments link when each holds this share of the points both views see.
         min_shared: the fewest shared points a link needs.
-        split_ratio: a segment whose points belong to two or more objects, each holding at
-            least this share of them (and ``min_shared`` points), is split between them:
-            every pixel goes to the object of its nearest point (a merged mask repaired).
+        split_ratio: a segment is split when two or more objects each hold this share of
+            its object points, or an object does and background holds this share of all its
+            points (each at least ``min_shared`` points): every pixel goes to the object, or
+            background, of its nearest point (a merged or bleeding mask repaired).
             0 disables splitting.
     Returns:
         per view, (H, W) uint8 consistent ID map.
