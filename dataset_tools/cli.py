@@ -55,7 +55,10 @@ def synth(out: Path, seed: int, views: int, res: int, objects: int, path_kind: s
 @click.option("--max-image-size", type=int, default=3200, show_default=True, help="SIFT runs on images at most this large.")
 @click.option("--peak-threshold", type=float, default=None,
               help="SIFT's peak threshold (default: COLMAP's 0.0067 for images of 1000 px and more, lower for smaller).")
-@click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--deterministic/--parallel-sift", default=True, show_default=True,
+              help="SIFT on one thread, so that the same photos and --seed give the same model (COLMAP's CPU SIFT "
+                   "on several threads varies from run to run); --parallel-sift is faster on many cores.")
+@click.option("--seed", type=int, default=0, show_default=True, help="Seed of the two-view verification and the mapper.")
 @click.option("--force", is_flag=True, help="Make the scene again where --out already holds one.")
 def sfm(photos: Path, out: Path, force: bool, **options) -> None:
     """Camera poses and a sparse model (COLMAP through pycolmap, on the CPU) for a folder of

@@ -59,7 +59,8 @@ class SfmConfig:
     peak_threshold: float | None = None  # SIFT's; None: by the image size (sift_peak_threshold)
     overlap: int = 10  # sequential matching: each image with its next ``overlap``
     keyframes: int = 30  # sequential matching: keyframes matched exhaustively among themselves
-    seed: int = 0
+    deterministic: bool = True  # SIFT on one thread, so that the same photos and seed give the same model
+    seed: int = 0  # of the two-view verification's RANSAC and of the mapper
 
     def check(self) -> None:
         if self.frames < 3:
@@ -196,10 +197,12 @@ def run_sfm(photos: Path | str, out: Path | str, cfg: SfmConfig = SfmConfig(), *
         side = min(max(im.size), cfg.max_image_size)
     peak = cfg.peak_threshold or sift_peak_threshold(side)
     options = {"camera_model": cfg.camera_model, "single_camera": single, "max_image_size": cfg.max_image_size,
-               "peak_threshold": peak}
+               "peak_threshold": peak, "deterministic": cfg.deterministic}
     if not steps.finished("features", options):
         database.unlink(missing_ok=True)
-        extraction = pycolmap.FeatureExtractionOptions(max_image_size=cfg.max_image_size, use_gpu=False)
+        # COLMAP's CPU SIFT on several threads gives slightly different keypoints from run to run
+        extraction = pycolmap.FeatureExtractionOptions(max_image_size=cfg.max_image_size, use_gpu=False,
+                                                       num_threads=1 if cfg.deterministic else -1)
         extraction.sift.peak_threshold = peak
         pycolmap.extract_features(database, image_dir, image_names=names,
                                   camera_mode=pycolmap.CameraMode.SINGLE if single else pycolmap.CameraMode.PER_FOLDER,
@@ -211,18 +214,21 @@ def run_sfm(photos: Path | str, out: Path | str, cfg: SfmConfig = SfmConfig(), *
     # 3. matches
     matcher = cfg.matcher if cfg.matcher != "auto" else (
         "sequential" if video or len(names) > EXHAUSTIVE_UP_TO else "exhaustive")
-    options = {"matcher": matcher, "overlap": cfg.overlap, "keyframes": cfg.keyframes}
+    options = {"matcher": matcher, "overlap": cfg.overlap, "keyframes": cfg.keyframes, "seed": cfg.seed}
     if not steps.finished("matches", options):
         _rebuild_database_without_matches(pycolmap, database)
         matching = pycolmap.FeatureMatchingOptions(use_gpu=False)
+        verification = pycolmap.TwoViewGeometryOptions()
+        verification.ransac.random_seed = cfg.seed
         if matcher == "exhaustive":
-            pycolmap.match_exhaustive(database, matching_options=matching, device=pycolmap.Device.cpu)
+            pycolmap.match_exhaustive(database, matching_options=matching, verification_options=verification,
+                                      device=pycolmap.Device.cpu)
         else:
             _pairs_file(names, cfg, work / "pairs.txt")
             pycolmap.match_image_pairs(database, matching_options=matching,
                                        pairing_options=pycolmap.ImportedPairingOptions(
                                            match_list_path=str(work / "pairs.txt")),
-                                       device=pycolmap.Device.cpu)
+                                       verification_options=verification, device=pycolmap.Device.cpu)
         steps.record("matches", options)
     bar.update(1)
 
@@ -235,7 +241,8 @@ def run_sfm(photos: Path | str, out: Path | str, cfg: SfmConfig = SfmConfig(), *
             mapping = pycolmap.IncrementalPipelineOptions(random_seed=cfg.seed)
             models = pycolmap.incremental_mapping(database, image_dir, work / "sparse", mapping)
         else:
-            models = pycolmap.global_mapping(database, image_dir, work / "sparse")
+            models = pycolmap.global_mapping(database, image_dir, work / "sparse",
+                                             pycolmap.GlobalPipelineOptions(random_seed=cfg.seed))
         sizes = {int(k): m.num_reg_images() for k, m in models.items()}
         if not sizes:
             raise InputError(f"{photos}: no two images could be matched into a model; the photos need more overlap "
