@@ -56,7 +56,7 @@ def synth(out: Path, seed: int, views: int, res: int, objects: int, path_kind: s
 @click.option("--peak-threshold", type=float, default=None,
               help="SIFT's peak threshold (default: COLMAP's 0.0067 for images of 1000 px and more, lower for smaller).")
 @click.option("--deterministic/--parallel-sift", default=True, show_default=True,
-              help="SIFT on one thread, so that the same photos and --seed give the same model (COLMAP's CPU SIFT "
+              help="SIFT and mapping on one thread, so that the same photos and --seed give the same model (COLMAP "
                    "on several threads varies from run to run); --parallel-sift is faster on many cores.")
 @click.option("--seed", type=int, default=0, show_default=True, help="Seed of the two-view verification and the mapper.")
 @click.option("--force", is_flag=True, help="Make the scene again where --out already holds one.")

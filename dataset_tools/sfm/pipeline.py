@@ -59,7 +59,7 @@ class SfmConfig:
     peak_threshold: float | None = None  # SIFT's; None: by the image size (sift_peak_threshold)
     overlap: int = 10  # sequential matching: each image with its next ``overlap``
     keyframes: int = 30  # sequential matching: keyframes matched exhaustively among themselves
-    deterministic: bool = True  # SIFT on one thread, so that the same photos and seed give the same model
+    deterministic: bool = True  # SIFT and mapping on one thread: the same photos and seed give the same model
     seed: int = 0  # of the two-view verification's RANSAC and of the mapper
 
     def check(self) -> None:
@@ -177,6 +177,9 @@ def run_sfm(photos: Path | str, out: Path | str, cfg: SfmConfig = SfmConfig(), *
     work.mkdir(parents=True, exist_ok=True)
     steps = _Steps(work)
     pycolmap.logging.minloglevel = 2  # warnings and errors only; progress is shown here
+    # On several threads COLMAP's CPU SIFT gives slightly different keypoints from run to run,
+    # and its bundle adjustment (Ceres) rounds differently: one thread gives the same model again.
+    threads = 1 if cfg.deterministic else -1
     bar = tqdm(total=len(STEPS) + 1, desc="sfm", unit="step", disable=not progress)
 
     # 1. images
@@ -200,9 +203,8 @@ def run_sfm(photos: Path | str, out: Path | str, cfg: SfmConfig = SfmConfig(), *
                "peak_threshold": peak, "deterministic": cfg.deterministic}
     if not steps.finished("features", options):
         database.unlink(missing_ok=True)
-        # COLMAP's CPU SIFT on several threads gives slightly different keypoints from run to run
         extraction = pycolmap.FeatureExtractionOptions(max_image_size=cfg.max_image_size, use_gpu=False,
-                                                       num_threads=1 if cfg.deterministic else -1)
+                                                       num_threads=threads)
         extraction.sift.peak_threshold = peak
         pycolmap.extract_features(database, image_dir, image_names=names,
                                   camera_mode=pycolmap.CameraMode.SINGLE if single else pycolmap.CameraMode.PER_FOLDER,
@@ -238,11 +240,11 @@ def run_sfm(photos: Path | str, out: Path | str, cfg: SfmConfig = SfmConfig(), *
         shutil.rmtree(work / "sparse", ignore_errors=True)
         (work / "sparse").mkdir()
         if cfg.mapper == "incremental":
-            mapping = pycolmap.IncrementalPipelineOptions(random_seed=cfg.seed)
+            mapping = pycolmap.IncrementalPipelineOptions(random_seed=cfg.seed, num_threads=threads)
             models = pycolmap.incremental_mapping(database, image_dir, work / "sparse", mapping)
         else:
             models = pycolmap.global_mapping(database, image_dir, work / "sparse",
-                                             pycolmap.GlobalPipelineOptions(random_seed=cfg.seed))
+                                             pycolmap.GlobalPipelineOptions(random_seed=cfg.seed, num_threads=threads))
         sizes = {int(k): m.num_reg_images() for k, m in models.items()}
         if not sizes:
             raise InputError(f"{photos}: no two images could be matched into a model; the photos need more overlap "
