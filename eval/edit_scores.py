@@ -51,7 +51,7 @@ def edit_rows(run: Run, segmentation: Segmentation, views: list[View], scene_dir
                     "removal": removal_scores(run.render_rgb(view, gaussians=removed, backend=backend), truth.without,
                                               region, truth.seen),
                     "extraction": extraction_scores(extracted.alpha.cpu().numpy(), to_uint8(extracted.rgb),
-                                                    truth.alone, truth.silhouette)})
+                                                    truth.alone, truth.silhouette, truth.silhouette_seen)})
     return rows
 
 
@@ -66,5 +66,6 @@ def summarize_edits(rows: list[dict]) -> dict:
             "removal_psnr_region": mean([r["removal"]["psnr_region"] for r in rows]),
             "removal_psnr_seen": mean([r["removal"]["psnr_seen"] for r in rows]),
             "extraction_iou": mean([r["extraction"]["iou"] for r in rows]),
+            "extraction_iou_seen": mean([r["extraction"]["iou_seen"] for r in rows]),
             "extraction_psnr_inside": mean([r["extraction"]["psnr_inside"] for r in rows]),
             "leak": mean([r["extraction"]["leak"] for r in rows])}

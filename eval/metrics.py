@@ -136,20 +136,26 @@ def removal_scores(removed: np.ndarray, truth: np.ndarray, region: np.ndarray, s
 
 
 def extraction_scores(alpha: np.ndarray, rgb: np.ndarray, truth: np.ndarray, silhouette: np.ndarray,
-                      margin: int = 2) -> dict[str, float]:
+                      seen: np.ndarray | None = None, margin: int = 2) -> dict[str, float]:
     """An extraction against the object rendered alone: IoU of its alpha >= 0.5 silhouette
     with the true silhouette, PSNR inside the true silhouette of the render on white, and the
     leak: the share of the extraction's opacity outside the true silhouette dilated by
-    ``margin`` pixels (floor, shadow or neighbours carried along).
+    ``margin`` pixels (floor, shadow or neighbours carried along). With ``seen``, also the IoU
+    over the pixels outside the silhouette's never-seen part (what no training view showed
+    counts neither way): ``iou_seen``.
 
     Args:
         alpha: (H, W) float accumulated opacity. rgb, truth: (H, W, 3) uint8 on white.
-        silhouette: (H, W) bool.
+        silhouette: (H, W) bool. seen: (H, W) bool, the silhouette pixels a training view saw.
     """
     import cv2
 
     iou, _ = binary_scores(alpha >= 0.5, silhouette)
     grown = cv2.dilate(silhouette.astype(np.uint8), np.ones((2 * margin + 1, 2 * margin + 1), np.uint8)) > 0
     total = float(alpha.sum())
-    return {"iou": iou, "psnr_inside": psnr(rgb[silhouette], truth[silhouette]) if silhouette.any() else None,
-            "leak": float(alpha[~grown].sum() / total) if total > 0 else 0.0}
+    out = {"iou": iou, "psnr_inside": psnr(rgb[silhouette], truth[silhouette]) if silhouette.any() else None,
+           "leak": float(alpha[~grown].sum() / total) if total > 0 else 0.0}
+    if seen is not None:
+        scored = ~(silhouette & ~seen)
+        out["iou_seen"] = binary_scores((alpha >= 0.5) & scored, silhouette & scored)[0]
+    return out

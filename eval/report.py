@@ -33,7 +33,7 @@ from gsseg.segment.reassign import Segmentation
 PANELS = ("photo", "ground truth", "predicted (visible)", "removal", "extraction", "recolour")
 TRUTH_PANELS = ("removal", "the view without the object", "extraction", "the object alone")
 EDIT_HEAD = ["object", "removal PSNR (dB)", "removal PSNR, object's region", "removal PSNR, region seen",
-             "extraction IoU", "extraction PSNR inside", "leak"]
+             "extraction IoU", "extraction IoU, seen part", "extraction PSNR inside", "leak"]
 
 
 def _fmt(x: float | None, digits: int = 3) -> str:

@@ -34,7 +34,7 @@ def test_without_an_object_the_view_changes_only_where_the_object_was(small_scen
     assert (truth.silhouette >= (full_ids == obj)).all()
     outside = ~truth.silhouette & ~boundary_band(truth.silhouette)
     assert (truth.alone[outside] == 255).all()
-    assert not truth.seen.any()  # no training view given: nothing behind it is seen
+    assert not truth.seen.any() and not truth.silhouette_seen.any()  # no training view given: nothing is seen
 
 
 def test_seen_marks_background_the_training_views_observe(small_scene):
@@ -46,6 +46,19 @@ def test_seen_marks_background_the_training_views_observe(small_scene):
     seers = [(v, render_view(layout, v.camera, v.cam_from_world, 1)[2]) for v in scene.split("train")]
     truth = edit_truth(layout, obj, view, seers)
     assert truth.seen.any() and (truth.seen <= (full_ids == obj)).all()
+
+
+def test_silhouette_seen_holds_what_a_training_view_shows_of_the_object(small_scene):
+    """Scored from a training view itself, every pixel of the object that view shows is seen
+    (it is its own seer), and nothing outside the silhouette is."""
+    layout = scene_layout(small_scene.root)
+    scene = load_scene(small_scene.root)
+    view = scene.split("train")[0]
+    full_ids = view.load_mask()
+    obj = int(np.bincount(full_ids.ravel())[1:].argmax()) + 1
+    truth = edit_truth(layout, obj, view, [(view, render_view(layout, view.camera, view.cam_from_world, 1)[2])])
+    shown = (full_ids == obj) & ~boundary_band(full_ids == obj)
+    assert truth.silhouette_seen[shown].all() and (truth.silhouette_seen <= truth.silhouette).all()
 
 
 def test_written_truth_reads_back_and_unknown_objects_are_refused(scene_copy):
@@ -82,3 +95,12 @@ def test_extraction_scores_have_known_answers():
     smeared[16:18, 5:15] = 0.4  # a faint floor smear 2 and 3 px below: only the row 3 px out is a leak
     s = extraction_scores(smeared, white, white, silhouette)
     assert s["leak"] == pytest.approx(4 / (100 + 8)) and s["iou"] == 1.0
+    seen = silhouette.copy()
+    seen[13:15] = False  # its bottom 2 rows never seen
+    partial = alpha.copy()
+    partial[13:15] = 0.0  # and not extracted
+    s = extraction_scores(partial, white, white, silhouette, seen)
+    assert s["iou"] == pytest.approx(0.8) and s["iou_seen"] == 1.0
+    partial[0:2, 5:15] = 1.0  # 20 px outside the silhouette count against it either way
+    s = extraction_scores(partial, white, white, silhouette, seen)
+    assert s["iou"] == pytest.approx(80 / 120) and s["iou_seen"] == pytest.approx(80 / 100)

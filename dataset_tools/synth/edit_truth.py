@@ -5,7 +5,10 @@ The generator's light has no shadows and no interreflections, so removing an obj
 nothing but the pixels it covered: the view without k is the scene rendered without k. What
 a removal can recover there depends on whether the training views saw it: ``seen`` marks the
 pixels of k's visible region whose surface behind k some training view observes (the
-learned environment stands in for the sky, which counts as seen).
+learned environment stands in for the sky, which counts as seen). What an extraction can
+recover depends on the same: ``silhouette_seen`` marks the pixels of k's whole silhouette
+whose surface of k some training view observes (a forward capture never sees the parts of an
+object that other objects hide from every view).
 
 The layout comes back from the ``scene.json`` the generator writes (its options and seed).
 """
@@ -38,12 +41,15 @@ class EditTruth:
         alone: (H, W, 3) uint8, the object alone on white.
         silhouette: (H, W) bool, its whole silhouette (the parts other objects hide included).
         seen: (H, W) bool, the pixels it covers in the view whose background a training view sees.
+        silhouette_seen: (H, W) bool, the silhouette pixels whose surface of the object a
+            training view sees.
     """
 
     without: np.ndarray
     alone: np.ndarray
     silhouette: np.ndarray
     seen: np.ndarray
+    silhouette_seen: np.ndarray
 
 
 def scene_config(scene_dir: Path) -> SynthConfig:
@@ -80,26 +86,32 @@ def edit_truth(layout: Layout, object_id: int, view: View, seers: list[tuple[Vie
     if not any(o.id == object_id for o in layout.objects):
         raise InputError(f"object {object_id} is not in this scene; pick one of {[o.id for o in layout.objects]}.")
     cam, pose = view.camera, view.cam_from_world
-    without, _, _, behind = render_view(_without(layout, object_id), cam, pose, supersample)
-    alone, ids, _, _ = render_view(_alone(layout, object_id), cam, pose, supersample, sky=WHITE)
+    without, _, depth_behind, behind = render_view(_without(layout, object_id), cam, pose, supersample)
+    alone, ids, _, surface = render_view(_alone(layout, object_id), cam, pose, supersample, sky=WHITE)
     _, full_ids, _, _ = render_view(layout, cam, pose, 1)
     covered = (full_ids == object_id).ravel()
-    seen = ~covered  # only the covered pixels are in question
-    rows = np.flatnonzero(covered)
-    finite = np.isfinite(behind[rows]).all(1)
-    seen[rows[~finite]] = True  # sky: the environment
-    points = behind[rows[finite]]
-    for other, depth in seers:
-        found, _ = observe(points, other.camera, other.cam_from_world, depth)
-        seen[rows[finite][found]] = True
+    seen = _seen_by(behind, covered, seers) | (covered & ~np.isfinite(depth_behind.ravel()))  # sky: the environment
+    silhouette = ids == object_id
     H, W = full_ids.shape
-    return EditTruth(without, alone, (ids == object_id), seen.reshape(H, W) & covered.reshape(H, W))
+    return EditTruth(without, alone, silhouette, seen.reshape(H, W),
+                     _seen_by(surface, silhouette.ravel(), seers).reshape(H, W))
+
+
+def _seen_by(points: np.ndarray, pixels: np.ndarray, seers: list[tuple[View, np.ndarray]]) -> np.ndarray:
+    """(H*W,) bool: which of the ``pixels`` (H*W,) bool have their (H*W, 3) surface ``points``
+    observed (in view, not occluded) by one of the ``seers``; False elsewhere."""
+    out = np.zeros(len(pixels), bool)
+    rows = np.flatnonzero(pixels)
+    for other, depth in seers:
+        found, _ = observe(points[rows], other.camera, other.cam_from_world, depth)
+        out[rows[found]] = True
+    return out
 
 
 def write_edit_truth(scene_dir: Path | str, *, images: str = "images", split: str = "test",
                      overwrite: bool = False, progress: bool = True) -> Path:
-    """Write ``scene_dir/edit_truth/<k>/{without,alone,silhouette,seen}/<stem>.png`` for every
-    object k and every view of ``split``, at the size of the ``images`` copy (an ``images_N``
+    """Write ``scene_dir/edit_truth/<k>/<item>/<stem>.png``, each item of :class:`EditTruth`,
+    for every object k and every view of ``split``, at the size of the ``images`` copy (an ``images_N``
     copy is the full views area-averaged, so its truth takes N times the generator's samples
     a side); the folder appears whole or not at all."""
     scene_dir = Path(scene_dir)
@@ -121,6 +133,7 @@ def write_edit_truth(scene_dir: Path | str, *, images: str = "images", split: st
                 write_png(base / "alone" / f"{view.stem}.png", truth.alone)
                 write_png(base / "silhouette" / f"{view.stem}.png", truth.silhouette.astype(np.uint8) * 255)
                 write_png(base / "seen" / f"{view.stem}.png", truth.seen.astype(np.uint8) * 255)
+                write_png(base / "silhouette_seen" / f"{view.stem}.png", truth.silhouette_seen.astype(np.uint8) * 255)
     return out
 
 
@@ -129,5 +142,8 @@ def read_edit_truth(scene_dir: Path | str, object_id: int, stem: str) -> EditTru
     base = Path(scene_dir) / EDIT_TRUTH / str(object_id)
     if not (base / "without" / f"{stem}.png").is_file():
         return None
+    if not (base / "silhouette_seen" / f"{stem}.png").is_file():
+        raise InputError(f"{base.parent}: written by an older version (no silhouette_seen/); write it again with "
+                         "--force.")
     return EditTruth(read_image(base / "without" / f"{stem}.png"), read_image(base / "alone" / f"{stem}.png"),
-                     read_mask(base / "silhouette" / f"{stem}.png") > 0, read_mask(base / "seen" / f"{stem}.png") > 0)
+                     *(read_mask(base / name / f"{stem}.png") > 0 for name in ("silhouette", "seen", "silhouette_seen")))
