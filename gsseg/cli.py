@@ -86,7 +86,7 @@ def render(run: Path, scene: Path, out: Path, what: str, force: bool, **options)
 @click.option("--smooth", type=int, default=0, show_default=True,
               help="Gaussians with weak evidence take the label majority of this many nearest Gaussians (0: off).")
 @click.option("--fill-interiors", "fill", is_flag=True, help="Objects take the Gaussians they enclose.")
-@click.option("--masks", default="object_mask", show_default=True, help="Mask folder that votes.")
+@click.option("--masks", default=None, help="Mask folder that votes (default: the one the run was trained on).")
 @click.option("--backend", type=click.Choice(["auto", "cpu", "torch", "gsplat"]), default="auto", show_default=True)
 def segment(run: Path, scene: Path, masks: str, backend: str, **options) -> None:
     """Prior-guided label reassignment of every Gaussian of RUN; writes RUN/labels.npz."""

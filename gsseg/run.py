@@ -69,6 +69,12 @@ class Run:
         return self.record.config
 
     @property
+    def masks(self) -> str:
+        """The mask folder the run was trained on, which votes in ``gsseg segment`` unless told
+        otherwise (``object_mask`` for a run trained on colour alone)."""
+        return self.config.masks or "object_mask"
+
+    @property
     def images(self) -> str:
         """The image folder of the scene the run was trained on (``images`` or ``images_N``)."""
         return self.config.images

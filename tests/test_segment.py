@@ -188,3 +188,23 @@ def test_segment_edit_and_render_segments_from_the_command_line(trained, small_s
     assert r.returncode == 2 and "object 42 is not among" in r.stderr and "Traceback" not in r.stderr
     r = subprocess.run([gsseg, "edit", str(trained), "--object-id", "1", "--op", "remove"], capture_output=True, text=True)
     assert r.returncode == 2 and "run `gsseg segment`" in r.stderr
+
+
+def test_segment_votes_with_the_masks_the_run_was_trained_on(segmented, scene_copy, tmp_path):
+    """A run trained on a mask folder of another name (the demo's ``hqmask``) is segmented
+    from it without ``--masks``: the same labels as from ``object_mask``."""
+    import shutil
+
+    from gsseg.segment.reassign import Segmentation
+    from gsseg.segment.segment_run import segment_run
+
+    run = tmp_path / "run"
+    shutil.copytree(segmented, run)
+    config = json.loads((run / "config.json").read_text())
+    assert config["masks"] == "object_mask"
+    (run / "config.json").write_text(json.dumps({**config, "masks": "hqmask"}))
+    (scene_copy / "object_mask").rename(scene_copy / "hqmask")
+    result = segment_run(run, scene_copy, backend="cpu", progress=False)
+    np.testing.assert_array_equal(result.labels, Segmentation.load(segmented / "labels.npz").labels)
+    with pytest.raises(InputError, match="object_mask holds no masks"):
+        segment_run(run, scene_copy, masks="object_mask", backend="cpu", progress=False)

@@ -40,11 +40,12 @@ class LabelOptions:
             raise InputError("--smooth and --fill-interiors relabel Gaussians one label each; use --mode multi.")
 
 
-def mask_contributions(run: Run, scene_dir: Path | str | None = None, *, masks: str = "object_mask",
+def mask_contributions(run: Run, scene_dir: Path | str | None = None, *, masks: str | None = None,
                        split: str = "train", backend: str | Backend = "cpu", progress: bool = True) -> Contributions:
-    """The contribution matrix of a loaded run over the masks of ``split`` (no labels where
-    no view of ``split`` has a mask)."""
-    views = [v for v in run.scene(scene_dir, masks=masks).split(split) if v.mask_path is not None]
+    """The contribution matrix of a loaded run over the masks of ``split`` (``masks``: the
+    folder, by default the one the run was trained on; no labels where no view of ``split`` has
+    a mask)."""
+    views = [v for v in run.scene(scene_dir, masks=masks or run.masks).split(split) if v.mask_path is not None]
     contributions = contribution_matrix(run.gaussians, views, backend=backend, progress=progress)
     contributions.model = run.fingerprint
     return contributions
@@ -66,15 +67,15 @@ def label_gaussians(run: Run, contributions: Contributions, options: LabelOption
 
 
 def segment_run(run_dir: Path | str, scene_dir: Path | str | None = None, *, options: LabelOptions = LabelOptions(),
-                masks: str = "object_mask", split: str = "train", backend: str | Backend = "auto",
+                masks: str | None = None, split: str = "train", backend: str | Backend = "auto",
                 progress: bool = True) -> Segmentation:
     """Label every Gaussian of a run from the masks of ``split`` (the training views by
-    default) and the run's classifier; write ``RUN/labels.npz`` and the contribution matrix
+    default; ``masks``: the folder, by default the one the run was trained on) and the run's classifier; write ``RUN/labels.npz`` and the contribution matrix
     they were chosen from, ``RUN/contributions.npz`` (for relabelling without recomputing it)."""
     run = load_run(run_dir)
     contributions = mask_contributions(run, scene_dir, masks=masks, split=split, backend=backend, progress=progress)
     if not len(contributions.labels) and options.method != "classifier":
-        raise InputError(f"{Path(scene_dir or run.record.scene) / masks} holds no masks for the {split} views; "
+        raise InputError(f"{Path(scene_dir or run.record.scene) / (masks or run.masks)} holds no masks for the {split} views; "
                          "build them with `hqmask build` or use --method classifier.")
     result = label_gaussians(run, contributions, options)
     with run.folder.lock():

@@ -78,7 +78,7 @@ class ViewerSession:
                  backend: str = "auto", k: int = 20) -> None:
         self.run = run
         self.scene_dir = scene_dir
-        self.masks = masks or run.config.masks or "object_mask"  # default: the masks the run was trained on
+        self.masks = masks or run.masks
         self.backend = get_backend(backend)
         self.k = k
         self.scene = run.scene(scene_dir)
