@@ -66,25 +66,29 @@ def smooth_weak_labels(segmentation: Segmentation, means: np.ndarray, opacities:
 
 
 def fill_interiors(segmentation: Segmentation, means: np.ndarray, share: float = 0.85,
-                   steps: int = 8) -> Segmentation:
+                   steps: int = 8, extent_quantile: float = 0.01) -> Segmentation:
     """Gaussians that one object's Gaussians enclose from at least ``share`` of the 14
-    directions join that object (interiors no view sees, and what stands inside a hollow).
+    directions join that object (interiors no view sees, rims along its surface, and what
+    stands inside a hollow).
 
-    A direction meets the object when a point along it, within the object's size (the
-    diagonal of its Gaussians' bounding box, marched in ``steps`` steps), lies within one
-    step of one of the object's Gaussians."""
+    The object's extent is the box between the ``extent_quantile`` and 1 - ``extent_quantile``
+    quantiles of its Gaussians' positions, so that a few stray Gaussians given its label far
+    away do not stretch it over its surroundings; its size is that box's diagonal. A Gaussian
+    within one step (size / ``steps``) of the box is tested: a direction meets the object
+    when a point along it, marched in ``steps`` steps up to the size, lies within one step of
+    one of the object's Gaussians."""
     labels = segmentation.labels.copy()
     for obj in segmentation.objects:
         own = labels == obj
         if own.sum() < 8:
             continue
-        lo, hi = means[own].min(0), means[own].max(0)
+        lo, hi = np.quantile(means[own], [extent_quantile, 1 - extent_quantile], axis=0)
         size = float(np.linalg.norm(hi - lo))
-        inside_box = np.all((means >= lo) & (means <= hi), axis=1) & ~own
+        step = size / steps
+        inside_box = np.all((means >= lo - step) & (means <= hi + step), axis=1) & ~own
         candidates = np.flatnonzero(inside_box)
         if not len(candidates) or size == 0:
             continue
-        step = size / steps
         tree = cKDTree(means[own])
         ts = step * np.arange(1, steps + 1)
         probes = means[candidates][:, None, None, :] + ts[None, None, :, None] * DIRECTIONS[None, :, None, :]

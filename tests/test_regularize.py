@@ -1,0 +1,63 @@
+"""The 3D label regularisations of ``gsseg segment``: weak evidence, neighbour smoothing and
+interior filling, on hand-made point sets with known answers."""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from gsseg.render.contributions import Contributions
+from gsseg.segment.reassign import Segmentation
+from gsseg.segment.regularize import fill_interiors, smooth_weak_labels, weak_evidence
+
+
+def _segmentation(labels: np.ndarray) -> Segmentation:
+    labels = labels.astype(np.uint8)
+    objects = np.unique(labels[labels > 0])
+    return Segmentation(labels=labels, objects=objects, selections=labels[None] == objects[:, None],
+                        method="prior", mode="multi", gamma_p=0.2)
+
+
+def _sphere(n: int, radius: float, rng: np.random.Generator) -> np.ndarray:
+    v = rng.normal(size=(n, 3))
+    return radius * v / np.linalg.norm(v, axis=1, keepdims=True)
+
+
+def test_weak_evidence_flags_small_totals_and_near_ties():
+    # Columns: a clear winner, a near tie (0.55 / 0.45), a clear winner seen 100x less than the median.
+    weights = torch.tensor([[9.0, 5.5, 0.09, 8.0],
+                            [1.0, 4.5, 0.01, 2.0]])
+    weak = weak_evidence(Contributions(labels=np.array([0, 1], np.uint8), weights=weights))
+    np.testing.assert_array_equal(weak, [False, True, True, False])
+
+
+def test_smoothing_relabels_weak_gaussians_by_opacity_weighted_neighbours_only():
+    # A weak Gaussian at the origin; 3 opaque neighbours of label 1, 5 faint ones of label 2.
+    rng = np.random.default_rng(0)
+    means = np.concatenate([[[0.0, 0, 0]], 0.1 * _sphere(8, 1.0, rng)])
+    labels = np.array([0, 1, 1, 1, 2, 2, 2, 2, 2])
+    opacities = np.array([0.5, 0.9, 0.9, 0.9, 0.1, 0.1, 0.1, 0.1, 0.1])
+    weak = np.zeros(9, bool)
+    weak[0] = True
+    out = smooth_weak_labels(_segmentation(labels), means, opacities, weak, k=8)
+    np.testing.assert_array_equal(out.labels, [1, *labels[1:]])  # strong labels never change
+    assert out.selections[out.objects.tolist().index(1)].sum() == 4
+
+
+def test_fill_takes_the_interior_and_the_rim_but_not_the_outside_despite_floaters():
+    """A hollow sphere of object 1 (radius 1) with a few far floaters also labelled 1: the
+    background Gaussians inside it and on its surface join it; those beside it stay
+    background (a floater must not stretch the object's extent over its surroundings)."""
+    rng = np.random.default_rng(1)
+    shell = _sphere(3000, 1.0, rng)
+    interior = _sphere(200, 1.0, rng) * rng.uniform(0.0, 0.7, (200, 1))
+    rim = _sphere(30, 1.0, rng)
+    outside = _sphere(300, 1.0, rng) * rng.uniform(1.4, 2.0, (300, 1))
+    floaters = np.array([[8.0, 8.0, 8.0], [-8.0, -8.0, -8.0], [8.0, -8.0, 0.0]])
+    means = np.concatenate([shell, floaters, interior, rim, outside])
+    labels = np.concatenate([np.ones(len(shell) + len(floaters)), np.zeros(len(interior) + len(rim) + len(outside))])
+    out = fill_interiors(_segmentation(labels), means).labels
+    start = len(shell) + len(floaters)
+    assert (out[start:start + len(interior)] == 1).all()
+    assert (out[start + len(interior):start + len(interior) + len(rim)] == 1).all()
+    assert (out[-len(outside):] == 0).all()
