@@ -41,7 +41,7 @@ def test_smoothing_relabels_weak_gaussians_by_opacity_weighted_neighbours_only()
     weak[0] = True
     out = smooth_weak_labels(_segmentation(labels), means, opacities, weak, k=8)
     np.testing.assert_array_equal(out.labels, [1, *labels[1:]])  # strong labels never change
-    assert out.selections[out.objects.tolist().index(1)].sum() == 4
+    assert out.selections[out.objects.tolist().index(1)].sum() == 4 and out.smooth == 8
 
 
 def test_fill_takes_the_interior_and_the_rim_but_not_the_outside_despite_floaters():
@@ -56,8 +56,19 @@ def test_fill_takes_the_interior_and_the_rim_but_not_the_outside_despite_floater
     floaters = np.array([[8.0, 8.0, 8.0], [-8.0, -8.0, -8.0], [8.0, -8.0, 0.0]])
     means = np.concatenate([shell, floaters, interior, rim, outside])
     labels = np.concatenate([np.ones(len(shell) + len(floaters)), np.zeros(len(interior) + len(rim) + len(outside))])
-    out = fill_interiors(_segmentation(labels), means).labels
+    filled = fill_interiors(_segmentation(labels), means)
+    out = filled.labels
     start = len(shell) + len(floaters)
     assert (out[start:start + len(interior)] == 1).all()
     assert (out[start + len(interior):start + len(interior) + len(rim)] == 1).all()
     assert (out[-len(outside):] == 0).all()
+
+
+def test_the_regularisation_applied_is_saved_with_the_labels(tmp_path):
+    labels = np.array([0, 1, 1, 2])
+    seg = fill_interiors(smooth_weak_labels(_segmentation(labels), np.eye(4, 3), np.ones(4), np.zeros(4, bool), k=4),
+                         np.eye(4, 3))
+    seg.save(tmp_path / "labels.npz")
+    loaded = Segmentation.load(tmp_path / "labels.npz")
+    assert (loaded.smooth, loaded.fill) == (4, True)
+    np.testing.assert_array_equal(loaded.selections, seg.selections)

@@ -10,6 +10,7 @@ import shutil
 import socket
 import subprocess
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -342,3 +343,19 @@ def test_the_viewer_in_headless_chromium_selects_and_removes_by_click(segmented,
     finally:
         browser.get("about:blank")
         viewer.stop()
+
+
+@pytest.mark.slow
+def test_relabelling_keeps_the_3d_regularisation_of_the_labels_shown(segmented, small_scene, tmp_path):
+    """Labels made with ``--smooth --fill-interiors`` (saved with them) are reassigned with the
+    same regularisation when gamma_p moves in the viewer."""
+    run = _copy(segmented, tmp_path)
+    options = LabelOptions(gamma_p=0.2, smooth=8, fill=True)
+    segment_run(run, small_scene.root, options=options, backend="cpu", progress=False)
+    session = ViewerSession(load_run(run), scene_dir=small_scene.root, backend="cpu")
+    assert (session.segmentation.smooth, session.segmentation.fill) == (8, True)
+    session.relabel("prior", 1.5)
+    expected = segment_run(run, small_scene.root, options=replace(options, gamma_p=1.5), backend="cpu",
+                           progress=False)
+    np.testing.assert_array_equal(session.segmentation.labels, expected.labels)
+    assert (session.segmentation.smooth, session.segmentation.fill) == (8, True)

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import zipfile
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -38,6 +38,8 @@ class Segmentation:
         selections: (M, N) bool, Gaussians selected for each object.
         model: the fingerprint of the model labelled (:attr:`gsseg.run.Run.fingerprint`),
             "" when unknown.
+        smooth, fill: the 3D regularisations applied after the reassignment
+            (:mod:`gsseg.segment.regularize`; 0 and False: none).
     """
 
     labels: np.ndarray
@@ -47,6 +49,8 @@ class Segmentation:
     mode: str
     gamma_p: float
     model: str = ""
+    smooth: int = 0
+    fill: bool = False
 
     def selection(self, obj: int) -> np.ndarray:
         """(N,) bool Gaussians of object ``obj``."""
@@ -58,8 +62,7 @@ class Segmentation:
 
     def subset(self, keep: np.ndarray) -> Segmentation:
         """The labels and selections of the Gaussians where (N,) bool ``keep`` is true."""
-        return Segmentation(labels=self.labels[keep], objects=self.objects, selections=self.selections[:, keep],
-                            method=self.method, mode=self.mode, gamma_p=self.gamma_p, model=self.model)
+        return replace(self, labels=self.labels[keep], selections=self.selections[:, keep])
 
     def save(self, path: Path) -> None:
         import io
@@ -67,7 +70,7 @@ class Segmentation:
         buf = io.BytesIO()
         np.savez_compressed(buf, labels=self.labels, objects=self.objects, selections=self.selections,
                             method=self.method, mode=self.mode, gamma_p=self.gamma_p, model=self.model,
-                            gaussians=len(self.labels))
+                            smooth=self.smooth, fill=self.fill, gaussians=len(self.labels))
         write_bytes_atomic(Path(path), buf.getvalue())
 
     @classmethod
@@ -78,7 +81,8 @@ class Segmentation:
             with np.load(path, allow_pickle=False) as f:
                 return cls(labels=f["labels"], objects=f["objects"], selections=f["selections"],
                            method=str(f["method"]), mode=str(f["mode"]), gamma_p=float(f["gamma_p"]),
-                           model=str(f["model"]) if "model" in f else "")
+                           model=str(f["model"]) if "model" in f else "",
+                           smooth=int(f["smooth"]) if "smooth" in f else 0, fill=bool(f["fill"]) if "fill" in f else False)
         except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as e:
             raise InputError(f"{path}: damaged labels ({e}); run `gsseg segment` on the run again.") from None
 

@@ -15,6 +15,8 @@ Gaussian Grouping regularises identities in 3D:
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import torch
 from scipy.spatial import cKDTree
@@ -40,10 +42,11 @@ def weak_evidence(contributions: Contributions, *, min_share: float = 0.05, marg
     return ((total < min_share * median) | (gap < margin)).numpy()
 
 
-def _relabelled(segmentation: Segmentation, labels: np.ndarray) -> Segmentation:
-    return Segmentation(labels=labels.astype(np.uint8), objects=segmentation.objects,
-                        selections=labels[None, :] == segmentation.objects[:, None], method=segmentation.method,
-                        mode=segmentation.mode, gamma_p=segmentation.gamma_p, model=segmentation.model)
+def _relabelled(segmentation: Segmentation, labels: np.ndarray, **applied) -> Segmentation:
+    """``segmentation`` with new (N,) ``labels``, its selections made from them, and the
+    regularisation ``applied`` recorded."""
+    return replace(segmentation, labels=labels.astype(np.uint8),
+                   selections=labels[None, :] == segmentation.objects[:, None], **applied)
 
 
 def smooth_weak_labels(segmentation: Segmentation, means: np.ndarray, opacities: np.ndarray, weak: np.ndarray,
@@ -54,7 +57,7 @@ def smooth_weak_labels(segmentation: Segmentation, means: np.ndarray, opacities:
     strong = np.flatnonzero(~weak)
     targets = np.flatnonzero(weak)
     if not len(strong) or not len(targets):
-        return segmentation
+        return replace(segmentation, smooth=k)
     _, nearest = cKDTree(means[strong]).query(means[targets], k=min(k, len(strong)))
     nearest = strong[np.atleast_2d(nearest.T).T]  # (T, k) indices into all Gaussians
     labels = segmentation.labels.copy()
@@ -62,7 +65,7 @@ def smooth_weak_labels(segmentation: Segmentation, means: np.ndarray, opacities:
     np.add.at(votes, (np.repeat(np.arange(len(targets)), nearest.shape[1]), labels[nearest].ravel()),
               opacities[nearest].ravel())
     labels[targets] = votes.argmax(1)
-    return _relabelled(segmentation, labels)
+    return _relabelled(segmentation, labels, smooth=k)
 
 
 def fill_interiors(segmentation: Segmentation, means: np.ndarray, share: float = 0.85,
@@ -96,4 +99,4 @@ def fill_interiors(segmentation: Segmentation, means: np.ndarray, share: float =
         met = np.isfinite(distance).reshape(len(candidates), len(DIRECTIONS), steps).any(2)
         enclosed = met.mean(1) >= share
         labels[candidates[enclosed]] = obj
-    return _relabelled(segmentation, labels)
+    return _relabelled(segmentation, labels, fill=True)

@@ -156,8 +156,11 @@ class ViewerSession:
     def relabel(self, method: str, gamma_p: float) -> float:
         """Reassign every Gaussian's label with ``method`` and ``gamma_p`` from the contribution
         matrix (read from ``RUN/contributions.npz``, computed from the masks and written there
-        when absent). The seconds the reassignment took, the matrix aside."""
-        options = LabelOptions(method=method, gamma_p=gamma_p)
+        when absent), with the 3D regularisations of the labels shown. The seconds the
+        reassignment took, the matrix aside."""
+        shown = self.segmentation
+        options = LabelOptions(method=method, gamma_p=gamma_p, smooth=shown.smooth if shown else 0,
+                               fill=shown.fill if shown else False)
         contributions = self.contributions()
         start = time.perf_counter()
         segmentation = label_gaussians(self.run, contributions, options)
