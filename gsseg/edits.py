@@ -95,7 +95,7 @@ def edit_run(run_dir: Path | str, op: str, *, point=None, click=None, object_id:
     edited = apply_edit(run.gaussians, selected, op, rgb)
     record = {"op": op, "object_id": int(object_id), "point": None if point is None else np.asarray(point).tolist(),
               "click": None if click is None else list(map(str, click)), "color": color,
-              "selected_gaussians": int(selected.sum()), "method": segmentation.method}
+              "selected_gaussians": int(selected.sum()), "labels": segmentation.settings()}
     return write_edit(run, edited, run.folder.edit(name or f"{op}_{object_id}"), record, scene=scene, split=split,
                       fps=fps, backend=backend, overwrite=overwrite, progress=progress)
 

@@ -180,6 +180,7 @@ def test_segment_edit_and_render_segments_from_the_command_line(trained, small_s
     ok("edit", run, "--point", *point, "--op", "remove", "--name", "gone", "--split", "train")
     edit = json.loads((run / "edits" / "gone" / "edit.json").read_text())
     assert edit["object_id"] == 2 and edit["selected_gaussians"] == int(seg.selection(2).sum())
+    assert edit["labels"] == {"method": "prior", "mode": "multi", "gamma_p": 0.2, "smooth": 0, "fill": False}
     frames = sorted((run / "edits" / "gone" / "renders").glob("*.png"))
     assert len(frames) == len(scene.split("train")) and (run / "edits" / "gone" / "video.mp4").stat().st_size > 0
     assert read_image(frames[0]).shape == (96, 96, 3)

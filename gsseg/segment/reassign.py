@@ -60,6 +60,11 @@ class Segmentation:
                              "pick one of them.")
         return self.selections[hit[0]]
 
+    def settings(self) -> dict:
+        """How the labels were chosen (method, mode, gamma_p, smooth, fill), as edits record it."""
+        return {"method": self.method, "mode": self.mode, "gamma_p": self.gamma_p, "smooth": self.smooth,
+                "fill": self.fill}
+
     def subset(self, keep: np.ndarray) -> Segmentation:
         """The labels and selections of the Gaussians where (N,) bool ``keep`` is true."""
         return replace(self, labels=self.labels[keep], selections=self.selections[:, keep])

@@ -208,7 +208,7 @@ class ViewerSession:
         g, _ = self.current()
         seg = self.segmentation
         record = {"steps": [{"op": s.op, "object_id": s.object_id, "color": s.color} for s in steps],
-                  "method": seg.method, "gamma_p": seg.gamma_p, "gaussians": len(g)}
+                  "labels": seg.settings(), "gaussians": len(g)}
         return write_edit(self.run, g, self.run.folder.edit(name), record, scene=self.scene, split=split,
                           backend=self.backend, overwrite=overwrite, progress=False)
 
