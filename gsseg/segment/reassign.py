@@ -87,7 +87,8 @@ class Segmentation:
                 return cls(labels=f["labels"], objects=f["objects"], selections=f["selections"],
                            method=str(f["method"]), mode=str(f["mode"]), gamma_p=float(f["gamma_p"]),
                            model=str(f["model"]) if "model" in f else "",
-                           smooth=int(f["smooth"]) if "smooth" in f else 0, fill=bool(f["fill"]) if "fill" in f else False)
+                           smooth=int(f["smooth"]) if "smooth" in f else 0,
+                           fill=bool(f["fill"]) if "fill" in f else False)
         except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as e:
             raise InputError(f"{path}: damaged labels ({e}); run `gsseg segment` on the run again.") from None
 

@@ -70,12 +70,14 @@ def segment_run(run_dir: Path | str, scene_dir: Path | str | None = None, *, opt
                 masks: str | None = None, split: str = "train", backend: str | Backend = "auto",
                 progress: bool = True) -> Segmentation:
     """Label every Gaussian of a run from the masks of ``split`` (the training views by
-    default; ``masks``: the folder, by default the one the run was trained on) and the run's classifier; write ``RUN/labels.npz`` and the contribution matrix
-    they were chosen from, ``RUN/contributions.npz`` (for relabelling without recomputing it)."""
+    default; ``masks``: the folder, by default the one the run was trained on) and the run's
+    classifier; write ``RUN/labels.npz`` and the contribution matrix they were chosen from,
+    ``RUN/contributions.npz`` (for relabelling without recomputing it)."""
     run = load_run(run_dir)
+    masks = masks or run.masks
     contributions = mask_contributions(run, scene_dir, masks=masks, split=split, backend=backend, progress=progress)
     if not len(contributions.labels) and options.method != "classifier":
-        raise InputError(f"{Path(scene_dir or run.record.scene) / (masks or run.masks)} holds no masks for the {split} views; "
+        raise InputError(f"{Path(scene_dir or run.record.scene) / masks} holds no masks for the {split} views; "
                          "build them with `hqmask build` or use --method classifier.")
     result = label_gaussians(run, contributions, options)
     with run.folder.lock():
