@@ -11,7 +11,8 @@ changed, with every step after it):
 3. ``matches``: exhaustive for up to ``EXHAUSTIVE_UP_TO`` images; otherwise, and for a video,
    sequential (each image with its next ``overlap`` and at powers of two further) plus every
    pair of keyframes spread over the sequence, which closes loops without a vocabulary tree;
-4. ``mapping``: incremental (or global) mapping; the model with the most images is kept and
+4. ``mapping``: incremental (its pixel thresholds scaled to the image size,
+   :func:`incremental_options`) or global mapping; the model with the most images is kept and
    the others reported, with a video's frames turned far from the frame before (flips);
 5. ``undistort``: the kept model undistorted to PINHOLE cameras.
 
@@ -28,6 +29,7 @@ import shutil
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from PIL import Image
 from tqdm import tqdm
@@ -37,6 +39,9 @@ from dataset_tools.cameras import turned_frames
 from dataset_tools.errors import InputError
 from dataset_tools.image_files import IMAGE_SUFFIXES, write_downsampled
 from dataset_tools.sfm.frames import VIDEO_SUFFIXES, sample_frames
+
+if TYPE_CHECKING:
+    import pycolmap
 
 STEPS = ("images", "features", "matches", "mapping", "undistort")
 EXHAUSTIVE_UP_TO = 150
@@ -112,12 +117,40 @@ def _input_images(photos: Path) -> list[str]:
     return names
 
 
+def pixel_scale(side: int) -> float:
+    """How COLMAP's defaults, set for photos of about ``REFERENCE_SIDE`` px, scale to images
+    whose longest side is ``side`` pixels: 1 at that size and above, in proportion below it,
+    a quarter at least."""
+    return min(1.0, max(0.25, side / REFERENCE_SIDE))
+
+
 def sift_peak_threshold(side: int) -> float:
     """SIFT's peak (contrast) threshold for images whose longest side is ``side`` pixels:
-    COLMAP's default at ``REFERENCE_SIDE`` px and above, lowered in proportion below it (to a
-    quarter at most). A small image holds fewer blobs above a fixed contrast: at the default,
-    the beer photos at 320 px give 60-300 keypoints each and leave views unregistered."""
-    return SIFT_PEAK_THRESHOLD * min(1.0, max(0.25, side / REFERENCE_SIDE))
+    COLMAP's default scaled by :func:`pixel_scale`. A small image holds fewer blobs above a
+    fixed contrast: at the default, the beer photos at 320 px give 60-300 keypoints each and
+    leave views unregistered."""
+    return SIFT_PEAK_THRESHOLD * pixel_scale(side)
+
+
+def incremental_options(side: int, seed: int, threads: int) -> pycolmap.IncrementalPipelineOptions:
+    """COLMAP's incremental mapper options for images whose longest side is ``side`` pixels:
+    its reprojection-error thresholds (the initial pair, registering an image, triangulating,
+    filtering points; 4 and 12 px) scaled by :func:`pixel_scale`. They decide which
+    observations the bundle adjustment fits: on small images 4 px is a large share of the
+    frame, and the loose observations it lets in bend the cameras (the beer photos at 320 px:
+    median rotation error 0.8-1.3 degrees by seed at 4 px, 0.4 at the scaled thresholds;
+    docs/sfm.md). The two-view verification keeps COLMAP's 4 px: it only proposes matches,
+    which the mapper then judges at its own thresholds, and a tighter one loses images."""
+    import pycolmap
+
+    options = pycolmap.IncrementalPipelineOptions(random_seed=seed, num_threads=threads)
+    scale = pixel_scale(side)
+    for owner, name in ((options.mapper, "init_max_error"), (options.mapper, "abs_pose_max_error"),
+                        (options.mapper, "filter_max_reproj_error"),
+                        (options.triangulation, "complete_max_reproj_error"),
+                        (options.triangulation, "merge_max_reproj_error")):
+        setattr(owner, name, getattr(owner, name) * scale)
+    return options
 
 
 def _pairs_file(names: list[str], cfg: SfmConfig, path: Path) -> None:
@@ -235,13 +268,13 @@ def run_sfm(photos: Path | str, out: Path | str, cfg: SfmConfig = SfmConfig(), *
     bar.update(1)
 
     # 4. mapping
-    options = {"mapper": cfg.mapper, "seed": cfg.seed}
+    options = {"mapper": cfg.mapper, "seed": cfg.seed, "pixel_scale": pixel_scale(side)}
     if not steps.finished("mapping", options):
         shutil.rmtree(work / "sparse", ignore_errors=True)
         (work / "sparse").mkdir()
         if cfg.mapper == "incremental":
-            mapping = pycolmap.IncrementalPipelineOptions(random_seed=cfg.seed, num_threads=threads)
-            models = pycolmap.incremental_mapping(database, image_dir, work / "sparse", mapping)
+            models = pycolmap.incremental_mapping(database, image_dir, work / "sparse",
+                                                  incremental_options(side, cfg.seed, threads))
         else:
             models = pycolmap.global_mapping(database, image_dir, work / "sparse",
                                              pycolmap.GlobalPipelineOptions(random_seed=cfg.seed, num_threads=threads))
