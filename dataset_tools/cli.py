@@ -55,6 +55,9 @@ def synth(out: Path, seed: int, views: int, res: int, objects: int, path_kind: s
 @click.option("--max-image-size", type=int, default=3200, show_default=True, help="SIFT runs on images at most this large.")
 @click.option("--peak-threshold", type=float, default=None,
               help="SIFT's peak threshold (default: COLMAP's 0.0067 for images of 1000 px and more, lower for smaller).")
+@click.option("--scale-thresholds/--colmap-thresholds", default=True, show_default=True,
+              help="The incremental mapper's reprojection-error thresholds scaled to the image size like the peak "
+                   "threshold, or COLMAP's 4 and 12 px.")
 @click.option("--deterministic/--parallel-sift", default=True, show_default=True,
               help="SIFT and mapping on one thread, so that the same photos and --seed give the same model (COLMAP "
                    "on several threads varies from run to run); --parallel-sift is faster on many cores.")

@@ -14,7 +14,7 @@ import pytest
 from dataset_tools import InputError, load_scene
 from dataset_tools.cameras import turned_frames
 from dataset_tools.sfm import SfmConfig, run_sfm
-from dataset_tools.sfm.pipeline import incremental_options, sift_peak_threshold
+from dataset_tools.sfm.pipeline import incremental_options, pixel_scale, sift_peak_threshold
 from dataset_tools.image_files import read_image
 from dataset_tools.synth import SynthConfig, generate_scene
 from eval.metrics import camera_errors, similarity_alignment
@@ -81,14 +81,14 @@ def test_sift_threshold_is_colmaps_for_large_images_and_lower_for_small_ones():
 
 def test_mapper_thresholds_are_colmaps_for_large_images_and_scaled_for_small_ones():
     def thresholds(side: int) -> list[float]:
-        o = incremental_options(side, seed=0, threads=1)
+        o = incremental_options(pixel_scale(side), seed=0, threads=1)
         return [o.mapper.init_max_error, o.mapper.abs_pose_max_error, o.mapper.filter_max_reproj_error,
                 o.triangulation.complete_max_reproj_error, o.triangulation.merge_max_reproj_error]
 
     assert thresholds(4000) == thresholds(1000) == pytest.approx([4, 12, 4, 4, 4])  # COLMAP's defaults
     assert thresholds(320) == pytest.approx([1.28, 3.84, 1.28, 1.28, 1.28])
     assert thresholds(64) == pytest.approx([1, 3, 1, 1, 1])  # a quarter at most
-    assert incremental_options(320, seed=7, threads=1).random_seed == 7
+    assert incremental_options(1.0, seed=7, threads=1).random_seed == 7
 
 
 def photos_of(beer: Path, out: Path, count: int) -> Path:

@@ -62,6 +62,7 @@ class SfmConfig:
     single_camera: bool | None = None  # None: one camera for a video, one per folder of photos
     max_image_size: int = 3200  # SIFT runs on images at most this large
     peak_threshold: float | None = None  # SIFT's; None: by the image size (sift_peak_threshold)
+    scale_thresholds: bool = True  # the mapper's pixel thresholds scaled to the image size; False: COLMAP's
     overlap: int = 10  # sequential matching: each image with its next ``overlap``
     keyframes: int = 30  # sequential matching: keyframes matched exhaustively among themselves
     deterministic: bool = True  # SIFT and mapping on one thread: the same photos and seed give the same model
@@ -132,19 +133,17 @@ def sift_peak_threshold(side: int) -> float:
     return SIFT_PEAK_THRESHOLD * pixel_scale(side)
 
 
-def incremental_options(side: int, seed: int, threads: int) -> pycolmap.IncrementalPipelineOptions:
-    """COLMAP's incremental mapper options for images whose longest side is ``side`` pixels:
-    its reprojection-error thresholds (the initial pair, registering an image, triangulating,
-    filtering points; 4 and 12 px) scaled by :func:`pixel_scale`. They decide which
-    observations the bundle adjustment fits: on small images 4 px is a large share of the
-    frame, and the loose observations it lets in bend the cameras (the beer photos at 320 px:
-    median rotation error 0.8-1.3 degrees by seed at 4 px, 0.4 at the scaled thresholds;
-    docs/sfm.md). The two-view verification keeps COLMAP's 4 px: it only proposes matches,
+def incremental_options(scale: float, seed: int, threads: int) -> pycolmap.IncrementalPipelineOptions:
+    """COLMAP's incremental mapper options with its reprojection-error thresholds (the initial
+    pair, registering an image, triangulating, filtering points; 4 and 12 px) times ``scale``
+    (:func:`pixel_scale` of the image size, by default). They decide which observations the
+    bundle adjustment fits: on small images 4 px is a large share of the frame, and the loose
+    observations it lets in bend the cameras (the beer photos at 320 px: median rotation error
+    0.8-1.3 degrees by seed at 4 px, 0.4 at the scaled thresholds; docs/sfm.md). The two-view verification keeps COLMAP's 4 px: it only proposes matches,
     which the mapper then judges at its own thresholds, and a tighter one loses images."""
     import pycolmap
 
     options = pycolmap.IncrementalPipelineOptions(random_seed=seed, num_threads=threads)
-    scale = pixel_scale(side)
     for owner, name in ((options.mapper, "init_max_error"), (options.mapper, "abs_pose_max_error"),
                         (options.mapper, "filter_max_reproj_error"),
                         (options.triangulation, "complete_max_reproj_error"),
@@ -268,13 +267,14 @@ def run_sfm(photos: Path | str, out: Path | str, cfg: SfmConfig = SfmConfig(), *
     bar.update(1)
 
     # 4. mapping
-    options = {"mapper": cfg.mapper, "seed": cfg.seed, "pixel_scale": pixel_scale(side)}
+    scale = pixel_scale(side) if cfg.scale_thresholds else 1.0
+    options = {"mapper": cfg.mapper, "seed": cfg.seed, "threshold_scale": scale}
     if not steps.finished("mapping", options):
         shutil.rmtree(work / "sparse", ignore_errors=True)
         (work / "sparse").mkdir()
         if cfg.mapper == "incremental":
             models = pycolmap.incremental_mapping(database, image_dir, work / "sparse",
-                                                  incremental_options(side, cfg.seed, threads))
+                                                  incremental_options(scale, cfg.seed, threads))
         else:
             models = pycolmap.global_mapping(database, image_dir, work / "sparse",
                                              pycolmap.GlobalPipelineOptions(random_seed=cfg.seed, num_threads=threads))
