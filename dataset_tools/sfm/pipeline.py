@@ -139,8 +139,9 @@ def incremental_options(scale: float, seed: int, threads: int) -> pycolmap.Incre
     (:func:`pixel_scale` of the image size, by default). They decide which observations the
     bundle adjustment fits: on small images 4 px is a large share of the frame, and the loose
     observations it lets in bend the cameras (the beer photos at 320 px: median rotation error
-    0.8-1.3 degrees by seed at 4 px, 0.4 at the scaled thresholds; docs/sfm.md). The two-view verification keeps COLMAP's 4 px: it only proposes matches,
-    which the mapper then judges at its own thresholds, and a tighter one loses images."""
+    0.8-1.3 degrees by seed at 4 px, 0.4 at the scaled thresholds; docs/sfm.md). The two-view
+    verification keeps COLMAP's 4 px: it only proposes matches, which the mapper then judges
+    at its own thresholds, and a tighter one loses images."""
     import pycolmap
 
     options = pycolmap.IncrementalPipelineOptions(random_seed=seed, num_threads=threads)
