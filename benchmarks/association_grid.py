@@ -205,7 +205,8 @@ def report(r: dict) -> tuple[str, str]:
                       for c in ("input", "ceiling", *METHODS)}
             exact = min(s["exact"] for s in by_seed.values())
             rows.append([*key.split("/"), *cell.split("/"), str(len(by_seed)), f"{values['input']:.3f}",
-                         f"{exact:.3f}", f"{values['tracks']:.3f}", f"{values['flow']:.3f}", f"{values['ceiling']:.3f}"])
+                         f"{exact:.3f}", f"{values['tracks']:.3f}", f"{values['flow']:.3f}",
+                         f"{values['ceiling']:.3f}"])
             if int(key.split("/")[0]) >= 16:
                 sev = cell.split("/")[1]
                 for c in ("tracks", "flow"):
