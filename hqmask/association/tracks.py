@@ -10,9 +10,12 @@
 3. Pieces joined: a core object seen in fewer views than those in which its points lie
    inside one other object is a piece of that object (the halves of a mask cut alike in
    two views link to each other) and takes its ID.
-4. Merges repaired: a segment whose points belong to two or more objects (each with a fair
-   share of its object points), or to an object and background (a fair share of all its
-   points), is split between them by nearest point.
+4. Merges repaired: each point belongs to the object (or background) its views vote for,
+   a background vote counting ``background_vote`` (a mask that misses part of an object is
+   a commoner error than one that covers floor in most views); a segment whose points
+   belong to two or more objects (each with a fair share of its object points), or to an
+   object and background (a fair share of all its points), is split between them by
+   nearest point.
 5. Conflicts and leftovers: a segment outside every core object of two or more segments
    (a split half, a merged blob, a speck) joins the object, or background, that holds most
    of its points in the other views; a segment with no points stays background.
@@ -108,6 +111,7 @@ def associate_tracks(
     link_ratio: float = 0.6,
     min_shared: int = 3,
     split_ratio: float = 0.3,
+    background_vote: float = 0.5,
 ) -> list[np.ndarray]:
     """Associate segments across views through the SfM points they share (steps 1-5 of the
     module docstring). The views are taken in an order their poses give
@@ -125,13 +129,17 @@ def associate_tracks(
             points (each at least ``min_shared`` points): every pixel goes to the object, or
             background, of its nearest point (a merged or bleeding mask repaired).
             0 disables splitting.
+        background_vote: the weight of a view's background against an object's 1 when the
+            views vote on a point's object: at 0.5 a point inside an object in more than a third of
+            the views that see it belongs to the object (where the masks cut away part of a
+            small object in most views, its pixels in the views that saw it whole stay its).
     Returns:
         per view, (H, W) uint8 consistent ID map.
     """
     centers = np.stack([v.center for v in views])
     order = pose_order(centers, np.stack([v.cam_from_world[2, :3] for v in views]))
     ids = _associate([views[k] for k in order], [segments[k] for k in order], n_points, link_ratio=link_ratio,
-                     min_shared=min_shared, split_ratio=split_ratio)
+                     min_shared=min_shared, split_ratio=split_ratio, background_vote=background_vote)
     out: list[np.ndarray] = [np.empty(0)] * len(views)
     for k, m in zip(order, ids):
         out[k] = m
@@ -217,15 +225,15 @@ def _join_pieces(graph: _Graph, root: np.ndarray, core: np.ndarray) -> np.ndarra
     return obj_of_node
 
 
-def _point_objects(graph: _Graph, obj_of_node: np.ndarray) -> dict[int, int]:
-    """Each point's object: the majority over the views of the core object it falls in (or
-    background, -2); ties to the smaller."""
-    votes: dict[int, dict[int, int]] = defaultdict(lambda: defaultdict(int))
+def _point_objects(graph: _Graph, obj_of_node: np.ndarray, background_vote: float) -> dict[int, int]:
+    """Each point's object: the weighted majority over the views of the core object it falls
+    in (weight 1) or background (-2, weight ``background_vote``); ties to the smaller."""
+    votes: dict[int, dict[int, float]] = defaultdict(lambda: defaultdict(float))
     for v in range(len(graph.node)):
         seen = np.flatnonzero(graph.node[v] >= 0)
         for p, o in zip(seen, obj_of_node[graph.node[v, seen]]):
             if o != -1:
-                votes[int(p)][int(o)] += 1
+                votes[int(p)][int(o)] += background_vote if o == -2 else 1.0
     return {p: max(c.items(), key=lambda kv: (kv[1], -kv[0]))[0] for p, c in votes.items()}
 
 
@@ -267,12 +275,13 @@ def _associate(
     link_ratio: float,
     min_shared: int,
     split_ratio: float,
+    background_vote: float,
 ) -> list[np.ndarray]:
     """Steps 1-5 of the module docstring on views in a fixed order."""
     graph = _Graph.of(views, segments, n_points)
     root, core = _core_objects(graph, graph.links(link_ratio, min_shared))
     obj_of_node = _join_pieces(graph, root, core)
-    point_obj = _point_objects(graph, obj_of_node)
+    point_obj = _point_objects(graph, obj_of_node, background_vote)
     labelled = [_label_view(view, seg, v, graph, obj_of_node, point_obj, split_ratio, min_shared)
                 for v, (view, seg) in enumerate(zip(views, segments))]
     return compact_ids([g for _, g in labelled], [seg for seg, _ in labelled])
