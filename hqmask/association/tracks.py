@@ -130,9 +130,10 @@ def associate_tracks(
             background, of its nearest point (a merged or bleeding mask repaired).
             0 disables splitting.
         background_vote: the weight of a view's background against an object's 1 when the
-            views vote on a point's object: at 0.5 a point inside an object in more than a third of
-            the views that see it belongs to the object (where the masks cut away part of a
-            small object in most views, its pixels in the views that saw it whole stay its).
+            views vote on a point's object: at 0.5 a point inside an object in more than a
+            third of the views that see it belongs to the object (where the masks cut away
+            part of a small object in most views, its pixels in the views that saw it whole
+            stay its).
     Returns:
         per view, (H, W) uint8 consistent ID map.
     """
