@@ -26,6 +26,9 @@ def cli() -> None:
               help="cpu: the short laptop schedule; gpu: the paper's 30k schedule; auto picks by backend.")
 @click.option("--backend", type=click.Choice(["auto", "cpu", "torch", "gsplat"]), default="auto", show_default=True)
 @click.option("--gamma-obj", type=float, default=1.0, show_default=True, help="Weight of the object cross-entropy.")
+@click.option("--geometry-from-masks", is_flag=True,
+              help="Let the object loss also move, reshape and densify the Gaussians (it then spends the "
+                   "Gaussian budget on mask noise; off: the masks train the object features alone).")
 @click.option("--knn-reg", type=float, default=0.0, show_default=True,
               help="Weight of Gaussian Grouping's 3D identity term (nearest Gaussians agree on their object); 0: off.")
 @click.option("--environment", "environment_degree", type=click.Choice(["none", "0", "1", "2", "3"]), default="3",

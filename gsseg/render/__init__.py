@@ -56,6 +56,7 @@ def render(
     sh_degree: int = 3,
     background: torch.Tensor | None = None,
     with_features: bool = True,
+    feature_geometry_grad: bool = True,
     backend: str | Backend = "cpu",
 ) -> RenderOutput:
     """Render colour, object features, alpha and depth of ``gaussians`` in one camera.
@@ -69,6 +70,10 @@ def render(
         background: what lies behind the Gaussians, a (3,) colour or an (H, W, 3) image (e.g.
             a learned :class:`gsseg.environment.Environment`); black when None.
         with_features: also blend the 16-d object features.
+        feature_geometry_grad: let gradients of the features reach the geometry (means,
+            rotations, scales, opacities, and ``means2d``, hence densification); when False
+            the features are blended in a second pass over the geometry detached, and their
+            gradients reach only ``obj_feat``.
         backend: a :class:`Backend` or its name (see :func:`get_backend`).
 
     Returns:
@@ -79,10 +84,16 @@ def render(
     R, t = cam_from_world[:3, :3].to(g.means), cam_from_world[:3, 3].to(g.means)
     dirs = torch.nn.functional.normalize(g.means + (R.T @ t), dim=-1)  # centre - camera centre
     colors = eval_sh(sh_degree, g.sh, dirs)
-    values = torch.cat([colors, g.obj_feat], dim=1) if with_features else colors
-    raster = get_backend(backend).rasterize(g.means, g.quats, g.scales, g.opacities, values, cam_from_world, camera)
+    backend = get_backend(backend)
+    fused = with_features and feature_geometry_grad
+    values = torch.cat([colors, g.obj_feat], dim=1) if fused else colors
+    raster = backend.rasterize(g.means, g.quats, g.scales, g.opacities, values, cam_from_world, camera)
+    features = raster.image[..., 3:]
+    if with_features and not fused:
+        features = backend.rasterize(g.means.detach(), g.quats.detach(), g.scales.detach(), g.opacities.detach(),
+                                     g.obj_feat, cam_from_world, camera).image
     rgb = raster.image[..., :3]
     if background is not None:
         rgb = rgb + (1 - raster.alpha[..., None]) * background.to(rgb)
-    return RenderOutput(rgb=rgb, features=raster.image[..., 3:], alpha=raster.alpha, depth=raster.depth,
+    return RenderOutput(rgb=rgb, features=features, alpha=raster.alpha, depth=raster.depth,
                         means2d=raster.means2d, radii=raster.radii)

@@ -69,6 +69,7 @@ class TrainConfig:
     masks: str | None = "object_mask"
     backend: str = "auto"
     gamma_obj: float = 1.0
+    geometry_from_masks: bool = False  # the object loss also moves, reshapes and densifies the Gaussians
     lambda_dssim: float = 0.2
     sh_degree: int = 3
     environment_degree: int | None = 3  # SH degree of the learned background; None: black
@@ -128,6 +129,7 @@ class TrainConfig:
         data = {k: v for k, v in data.items() if k in names}
         data["lr"] = LearningRates(**data.get("lr", {}))
         data.setdefault("environment_profile", False)  # runs from before the profile existed
+        data.setdefault("geometry_from_masks", True)  # runs from before the option: the loss shaped geometry
         return cls(**data)
 
 

@@ -210,7 +210,7 @@ def _loss_and_backward(state: _State, view: TrainView, cfg: TrainConfig, backend
     use_mask = view.mask is not None and cfg.gamma_obj != 0
     out = render(state.gaussians.gaussians, view.camera, view.cam_from_world, sh_degree=sh_degree,
                  background=background_image(state.environment, view.camera, view.cam_from_world),
-                 with_features=use_mask, backend=backend)
+                 with_features=use_mask, feature_geometry_grad=cfg.geometry_from_masks, backend=backend)
     rgb_loss = photometric_loss(out.rgb, view.image, cfg.lambda_dssim)
     obj = (object_loss(out.features, view.mask, state.classifier, obj_pixels, generator) if use_mask
            else torch.zeros((), device=rgb_loss.device))
