@@ -54,6 +54,30 @@ def test_resume_continues_the_same_loss_curve(small_scene, tmp_path):
     assert all(torch.equal(x, y) for x, y in zip(a.tensors().values(), b.tensors().values()))
 
 
+def test_config_keeps_what_a_run_was_trained_with():
+    """A config round-trips through its JSON; a run recorded before ``geometry_from_masks``
+    existed (its object loss shaped the geometry) resumes with that coupling."""
+    cfg = TrainConfig(iters=10, seed=3)
+    assert TrainConfig.from_json(json.loads(json.dumps(cfg.to_json()))) == cfg
+    assert not cfg.geometry_from_masks
+    older = {k: v for k, v in cfg.to_json().items() if k != "geometry_from_masks"}
+    assert TrainConfig.from_json(older).geometry_from_masks
+
+
+def test_masks_train_the_features_alone_unless_asked(small_scene, tmp_path):
+    """By default the object loss leaves the geometry where colour alone puts it (same
+    Gaussians, bit for bit, as training without it); --geometry-from-masks moves it."""
+    geometry = ("means", "log_scales", "quats", "opacity_logits")
+    runs = {}
+    for name, cfg in {"colour": TrainConfig(iters=40, backend="cpu", gamma_obj=0.0),
+                      "default": TrainConfig(iters=40, backend="cpu"),
+                      "coupled": TrainConfig(iters=40, backend="cpu", geometry_from_masks=True)}.items():
+        runs[name] = read_ply(train(small_scene.root, tmp_path / name, cfg, progress=False).run / "gaussians.ply")
+    assert all(torch.equal(getattr(runs["default"], k), getattr(runs["colour"], k)) for k in geometry)
+    assert not torch.equal(runs["default"].obj_feat, runs["colour"].obj_feat)
+    assert len(runs["coupled"]) != len(runs["colour"]) or not torch.equal(runs["coupled"].means, runs["colour"].means)
+
+
 @pytest.mark.slow
 def test_max_gaussians_caps_densification(small_scene, tmp_path):
     free = _history(train(small_scene.root, tmp_path / "free", TrainConfig(iters=60, backend="cpu"),
