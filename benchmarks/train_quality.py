@@ -92,14 +92,15 @@ def main() -> None:
 
 def report(r: dict) -> tuple[str, str]:
     runs = {k: v for k, v in r["runs"].items() if not k.endswith("_over_seeds")}
-    orbit = [v for k, v in runs.items() if k.startswith("orbit_cpu") and not k.endswith("_coupled")]
+    seeds = [k for k in runs if k.startswith("orbit_cpu") and not k.endswith("_coupled")]
+    orbit = [runs[k] for k in seeds]
     headline = ", ".join(f"{k}: {v['test_psnr']:.2f} dB" + (f", mIoU {v['test_miou']:.3f}" if "test_miou" in v else "")
                          + (f", {v['train_seconds']:.0f} s" if v["train_seconds"] else "")
                          for k, v in runs.items())
     if len(orbit) > 1:
         headline = (f"orbit cpu over {len(orbit)} seeds: {min(v['test_psnr'] for v in orbit):.2f}-"
                     f"{max(v['test_psnr'] for v in orbit):.2f} dB; " + ", ".join(
-                        f"{k}: {v['test_psnr']:.2f} dB" for k, v in runs.items() if v not in orbit))
+                        f"{k}: {v['test_psnr']:.2f} dB" for k, v in runs.items() if k not in seeds))
     rows = [[k, str(v["iterations"]), str(v["gaussians"]), f"{v['test_psnr']:.2f}", f"{v['test_ssim']:.3f}",
              f"{v['test_miou']:.3f}" if "test_miou" in v else "n/a",
              f"{v['train_seconds']:.0f}" if v["train_seconds"] else "reused"] for k, v in runs.items()]

@@ -23,6 +23,9 @@ def script(name: str) -> str:
     return str(Path(sys.executable).parent / name)
 
 
+GEOMETRY = ("means", "log_scales", "quats", "opacity_logits")  # the Gaussian fields that place and shape them
+
+
 def random_gaussians(n: int, seed: int, dtype: torch.dtype = torch.float32,
                      scales: tuple[float, float] = (0.04, 0.24)) -> Gaussians:
     """``n`` Gaussians in front of :func:`look_down_z`, with varied shapes (axis standard

@@ -12,10 +12,9 @@ import torch
 from dataset_tools.cameras import PinholeCamera
 from gsseg.gaussians import Gaussians
 from gsseg.render import BACKENDS, cpu_kernels, get_backend, render
-from helpers import look_down_z, output_weights, random_gaussians, weighted_sum
+from helpers import GEOMETRY, look_down_z, output_weights, random_gaussians, weighted_sum
 
 OUTPUTS = ("rgb", "features", "alpha", "depth")
-GEOMETRY = ("means", "quats", "log_scales", "opacity_logits")
 
 
 def _render_with_grads(g: Gaussians, backend: str, weights, cam, pose):

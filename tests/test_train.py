@@ -21,7 +21,7 @@ from gsseg.train.config import LearningRates
 from gsseg.train.strategy import DensifyOptions, DensifyStats, densify_and_prune
 from gsseg.train.optim import GaussianOptimizer
 from gsseg.train.views import TrainViews, view_bytes
-from helpers import random_gaussians
+from helpers import GEOMETRY, random_gaussians
 
 
 def _history(run):
@@ -67,13 +67,12 @@ def test_config_keeps_what_a_run_was_trained_with():
 def test_masks_train_the_features_alone_unless_asked(small_scene, tmp_path):
     """By default the object loss leaves the geometry where colour alone puts it (same
     Gaussians, bit for bit, as training without it); --geometry-from-masks moves it."""
-    geometry = ("means", "log_scales", "quats", "opacity_logits")
     runs = {}
     for name, cfg in {"colour": TrainConfig(iters=40, backend="cpu", gamma_obj=0.0),
                       "default": TrainConfig(iters=40, backend="cpu"),
                       "coupled": TrainConfig(iters=40, backend="cpu", geometry_from_masks=True)}.items():
         runs[name] = read_ply(train(small_scene.root, tmp_path / name, cfg, progress=False).run / "gaussians.ply")
-    assert all(torch.equal(getattr(runs["default"], k), getattr(runs["colour"], k)) for k in geometry)
+    assert all(torch.equal(getattr(runs["default"], k), getattr(runs["colour"], k)) for k in GEOMETRY)
     assert not torch.equal(runs["default"].obj_feat, runs["colour"].obj_feat)
     assert len(runs["coupled"]) != len(runs["colour"]) or not torch.equal(runs["coupled"].means, runs["colour"].means)
 
