@@ -1,15 +1,24 @@
-"""Outputs that appear whole or not at all: write to a temporary sibling, then rename."""
+"""Outputs that appear whole or not at all: write to a temporary sibling, then rename.
+
+A temporary sibling is locked (an OS lock) by the process writing it. One that no process
+holds is what a killed process left: the next write of the same output removes it.
+"""
 
 from __future__ import annotations
 
 import contextlib
 import os
+import glob
 import shutil
 import tempfile
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
 from dataset_tools.errors import InputError
+from dataset_tools.locks import try_lock
+
+STALE_AFTER_S = 60  # a temporary sibling younger than this may be one another writer is just creating
 
 
 def require_folder_path(path: Path) -> None:
@@ -26,11 +35,38 @@ def _default_mode(kind: int) -> int:
     return kind & ~umask
 
 
+def remove_stale_temporaries(path: Path) -> None:
+    """Remove the temporary siblings of ``path`` (``.NAME.*.tmp``, ``.NAME.old``) that no
+    process holds: the leftovers of a killed write. ``path`` named ``*`` stands for every
+    output in its folder (for folders whose every entry the project writes)."""
+    now = time.time()
+    name = "*" if path.name == "*" else glob.escape(path.name)
+    for leftover in path.parent.glob(f".{name}.*"):
+        if not (leftover.name.endswith(".tmp") or leftover.name.endswith(".old")):
+            continue
+        try:
+            if now - leftover.lstat().st_mtime < STALE_AFTER_S:
+                continue
+            fd = os.open(leftover, os.O_RDONLY)
+        except OSError:
+            continue
+        try:
+            if try_lock(fd):
+                if leftover.is_dir() and not leftover.is_symlink():
+                    shutil.rmtree(leftover, ignore_errors=True)
+                else:
+                    leftover.unlink(missing_ok=True)
+        finally:
+            os.close(fd)
+
+
 def write_bytes_atomic(path: Path, data: bytes) -> None:
     """Write ``data`` to ``path`` through a temporary file in the same folder."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
+    remove_stale_temporaries(path)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try_lock(fd)
     try:
         with os.fdopen(fd, "wb") as f:
             f.write(data)
@@ -50,7 +86,10 @@ def atomic_directory(path: Path, *, overwrite: bool = False) -> Iterator[Path]:
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
+    remove_stale_temporaries(path)
     tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent))
+    held = os.open(tmp, os.O_RDONLY)
+    try_lock(held)
     try:
         yield tmp
         os.chmod(tmp, _default_mode(0o777))
@@ -67,3 +106,5 @@ def atomic_directory(path: Path, *, overwrite: bool = False) -> Iterator[Path]:
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
+    finally:
+        os.close(held)

@@ -107,11 +107,14 @@ def corrupt(scene: Path, out_masks: str, severity: str, model: str, coarse: bool
 def inspect(scene_dir: Path, images: str, masks: str, sheet: Path | None) -> None:
     """Print a summary of a scene folder and write a contact sheet PNG."""
     from dataset_tools.inspect_scene import contact_sheet, summarize
+    from dataset_tools.overlap import refuse_overlap, scene_inputs
     from dataset_tools.scene import load_scene
 
+    sheet = sheet or scene_dir / "contact_sheet.png"
+    refuse_overlap(sheet, scene_inputs(scene_dir, [masks]))
     scene = load_scene(scene_dir, images=images, masks=masks)
     click.echo(str(summarize(scene)))
-    path = contact_sheet(scene, sheet or scene_dir / "contact_sheet.png")
+    path = contact_sheet(scene, sheet)
     click.echo(f"contact sheet {path}")
 
 

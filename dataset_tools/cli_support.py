@@ -72,6 +72,14 @@ def _failure(e: BaseException, prog_name: str) -> tuple[str, int]:
     return f"error: {e.format_message()}", e.exit_code  # any other click.ClickException
 
 
+def other_scene_option(command: Callable) -> Callable:
+    """``--allow-other-scene``, handed to ``command`` as ``other_scene``: use a run with a scene
+    other than the one it was trained on (refused by default)."""
+    return click.option("--allow-other-scene", "other_scene", is_flag=True,
+                        help="Use the run with another scene than the one it was trained on (its views, cameras, "
+                             "poses or images differ).")(command)
+
+
 def engine_options(command: Callable) -> Callable:
     """``--engine local|ray`` and ``--address``, handed to ``command`` as one ``engine``
     (:class:`dataset_tools.engine.Engine`)."""

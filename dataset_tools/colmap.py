@@ -6,6 +6,7 @@ image libraries breaks every later PNG write (seen with pycolmap 4.2.1).
 
 from __future__ import annotations
 
+import struct
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -34,6 +35,29 @@ class ColmapModel:
     rgb: np.ndarray  # (P, 3) uint8
 
 
+def _check_cameras_bin(path: Path) -> None:
+    """Refuse a binary camera file whose length is not the one its records declare (pycolmap
+    reads a truncated one, filling the missing parameters with the last value read)."""
+    import pycolmap
+
+    if not path.is_file():
+        return
+    data = path.read_bytes()
+    offset, expected = 8, None
+    try:
+        (count,) = struct.unpack_from("<Q", data, 0)
+        for _ in range(count):
+            _, model_id, _, _ = struct.unpack_from("<iiQQ", data, offset)
+            n_params = len(pycolmap.Camera.create_from_model_id(0, pycolmap.CameraModelId(model_id), 1.0, 1, 1).params)
+            offset += 24 + 8 * n_params
+        expected = offset
+    except (struct.error, ValueError, TypeError):
+        pass
+    if expected != len(data):
+        raise InputError(f"{path}: {len(data)} bytes, not the length its camera records declare; the model is "
+                         "damaged, export it from COLMAP again.")
+
+
 def read_model(sparse_dir: Path) -> ColmapModel:
     """Read a binary or text COLMAP model (cameras, images, points3D) from ``sparse_dir``."""
     import pycolmap
@@ -51,10 +75,13 @@ def read_model(sparse_dir: Path) -> ColmapModel:
             f"{sparse_dir}: not a readable COLMAP model ({str(e).strip().splitlines()[0]}); it needs "
             "cameras, images and points3D as .bin or .txt files."
         ) from None
+    _check_cameras_bin(sparse_dir / "cameras.bin")
     for camera_id, cam in rec.cameras.items():
         params = np.asarray(cam.params, float)
         focal = params[cam.focal_length_idxs()] if len(params) else params
-        if cam.width <= 0 or cam.height <= 0 or not np.isfinite(params).all() or (focal <= 0).any():
+        cx, cy = params[cam.principal_point_idxs()] if len(params) else (-1.0, -1.0)
+        if (cam.width <= 0 or cam.height <= 0 or not np.isfinite(params).all() or (focal <= 0).any()
+                or not (0 <= cx <= cam.width and 0 <= cy <= cam.height)):
             raise InputError(f"{sparse_dir}: camera {camera_id} is {cam.width}x{cam.height} with parameters "
                              f"{params.round(3).tolist()}; the model is damaged, export it from COLMAP again.")
     point_ids = sorted(rec.points3D.keys())

@@ -11,6 +11,7 @@ actors that make it once each (:meth:`Engine.map_stateful`).
 from __future__ import annotations
 
 import os
+import socket
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -115,11 +116,30 @@ class _Worker:
         return fn(self.state, item)
 
 
+CONNECT_TIMEOUT_S = 5.0
+
+
+def _require_reachable(address: str, timeout: float = CONNECT_TIMEOUT_S) -> None:
+    """Refuse a cluster address (``HOST:PORT`` or ``ray://HOST:PORT``) where nothing accepts a
+    connection within ``timeout`` seconds: Ray itself retries for minutes."""
+    host, _, port = address.removeprefix("ray://").rpartition(":")
+    if not host or not port.isdigit():
+        raise InputError(f"--address {address}: give the cluster's HOST:PORT, such as 10.0.0.1:6379.")
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), timeout=timeout).close()
+    except (OSError, ValueError) as e:
+        why = e.strerror if isinstance(e, OSError) and e.strerror else str(e) or type(e).__name__
+        raise InputError(f"--address {address}: no Ray cluster answers there ({why}); start one with "
+                         "`ray start --head` or leave --address out for a local one.") from None
+
+
 def _init_ray(address: str | None):
     try:
         import ray
     except ImportError:
         raise InputError("--engine ray needs Ray; install it with `pip install -e .[ray]`.") from None
+    if address is not None and address != "auto":
+        _require_reachable(address)
     if not ray.is_initialized():
         try:
             ray.init(address=address, include_dashboard=False, log_to_driver=False, configure_logging=False)

@@ -20,6 +20,7 @@ from pathlib import Path
 from tqdm import tqdm
 
 from dataset_tools.atomic import atomic_directory
+from dataset_tools.overlap import refuse_overlap
 from dataset_tools.errors import InputError
 from dataset_tools.hf_dataset import write_scenes_from_rows
 from dataset_tools.scene import load_scene
@@ -145,5 +146,7 @@ def fetch_hq(out: Path | str, *, local: Path | str | None = None, scenes: list[s
              progress: bool = True) -> list[Path]:
     """Scene folders of the HQ dataset in ``out``: from the local copy ``local``, or downloaded
     from the Hub when it is None."""
+    if local is not None:
+        refuse_overlap(out, [("the local copy", Path(local))])
     source = Path(local) if local is not None else download_hq(revision=revision)
     return convert_hq(source, out, scenes=scenes, masks=masks, overwrite=overwrite, progress=progress)

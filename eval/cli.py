@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from dataset_tools.cli_support import engine_options, none_means_off, run_cli
+from dataset_tools.cli_support import engine_options, none_means_off, other_scene_option, run_cli
 
 
 @click.group(name="gseval", context_settings={"help_option_names": ["-h", "--help"]})
@@ -28,13 +28,14 @@ def cli() -> None:
 @click.option("--lpips", type=click.Path(path_type=Path), default=None,
               help="LPIPS network (ONNX, from `gseval export-lpips`); without it LPIPS is n/a.")
 @click.option("--force", is_flag=True, help="Replace --out if it exists.")
+@other_scene_option
 def report(run: Path, scene: Path, out: Path, gt_masks: str, split: str, object_id: int | None,
-           color: tuple[int, int, int], backend: str, lpips: Path | None, force: bool) -> None:
+           color: tuple[int, int, int], backend: str, lpips: Path | None, force: bool, other_scene: bool) -> None:
     """Metrics (visible and extracted mIoU/mAcc, PSNR, SSIM) and a markdown/HTML report of RUN."""
     from eval.report import report_run
 
     ev = report_run(run, scene, out, gt_masks=gt_masks, split=split, object_id=object_id, color=color,
-                    backend=backend, lpips=lpips, overwrite=force)
+                    backend=backend, lpips=lpips, overwrite=force, other_scene=other_scene)
     s = ev.summary()
     scores = (f"mIoU visible {s['visible']['miou']:.3f}, extracted {s['extracted']['miou']:.3f}; "
               if s["visible"]["miou"] is not None else "")
@@ -48,8 +49,11 @@ def report(run: Path, scene: Path, out: Path, gt_masks: str, split: str, object_
 def compare(runs: tuple[Path, ...], out: Path | None) -> None:
     """Put the evaluations of several reported runs side by side (markdown)."""
     from dataset_tools.atomic import write_bytes_atomic
+    from dataset_tools.overlap import refuse_overlap, run_inputs
     from eval.report import compare_runs
 
+    if out is not None:
+        refuse_overlap(out, [p for run in runs for p in run_inputs(run)])
     table = compare_runs(list(runs))
     click.echo(table)
     if out is not None:

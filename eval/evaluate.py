@@ -131,9 +131,11 @@ def score_views(renders: list[ViewRenders], *, run: str, scene: str, split: str,
     return result
 
 
-def load_inputs(run_dir: Path, scene_dir: Path, gt_masks: str | None, split: str) -> tuple[Run, Segmentation, list[View]]:
-    """The run, its labels and the scene's ``split`` views, refusing what cannot be evaluated."""
-    run = load_run(run_dir)
+def load_inputs(run_dir: Path, scene_dir: Path, gt_masks: str | None, split: str,
+                other_scene: bool = False) -> tuple[Run, Segmentation, list[View]]:
+    """The run, its labels and the scene's ``split`` views, refusing what cannot be evaluated
+    (a scene other than the run's unless ``other_scene``)."""
+    run = load_run(run_dir, other_scene=other_scene)
     segmentation = run.labels()
     if gt_masks is not None and not (scene_dir / gt_masks).is_dir():
         raise InputError(f"{scene_dir / gt_masks}: no ground-truth masks for the metrics; "

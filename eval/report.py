@@ -18,6 +18,7 @@ import numpy as np
 from dataset_tools.atomic import atomic_directory, write_bytes_atomic
 from dataset_tools.errors import InputError
 from dataset_tools.image_files import colorize_labels, encode_png
+from dataset_tools.overlap import refuse_overlap, run_inputs, scene_entries
 from dataset_tools.scene import View
 from dataset_tools.synth.edit_truth import read_edit_truth
 from eval.edit_scores import edit_rows, summarize_edits
@@ -214,15 +215,17 @@ figure{{margin:0 0 12px}} img{{max-width:100%;image-rendering:pixelated}} figcap
 def report_run(run_dir: Path | str, scene_dir: Path | str, out_dir: Path | str, *, gt_masks: str | None = "object_mask",
                split: str = "test", object_id: int | None = None, color: tuple[int, int, int] = (255, 40, 200),
                backend: str = "auto", lpips: Path | str | None = None, overwrite: bool = False,
-               progress: bool = True) -> Evaluation:
+               other_scene: bool = False, progress: bool = True) -> Evaluation:
     """Evaluate a segmented run and write its report to ``out_dir`` and ``RUN/evaluation.json``
     (LPIPS with the network file ``lpips``, else reported as not available)."""
     run_dir, scene_dir, out_dir = Path(run_dir), Path(scene_dir), Path(out_dir)
+    refuse_overlap(out_dir, [*run_inputs(run_dir), *scene_entries(scene_dir)]
+                   + ([("the LPIPS network", Path(lpips))] if lpips is not None else []))
     if out_dir.exists() and not overwrite:
         raise InputError(f"{out_dir}: already exists; pass --force to replace it.")
     backend = get_backend(backend)
     lpips_net = LPIPS(lpips) if lpips is not None else None  # a bad file fails before any rendering
-    run, segmentation, views = load_inputs(run_dir, scene_dir, gt_masks, split)
+    run, segmentation, views = load_inputs(run_dir, scene_dir, gt_masks, split, other_scene)
     ev, renders = evaluate(run, segmentation, views, with_truth=gt_masks is not None, scene=str(scene_dir), split=split,
                            backend=backend, lpips=lpips_net, progress=progress)
     selected = default_object(segmentation) if object_id is None else int(object_id)

@@ -6,8 +6,9 @@ from pathlib import Path
 
 import click
 import numpy as np
+from click.core import ParameterSource
 
-from dataset_tools.cli_support import none_means_off, run_cli
+from dataset_tools.cli_support import none_means_off, other_scene_option, run_cli
 
 
 @click.group(name="gsseg", context_settings={"help_option_names": ["-h", "--help"]})
@@ -39,7 +40,8 @@ def cli() -> None:
 @click.option("--max-gaussians", type=int, default=None,
               help="Densification stops at this many Gaussians (default: 150 000 on the cpu schedule, 6 000 000 on gpu).")
 @click.option("--seed", type=int, default=0, show_default=True)
-@click.option("--resume", is_flag=True, help="Continue the run in --out from its latest checkpoint.")
+@click.option("--resume", is_flag=True, help="Continue the run in --out from its latest checkpoint (options given "
+                                              "must be those it was trained with; --iters may grow).")
 @click.option("--allow-other-scene", is_flag=True, help="With --resume, continue on another scene than the run's.")
 @click.option("--stop-after", type=int, default=None, help="Checkpoint and stop at this step; continue with --resume.")
 @click.option("--cache-views", type=click.Choice(["auto", "memory", "disk"]), default="auto", show_default=True,
@@ -51,10 +53,12 @@ def train(scene: Path, run: Path, schedule: str, resume: bool, allow_other_scene
     from gsseg.render import get_backend
     from gsseg.train import TrainConfig, train as run_training
 
+    ctx = click.get_current_context()
+    given = {name for name in ("schedule", *options) if ctx.get_parameter_source(name) == ParameterSource.COMMANDLINE}
     if schedule == "auto":
         schedule = get_backend(options["backend"]).default_schedule
-    result = run_training(scene, run, TrainConfig(schedule=schedule, **options), resume=resume, stop_after=stop_after,
-                          other_scene=allow_other_scene, cache_views=cache_views)
+    result = run_training(scene, run, TrainConfig(schedule=schedule, **options), resume=resume, given=given,
+                          stop_after=stop_after, other_scene=allow_other_scene, cache_views=cache_views)
     state = "finished" if result.finished else f"stopped at step {result.step}; continue with --resume"
     click.echo(f"{result.run}: {state}, {result.num_gaussians} Gaussians, {result.seconds:.0f} s")
 
@@ -71,6 +75,7 @@ def train(scene: Path, run: Path, schedule: str, resume: bool, allow_other_scene
 @click.option("--images", default=None, help="Image folder defining the cameras (default: the run's).")
 @click.option("--backend", type=click.Choice(["auto", "cpu", "torch", "gsplat"]), default="auto", show_default=True)
 @click.option("--force", is_flag=True, help="Replace --out if it exists.")
+@other_scene_option
 def render(run: Path, scene: Path, out: Path, what: str, force: bool, **options) -> None:
     """Render RGB, per-pixel classifier labels or Gaussian segments of RUN on SCENE's views."""
     from gsseg.render_views import render_run
@@ -91,11 +96,13 @@ def render(run: Path, scene: Path, out: Path, what: str, force: bool, **options)
 @click.option("--fill-interiors", "fill", is_flag=True, help="Objects take the Gaussians they enclose.")
 @click.option("--masks", default=None, help="Mask folder that votes (default: the one the run was trained on).")
 @click.option("--backend", type=click.Choice(["auto", "cpu", "torch", "gsplat"]), default="auto", show_default=True)
-def segment(run: Path, scene: Path, masks: str, backend: str, **options) -> None:
+@other_scene_option
+def segment(run: Path, scene: Path, masks: str, backend: str, other_scene: bool, **options) -> None:
     """Prior-guided label reassignment of every Gaussian of RUN; writes RUN/labels.npz."""
     from gsseg.segment.segment_run import LabelOptions, segment_run
 
-    result = segment_run(run, scene, options=LabelOptions(**options), masks=masks, backend=backend)
+    result = segment_run(run, scene, options=LabelOptions(**options), masks=masks, backend=backend,
+                         other_scene=other_scene)
     counts = {int(o): int(s.sum()) for o, s in zip(result.objects, result.selections)}
     click.echo(f"wrote {run / 'labels.npz'}: {len(result.labels)} Gaussians; per object {counts}")
 
@@ -112,6 +119,7 @@ def segment(run: Path, scene: Path, masks: str, backend: str, **options) -> None
 @click.option("--split", type=click.Choice(["train", "test", "all"]), default="test", show_default=True)
 @click.option("--backend", type=click.Choice(["auto", "cpu", "torch", "gsplat"]), default="auto", show_default=True)
 @click.option("--force", is_flag=True, help="Replace the edit folder if it exists.")
+@other_scene_option
 def edit(run: Path, point, click_, scene, force: bool, **options) -> None:
     """Select an object by a 3D point, a click or its ID; remove, extract or recolour it."""
     from gsseg.edits import edit_run
@@ -128,6 +136,7 @@ def edit(run: Path, point, click_, scene, force: bool, **options) -> None:
 @click.option("--max-size", type=click.IntRange(16), default=640, show_default=True,
               help="Frames are rendered at most this many pixels on their long side.")
 @click.option("--backend", type=click.Choice(["auto", "cpu", "torch", "gsplat"]), default="auto", show_default=True)
+@other_scene_option
 def view(run: Path, scene: Path | None, **options) -> None:
     """Open RUN in the browser: click an object to select it, remove / extract / recolour it, save the edit."""
     try:
@@ -146,11 +155,12 @@ def view(run: Path, scene: Path | None, **options) -> None:
               help="Export this object's Gaussians alone (its ID in labels.npz).")
 @click.option("--format", "fmt", type=click.Choice(["ply", "splat"]), default=None,
               help="ply: 3D-GS PLY + a label property; splat: 32-byte records for web viewers (default: from --out).")
-def export(run: Path, out: Path, object_id: int | None, fmt: str | None) -> None:
+@click.option("--force", is_flag=True, help="Replace --out if it exists.")
+def export(run: Path, out: Path, object_id: int | None, fmt: str | None, force: bool) -> None:
     """Write RUN's model, or one object of it, for other 3D-GS viewers and editors."""
     from gsseg.export import export_run
 
-    click.echo(f"wrote {export_run(run, out, object_id=object_id, fmt=fmt)}")
+    click.echo(f"wrote {export_run(run, out, object_id=object_id, fmt=fmt, overwrite=force)}")
 
 
 @cli.command()

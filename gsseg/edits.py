@@ -10,7 +10,8 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from dataset_tools.atomic import atomic_directory
+from dataset_tools.atomic import atomic_directory, remove_stale_temporaries
+from dataset_tools.overlap import refuse_overlap, scene_entries
 from dataset_tools.errors import InputError
 from dataset_tools.image_files import write_png
 from dataset_tools.names import plain_name
@@ -64,7 +65,7 @@ def apply_edit(g: Gaussians, selected: np.ndarray, op: str, rgb: tuple[float, fl
 def edit_run(run_dir: Path | str, op: str, *, point=None, click=None, object_id: int | None = None,
              color: tuple[int, int, int] | None = None, name: str | None = None, scene_dir: Path | str | None = None,
              split: str = "test", k: int = 20, fps: int = 8, backend: str | Backend = "auto", overwrite: bool = False,
-             progress: bool = True) -> Path:
+             other_scene: bool = False, progress: bool = True) -> Path:
     """Select an object (a 3D ``point``, a ``click`` = (view, u, v) or an ``object_id``), apply
     ``op`` and write ``RUN/edits/NAME/``: ``gaussians.ply``, ``renders/<view>.png`` of the
     scene's ``split`` views, ``video.mp4`` of those renders, and ``edit.json``."""
@@ -77,7 +78,7 @@ def edit_run(run_dir: Path | str, op: str, *, point=None, click=None, object_id:
     check_edit(op, color)
     if color is not None and not all(0 <= c <= 255 for c in color):
         raise InputError(f"--color {' '.join(map(str, color))}: give three values in 0..255.")
-    run = load_run(run_dir)
+    run = load_run(run_dir, other_scene=other_scene)
     segmentation = run.labels()
     backend = get_backend(backend)
     scene = run.scene(scene_dir)
@@ -105,6 +106,8 @@ def write_edit(run: Run, edited: Gaussians, out: Path, record: dict, *, scene: S
     """Write the edit folder ``out`` (inside ``RUN/edits/``) of the ``edited`` model:
     ``gaussians.ply``, ``renders/<view>.png`` of ``scene``'s ``split`` views, ``video.mp4`` and
     ``edit.json`` (``record``); whole or not at all."""
+    refuse_overlap(out, scene_entries(scene.root))
+    remove_stale_temporaries(out.parent / "*")  # what killed edits left in RUN/edits/
     if out.exists() and not overwrite:
         raise InputError(f"{out} exists; pass --force or choose another --name.")
     with run.folder.lock(), atomic_directory(out, overwrite=overwrite) as tmp:

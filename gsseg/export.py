@@ -19,6 +19,7 @@ import torch
 
 from dataset_tools.atomic import write_bytes_atomic
 from dataset_tools.errors import InputError
+from dataset_tools.overlap import refuse_overlap, run_inputs
 from gsseg.gaussians import Gaussians
 from gsseg.ply import write_ply
 from gsseg.run import load_run
@@ -53,12 +54,17 @@ def read_splat(path: Path | str) -> np.ndarray:
     return np.frombuffer(data, SPLAT_RECORD)
 
 
-def export_run(run_dir: Path | str, out: Path | str, *, object_id: int | None = None, fmt: str | None = None) -> Path:
+def export_run(run_dir: Path | str, out: Path | str, *, object_id: int | None = None, fmt: str | None = None,
+               overwrite: bool = False) -> Path:
     """Write a run's model (or the Gaussians of ``object_id`` alone) to ``out`` as ``fmt``
-    (default: from the suffix of ``out``, ``.ply`` or ``.splat``), atomically."""
+    (default: from the suffix of ``out``, ``.ply`` or ``.splat``), atomically; an existing
+    ``out`` is replaced only with ``overwrite``, and never one inside the run folder."""
     out = Path(out)
+    refuse_overlap(out, run_inputs(run_dir))
     if out.is_dir():
         raise InputError(f"{out} is a folder; give a file name for the export.")
+    if out.exists() and not overwrite:
+        raise InputError(f"{out}: already exists; pass --force to replace it or choose another --out.")
     fmt = fmt or out.suffix.lstrip(".").lower()
     if fmt not in FORMATS:
         raise InputError(f"{out}: cannot tell the format; end the name in .ply or .splat, or pass --format.")

@@ -11,6 +11,7 @@ from tqdm import tqdm
 from dataset_tools.atomic import atomic_directory
 from dataset_tools.errors import InputError
 from dataset_tools.image_files import colorize_labels, write_png
+from dataset_tools.overlap import refuse_overlap
 from gsseg.gaussians import Gaussians
 from gsseg.render import Backend, get_backend, render, to_uint8
 from gsseg.run import load_run
@@ -48,19 +49,22 @@ def render_run(
     images: str | None = None,
     backend: str | Backend = "auto",
     overwrite: bool = False,
+    other_scene: bool = False,
     progress: bool = True,
 ) -> Path:
     """Render the views of ``split`` and write ``out/rgb/<stem>.png``, ``out/labels/<stem>.png``
     (raw 8-bit classifier argmax) and ``out/segments/<stem>.png`` (raw 8-bit labels of
     ``RUN/labels.npz``, by largest blended weight); with ``colorize`` also
-    ``out/<kind>_color/<stem>.png``. The folder appears complete or not at all."""
+    ``out/<kind>_color/<stem>.png``. The folder appears complete or not at all; ``other_scene``
+    renders on a scene other than the run's."""
     unknown = set(what) - set(PRODUCTS)
     if unknown:
         raise InputError(f"unknown --what {', '.join(sorted(unknown))}; choose from {', '.join(PRODUCTS)}.")
     out = Path(out)
+    run = load_run(run_dir, other_scene=other_scene)
+    refuse_overlap(out, run.inputs(scene_dir))
     if out.exists() and not overwrite:
         raise InputError(f"{out} exists; pass --force to replace it or choose another --out.")
-    run = load_run(run_dir)
     segmentation = run.labels() if "segments" in what else None
     backend = get_backend(backend)
     classifier = run.classifier.to(backend.device)

@@ -14,6 +14,7 @@ import torch
 
 from dataset_tools.cameras import PinholeCamera
 from dataset_tools.errors import InputError
+from dataset_tools.overlap import Protected, run_inputs, scene_entries
 from dataset_tools.scene import Scene, load_scene
 from gsseg.environment import Environment, background_image
 from gsseg.gaussians import Gaussians, make_classifier
@@ -21,7 +22,7 @@ from gsseg.ply import read_ply
 from gsseg.render import Backend, RenderOutput, get_backend, render, to_uint8
 from gsseg.run_folder import RunFolder
 from gsseg.segment.reassign import Segmentation
-from gsseg.train.config import RunRecord, TrainConfig
+from gsseg.train.config import RunRecord, TrainConfig, scene_difference
 
 Background = Literal["environment", "white", "black"]
 
@@ -46,6 +47,7 @@ class Run:
     gaussians: Gaussians
     classifier: torch.nn.Linear
     environment: Environment | None = None  # None: the run renders on black
+    other_scene: bool = False  # accept a scene other than the recorded one (--allow-other-scene)
     _on_device: dict[str, Gaussians] = field(default_factory=dict, repr=False)
 
     @property
@@ -80,15 +82,21 @@ class Run:
         return self.config.images
 
     def scene(self, scene_dir: Path | str | None = None, *, masks: str | None = None,
-              images: str | None = None) -> Scene:
+              images: str | None = None, other_scene: bool = False) -> Scene:
         """The scene the run was trained on, at the run's image size; ``scene_dir`` names it
-        where it moved, and is refused when it lacks a view the run was trained on."""
+        where it moved, and is refused when it is not the scene the run recorded (its views,
+        cameras, poses or images differ) unless ``other_scene``."""
         scene = load_scene(scene_dir or self.record.scene, images=images or self.images, masks=masks)
-        missing = set(self.record.train_views) - {v.name for v in scene.views}
-        if missing:
-            raise InputError(f"{scene.root}: not the scene {self.root} was trained on ({self.record.scene}; "
-                             f"{len(missing)} of its views are missing, e.g. {sorted(missing)[0]}); pass that scene.")
+        difference = None if other_scene or self.other_scene else scene_difference(self.record, scene)
+        if difference is not None:
+            raise InputError(f"{scene.root}: not the scene {self.root} was trained on ({difference}); pass that "
+                             "scene, or --allow-other-scene to use this one.")
         return scene
+
+    def inputs(self, scene_dir: Path | str | None = None) -> list[Protected]:
+        """What a command that reads the run and its scene (``scene_dir``, default the
+        recorded one) must never write over: the run folder and everything in the scene."""
+        return [*run_inputs(self.root), *scene_entries(scene_dir or self.record.scene)]
 
     def gaussians_on(self, device: str) -> Gaussians:
         """The run's Gaussians on ``device`` (moved once, then kept)."""
@@ -143,8 +151,9 @@ def _environment(path: Path) -> Environment | None:
         raise _damaged(path, e) from None
 
 
-def load_run(root: Path | str) -> Run:
-    """Load the model of a finished training run; damaged files are refused in one sentence."""
+def load_run(root: Path | str, *, other_scene: bool = False) -> Run:
+    """Load the model of a finished training run; damaged files are refused in one sentence.
+    ``other_scene``: :meth:`Run.scene` accepts a scene other than the one the run recorded."""
     folder = RunFolder(root)
     folder.require_finished()
     try:
@@ -152,5 +161,5 @@ def load_run(root: Path | str) -> Run:
     except (ValueError, KeyError, TypeError, AttributeError) as e:
         raise _damaged(folder.config, e) from None
     return Run(folder, record, read_ply(folder.gaussians), _classifier(folder.classifier),
-               _environment(folder.environment))
+               _environment(folder.environment), other_scene)
 

@@ -18,11 +18,8 @@ file of a run is named here and nowhere else.
 from __future__ import annotations
 
 import contextlib
-import fcntl
 import io
 import json
-import os
-from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -30,6 +27,7 @@ import torch
 
 from dataset_tools.atomic import write_bytes_atomic
 from dataset_tools.errors import InputError
+from dataset_tools.locks import exclusive
 from dataset_tools.names import plain_name
 
 
@@ -99,24 +97,10 @@ class RunFolder:
         """Whether training wrote the model files."""
         return all(p.is_file() for p in (self.config, self.gaussians, self.classifier))
 
-    @contextlib.contextmanager
-    def lock(self) -> Iterator[None]:
-        """Hold the run's lock (an OS file lock, released when the process ends however it
-        ends) while writing the run; a second writer is refused in one sentence."""
-        self.root.mkdir(parents=True, exist_ok=True)
-        fd = os.open(self.root / ".lock", os.O_RDWR | os.O_CREAT, 0o644)
-        try:
-            try:
-                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            except BlockingIOError:
-                holder = os.pread(fd, 32, 0).decode(errors="replace").strip() or "another process"
-                raise InputError(f"{self.root}: another command ({holder}) is writing this run; wait for it to "
-                                 "finish or choose another folder.") from None
-            os.ftruncate(fd, 0)
-            os.pwrite(fd, f"pid {os.getpid()}".encode(), 0)
-            yield
-        finally:
-            os.close(fd)
+    def lock(self) -> contextlib.AbstractContextManager[None]:
+        """Hold the run's lock (:func:`dataset_tools.locks.exclusive` on ``.lock``) while
+        writing the run; a second writer is refused in one sentence."""
+        return exclusive(self.root / ".lock", self.root, "this run")
 
     def require_finished(self) -> None:
         for path in (self.config, self.gaussians, self.classifier):

@@ -14,14 +14,18 @@ from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
 
+import cv2
 import numpy as np
 from tqdm import tqdm
 
 from dataset_tools.atomic import atomic_directory, write_bytes_atomic
+from dataset_tools.checked_files import read_checked, write_checked
 from dataset_tools.engine import Engine
 from dataset_tools.errors import InputError
-from dataset_tools.names import plain_name
 from dataset_tools.image_files import encode_png, read_mask
+from dataset_tools.locks import exclusive_folder
+from dataset_tools.names import plain_name
+from dataset_tools.overlap import refuse_overlap, scene_inputs
 from dataset_tools.scene import Scene, View, load_scene
 from hqmask.association import associate_flow, associate_tracks
 from hqmask.association.anchors import sighting, triangulate
@@ -78,8 +82,15 @@ def propose_view(proposer: Proposer, job: tuple[np.ndarray, View, Path | None]) 
         raise InputError(f"{view.image_path}: the proposer made {seg.max()} segments, more than 255; raise --min-area.")
     seg = seg.astype(np.uint8)
     if cached is not None:
-        write_bytes_atomic(cached, encode_png(seg))
+        write_checked(cached, encode_png(seg))
     return seg
+
+
+def read_cached_segments(path: Path | None) -> np.ndarray | None:
+    """The segment map cached at ``path``, or None when there is none or it is damaged."""
+    data = read_checked(path) if path is not None else None
+    seg = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED) if data else None
+    return seg if seg is not None and seg.ndim == 2 and seg.dtype == np.uint8 else None
 
 
 def _segments(scene: Scene, proposer: Proposer, make: Callable[[], Proposer], cfg: BuildConfig,
@@ -89,12 +100,13 @@ def _segments(scene: Scene, proposer: Proposer, make: Callable[[], Proposer], cf
     ``make``) and cached view by view, so that an interrupted build resumes."""
     cache = None if proposer.cache_name is None else scene.root / CACHE / proposer.cache_name
     paths = [None if cache is None else cache / f"{view.stem}.png" for view in scene.views]
-    todo = [k for k, path in enumerate(paths) if path is None or cfg.force or not path.exists()]
+    segments = {k: seg for k, path in enumerate(paths)
+                if not cfg.force and (seg := read_cached_segments(path)) is not None}
+    todo = [k for k in range(len(paths)) if k not in segments]
     fresh = engine.map_stateful(make, propose_view, [(images[k], scene.views[k], paths[k]) for k in todo],
                                 local_state=proposer, desc=f"proposing ({cfg.proposer})", progress=progress)
-    segments = dict(zip(todo, fresh))
-    return [clean_mask(segments[k] if k in segments else read_mask(path), cfg.min_area)
-            for k, path in enumerate(paths)]
+    segments.update(zip(todo, fresh))
+    return [clean_mask(segments[k], cfg.min_area) for k in range(len(paths))]
 
 
 def depth_priors(scene: Scene, ids: list[np.ndarray], associate: str) -> list[np.ndarray | None]:
@@ -138,17 +150,27 @@ def build_masks(scene_dir: Path | str, cfg: BuildConfig, *, engine: Engine = Eng
         raise InputError(f"--consensus {cfg.consensus}: use 0 (off) or a number of neighbouring views.")
     if cfg.proposer == "existing" and not cfg.from_masks:
         raise InputError("--proposer existing needs --from-masks NAME, the mask folder to re-associate.")
-    if cfg.from_masks is not None and cfg.from_masks == cfg.out_masks:
-        raise InputError(f"--out-masks {cfg.out_masks}: would overwrite the input masks; choose another name.")
+    out_dir = scene_dir / cfg.out_masks
+    reads = scene_inputs(scene_dir, [cfg.from_masks])
+    refuse_overlap(out_dir, reads)
+    if cfg.dataset:
+        refuse_overlap(cfg.dataset, [*reads, ("the mask folder it writes", out_dir)])
     make = partial(make_proposer, cfg.proposer, cfg.model, device=cfg.device, threads=cfg.threads,
                    points_per_side=cfg.points_per_side,
                    embedding_cache=scene_dir / CACHE / "sam-hq-embeddings" if cfg.cache_embeddings else None)
     proposer = make()  # an unknown or unavailable one fails before any work
-    out_dir = scene_dir / cfg.out_masks
     if out_dir.exists() and not cfg.force:
         raise InputError(f"{out_dir}: already exists; pass --force to rebuild it.")
     if cfg.dataset and Path(cfg.dataset).exists() and not cfg.force:
         raise InputError(f"{cfg.dataset}: already exists; choose another --dataset or pass --force.")
+    if not scene_dir.is_dir():
+        raise InputError(f"{scene_dir}: scene folder not found; check the path.")
+    with exclusive_folder(scene_dir, "masks"):
+        return _build_locked(scene_dir, out_dir, cfg, proposer, make, engine, progress)
+
+
+def _build_locked(scene_dir: Path, out_dir: Path, cfg: BuildConfig, proposer: Proposer,
+                  make: Callable[[], Proposer], engine: Engine, progress: bool) -> BuildResult:
     scene = load_scene(scene_dir, images=cfg.images, masks=cfg.from_masks if cfg.proposer == "existing" else None)
     if cfg.proposer == "existing" and scene.mask_dir is None:
         raise InputError(f"{scene_dir / cfg.from_masks}: mask folder not found; check --from-masks.")
@@ -185,8 +207,7 @@ def clean_scene_masks(
     _check_min_area(min_area)
     if not src.is_dir():
         raise InputError(f"{src}: mask folder not found; check --masks.")
-    if src == dst:
-        raise InputError(f"--out-masks {out_masks}: would overwrite the input masks; choose another name.")
+    refuse_overlap(dst, scene_inputs(scene_dir, [masks]))
     if dst.exists() and not force:
         raise InputError(f"{dst}: already exists; pass --force to replace it.")
     files = sorted(src.rglob("*.png"))

@@ -30,6 +30,7 @@ import torch
 from dataset_tools.atomic import require_folder_path
 from dataset_tools.errors import InputError
 from dataset_tools.image_files import IMAGE_SUFFIXES, image_size, write_downsampled
+from dataset_tools.overlap import refuse_overlap, scene_entries
 from dataset_tools.scene import linked_scene
 from dataset_tools.sfm import run_sfm
 from dataset_tools.synth import SynthConfig, generate_scene
@@ -114,6 +115,10 @@ def run_demo(out: Path | str, *, scene: Path | str | None = None, images: str | 
     if scene is not None and not Path(scene).exists():
         raise InputError(f"{scene}: not found; pass a scene folder, a folder of photos or a video with --scene.")
     require_folder_path(out)
+    if scene is not None:
+        scene = Path(scene)
+        refuse_overlap(out, scene_entries(scene) if scene.is_dir() and (scene / "sparse").is_dir()
+                       else [("the photos", scene)])
     if out.exists() and any(out.iterdir()) and not overwrite:
         raise InputError(f"{out}: already exists and is not empty; pass --force or choose another --out.")
     for owned in ("scene", "run", "report"):  # --force: the demo's own outputs, nothing else
@@ -121,6 +126,17 @@ def run_demo(out: Path | str, *, scene: Path | str | None = None, images: str | 
             (out / owned).unlink()
         elif (out / owned).exists():
             shutil.rmtree(out / owned)
+    created = not out.exists()
+    try:
+        return _run_demo(out, scene, images, cfg, backend, start, progress)
+    except BaseException:
+        if created:  # a failed first run leaves nothing, so that the plain retry is not refused
+            shutil.rmtree(out, ignore_errors=True)
+        raise
+
+
+def _run_demo(out: Path, scene: Path | None, images: str | None, cfg: TrainConfig, backend: Backend, start: float,
+              progress: bool) -> DemoResult:
     synth_point, warning = None, None
     if scene is None:
         result = generate_scene(DEMO_SCENE, out / "scene", progress=progress)
@@ -129,7 +145,6 @@ def run_demo(out: Path | str, *, scene: Path | str | None = None, images: str | 
         synth_point = result.layout.objects[0].bounding_sphere[0]
         images = DEMO_IMAGES
     else:
-        scene = Path(scene)
         if scene.is_dir() and (scene / "sparse").is_dir():
             scene_dir = linked_scene(scene, out / "scene")
         else:  # photos or a video: structure from motion first

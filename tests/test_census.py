@@ -67,6 +67,26 @@ def _damage_scenes(world: Path) -> None:
     (variant("bad_split") / "scene.json").write_text(json.dumps({"split": {"test": ["nope.png"]}}))
     other = generate_scene(SynthConfig(views=5, res=64, objects=2, seed=9), world / "other", progress=False).root
     assert other.is_dir()
+    same_names = variant("same_names")  # the same views, one photo changed
+    image = read_image(first)
+    write_png(same_names / "images" / first.name, 255 - image)
+    moved = variant("moved_camera")  # the same photos, one camera's focal length changed
+    _scale_focal(moved / sparse)
+    (variant("all_test") / "scene.json").write_text(json.dumps({"split": {"test": sorted(
+        p.name for p in (scene / "images").iterdir())}}))
+    short = variant("short_cameras") / sparse / "cameras.bin"
+    short.write_bytes(short.read_bytes()[:-8])  # the last parameter cut: pycolmap still reads it
+
+
+def _scale_focal(sparse: Path) -> None:
+    import pycolmap
+
+    model = pycolmap.Reconstruction(str(sparse))
+    camera = next(iter(model.cameras.values()))
+    params = camera.params.copy()
+    params[0] *= 1.1
+    camera.params = params
+    model.write(str(sparse))
 
 
 def _damage_runs(world: Path) -> None:
@@ -136,7 +156,7 @@ CASES = [
     ("dataset_tools", "corrupt --scene {w}/nowhere --out-masks n", "scene folder not found"),
     ("dataset_tools", "corrupt --scene {w}/scene --out-masks ../escape", "plain folder name"),
     ("dataset_tools", "corrupt --scene {w}/scene --out-masks .", "plain folder name"),
-    ("dataset_tools", "corrupt --scene {w}/scene --out-masks object_mask", "overwrite the exact masks"),
+    ("dataset_tools", "corrupt --scene {w}/scene --out-masks object_mask", "which this command reads"),
     ("dataset_tools", "corrupt --scene {w}/scene --out-masks n --severity extreme", "extreme"),
     ("dataset_tools", "corrupt --scene {w}/scene --out-masks n --model random", "random"),
     ("dataset_tools", "corrupt --scene {w}/scene --out-masks n --model proposer --coarse", "--coarse"),
@@ -167,10 +187,10 @@ CASES = [
     ("hqmask", "build {w}/scene --threads -1", "--threads -1"),
     ("hqmask", "build {w}/scene --proposer existing", "needs --from-masks"),
     ("hqmask", "build {w}/scene --proposer existing --from-masks nothing --out-masks n", "mask folder not found"),
-    ("hqmask", "build {w}/scene --proposer existing --from-masks object_mask", "overwrite the input masks"),
+    ("hqmask", "build {w}/scene --proposer existing --from-masks object_mask", "which this command reads"),
     ("hqmask", "build {w}/scene --out-masks ../escape", "plain folder name"),
     ("hqmask", "build {w}/scene --out-masks .", "plain folder name"),
-    ("hqmask", "build {w}/scene --out-masks images", "already exists"),
+    ("hqmask", "build {w}/scene --out-masks images", "which this command reads"),
     ("hqmask", "build {w}/scene --out-masks n --dataset {w}/run", "already exists"),
     ("hqmask", "build {w}/scene --out-masks n --proposer sam-hq", "needs --model"),
     ("hqmask", "build {w}/scene --out-masks n --proposer sam-hq --model {w}/nowhere", "nowhere"),
@@ -186,7 +206,7 @@ CASES = [
     ("hqmask", "clean {w}/scene --masks nothing --out-masks n", "mask folder not found"),
     ("hqmask", "clean {w}/scene --masks object_mask --out-masks ../escape", "plain folder name"),
     ("hqmask", "clean {w}/scene --masks object_mask --out-masks n --min-area -5", "--min-area -5"),
-    ("hqmask", "clean {w}/scene --masks object_mask --out-masks images", "already exists"),
+    ("hqmask", "clean {w}/scene --masks object_mask --out-masks images", "which this command reads"),
     ("hqmask", "export-onnx --checkpoint {w}/nowhere.pth --model-type vit_b --out {w}/exported", ""),
     # gsseg train
     ("gsseg", "train {w}/nowhere --out {w}/new", "scene folder not found"),
@@ -278,6 +298,78 @@ CASES = [
     ("gseval", "compare {w}/run --out {w}/run", ""),
     ("gseval", "paper-tables --out {w}/a_file --quick", "a file stands there"),
     ("gseval", "paper-tables --out {w}/new --quick --address 10.0.0.1:6379", "with --engine ray"),
+]
+
+# No command writes over what it reads: every writing command aimed at one of its inputs
+# (is, contains or lies inside it) is refused, with or without --force.
+OVERLAPS = [
+    ("dataset_tools", "corrupt --scene {w}/scene --out-masks images"),
+    ("dataset_tools", "corrupt --scene {w}/scene --out-masks sparse"),
+    ("dataset_tools", "sfm {w}/scene/images --out {w}/scene/images"),
+    ("dataset_tools", "sfm {w}/scene/images --out {w}/scene/images/scene"),
+    ("dataset_tools", "sfm {w}/scene/images --out {w}/scene"),
+    ("dataset_tools", "inspect {w}/scene --sheet {w}/scene/images/0001.png"),
+    ("dataset_tools", "hq --out {w}/scene --local {w}/scene/images"),
+    ("hqmask", "build {w}/scene --out-masks images"),
+    ("hqmask", "build {w}/scene --out-masks sparse"),
+    ("hqmask", "build {w}/scene --proposer existing --from-masks object_mask --out-masks object_mask"),
+    ("hqmask", "build {w}/scene --out-masks n --dataset {w}/scene/images"),
+    ("hqmask", "build {w}/scene --out-masks n --dataset {w}"),
+    ("hqmask", "clean {w}/scene --masks object_mask --out-masks images"),
+    ("hqmask", "clean {w}/scene --masks object_mask --out-masks sparse"),
+    ("hqmask", "clean {w}/scene --masks object_mask --out-masks object_mask"),
+    ("hqmask", "export-onnx --checkpoint {w}/lpips.onnx --model-type vit_b --out {w}"),
+    ("gsseg", "train {w}/scene --out {w}/scene/images"),
+    ("gsseg", "train {w}/scene --out {w}/scene/sparse/0"),
+    ("gsseg", "train {w}/scene --out {w}/scene"),
+    ("gsseg", "train {w}/scene --out {w}"),
+    ("gsseg", "render {w}/run --out {w}/run"),
+    ("gsseg", "render {w}/run --out {w}/run/checkpoints"),
+    ("gsseg", "render {w}/run --out {w}/run/renders"),
+    ("gsseg", "render {w}/run --out {w}"),
+    ("gsseg", "render {w}/run --scene {w}/scene --out {w}/scene/images"),
+    ("gsseg", "render {w}/run --scene {w}/scene --out {w}/scene/object_mask"),
+    ("gsseg", "render {w}/run --out {w}/scene"),
+    ("gsseg", "export {w}/run --out {w}/run/gaussians.ply --object 1"),
+    ("gsseg", "export {w}/run --out {w}/run/model.splat"),
+    ("gsseg", "demo --scene {w}/scene --out {w}/scene"),
+    ("gsseg", "demo --scene {w}/scene --out {w}"),
+    ("gsseg", "demo --scene {w}/scene/images --out {w}/scene/images/demo"),
+    ("gseval", "report {w}/run --out {w}/run"),
+    ("gseval", "report {w}/run --out {w}/run/report"),
+    ("gseval", "report {w}/run --out {w}/scene/object_mask"),
+    ("gseval", "report {w}/run --out {w}/scene"),
+    ("gseval", "report {w}/run --out {w}/report --lpips {w}/report/report.md"),
+    ("gseval", "compare {w}/run --out {w}/run/evaluation.json"),
+]
+CASES += [(c, a + force, "which this command reads") for c, a in OVERLAPS for force in ("", " --force")
+          if not (force and a.split()[0] in ("inspect", "compare", "train"))]  # these have no --force
+CASES += [
+    # a run knows its scene: another scene with the same view names is refused
+    ("gsseg", "segment {w}/run --scene {w}/same_names", "the image of view"),
+    ("gsseg", "render {w}/run --scene {w}/same_names --out {w}/new", "the image of view"),
+    ("gsseg", "edit {w}/run --scene {w}/same_names --op remove --object-id 1", "the image of view"),
+    ("gsseg", "edit {w}/run --scene {w}/same_names --op remove --click 0001 5 5", "not the scene"),
+    ("gsseg", "view {w}/run --scene {w}/same_names", "the image of view"),
+    ("gseval", "report {w}/run --scene {w}/same_names --out {w}/new", "the image of view"),
+    ("gsseg", "render {w}/run --scene {w}/moved_camera --out {w}/new", "the camera of view"),
+    ("gsseg", "train {w}/same_names --out {w}/unfinished --resume", "the image of view"),
+    # resume keeps its options
+    ("gsseg", "train {w}/scene --out {w}/unfinished --resume --seed 3", "seed = 0, not 3"),
+    ("gsseg", "train {w}/scene --out {w}/unfinished --resume --gamma-obj 2", "gamma_obj"),
+    ("gsseg", "train {w}/scene --out {w}/unfinished --resume --masks none", "masks"),
+    ("gsseg", "train {w}/scene --out {w}/unfinished --resume --images images_9", "images"),
+    ("gsseg", "train {w}/scene --out {w}/unfinished --resume --knn-reg 1", "knn_reg"),
+    ("gsseg", "train {w}/scene --out {w}/unfinished --resume --max-gaussians 9", "max_gaussians"),
+    ("gsseg", "train {w}/scene --out {w}/unfinished --resume --iters 2", "only lengthen"),
+    ("gsseg", "train {w}/scene --out {w}/cut_config --resume", "damaged run file"),
+    # the rest of the census
+    ("gsseg", "train {w}/all_test --out {w}/new", "none is left to train on"),
+    ("dataset_tools", "inspect {w}/short_cameras", "not the length its camera records declare"),
+    ("gsseg", "view {w}/run --host 256.1.1.1", "cannot serve on 256.1.1.1"),
+    ("gsseg", "view {w}/run --host no.such.host.invalid --port 0", "cannot serve on"),
+    ("gsseg", "export {w}/run --out {w}/lpips.onnx --format ply", "already exists"),
+    ("hqmask", "build {w}/scene --out-masks n --engine ray --address 127.0.0.1:1", "no Ray cluster answers"),
 ]
 
 

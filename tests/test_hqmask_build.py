@@ -14,7 +14,7 @@ from dataset_tools.corruption import PERMUTE_ONLY, corrupt_mask
 from dataset_tools.image_files import write_png
 from dataset_tools.label_maps import consistent_fraction, match_ids, overlap
 from dataset_tools.synth import SynthConfig, generate_scene
-from hqmask.build import BuildConfig, build_masks, clean_scene_masks
+from hqmask.build import BuildConfig, build_masks, clean_scene_masks, read_cached_segments
 
 
 def permuted_masks(scene_dir: Path, name: str) -> None:
@@ -271,3 +271,16 @@ def test_graph_masks_give_the_beer_can_one_id_in_every_view(beer, tmp_path):
     assert all(0.02 < np.mean(m == can) < 0.2 for m in masks)
     others = [np.mean((m != can) & (m != 0)) for m in masks]
     assert max(others) < 0.01 and np.mean([o > 0 for o in others]) < 0.2
+
+
+def test_a_damaged_cache_entry_is_proposed_again(scene_copy):
+    """One truncated and one foreign file in the graph proposer's cache: the next build
+    proposes those views again and writes the masks of a build from an empty cache."""
+    build_masks(scene_copy, BuildConfig(proposer="graph", out_masks="first"), progress=False)
+    cached = sorted((scene_copy / ".hqmask_cache" / "graph").glob("*.png"))
+    cached[0].write_bytes(cached[0].read_bytes()[:50])
+    cached[1].write_bytes(cached[2].read_bytes()[:-1] + b"\0")
+    build_masks(scene_copy, BuildConfig(proposer="graph", out_masks="second"), progress=False)
+    for first in sorted((scene_copy / "first").glob("*.png")):
+        assert first.read_bytes() == (scene_copy / "second" / first.name).read_bytes()
+    assert read_cached_segments(cached[0]) is not None and read_cached_segments(cached[1]) is not None

@@ -14,10 +14,12 @@ import pytest
 from dataset_tools import InputError, load_scene
 from dataset_tools.cameras import turned_frames
 from dataset_tools.sfm import SfmConfig, run_sfm
-from dataset_tools.sfm.pipeline import incremental_options, pixel_scale, sift_peak_threshold
+from dataset_tools.locks import exclusive
+from dataset_tools.sfm.pipeline import _input_images, incremental_options, pixel_scale, sift_peak_threshold
 from dataset_tools.image_files import read_image
 from dataset_tools.synth import SynthConfig, generate_scene
 from eval.metrics import camera_errors, similarity_alignment
+from pipeline.demo import run_demo
 from helpers import script
 
 
@@ -200,7 +202,7 @@ def test_bad_photos_are_one_sentence_and_write_nothing(tmp_path, make, message):
     source = source if source.exists() else source.with_suffix(".mp4")
     with pytest.raises(InputError, match=message):
         run_sfm(source, tmp_path / "scene", progress=False)
-    assert not (tmp_path / "scene" / "scene.json").exists() and not (tmp_path / "scene" / "sparse").exists()
+    assert not (tmp_path / "scene").exists()  # not even the work folder
 
 
 @pytest.mark.slow
@@ -213,4 +215,71 @@ def test_photos_that_do_not_overlap_are_refused(tmp_path):
         cv2.imwrite(str(photos / f"{k}.png"), rng.integers(0, 255, (120, 160, 3), dtype=np.uint8))
     with pytest.raises(InputError, match="need more overlap"):
         run_sfm(photos, tmp_path / "scene", progress=False)
-    assert not (tmp_path / "scene" / "sparse").exists()
+    assert not (tmp_path / "scene").exists()
+    for _ in range(2):  # a refused demo leaves nothing, so the plain retry is refused for the same reason
+        with pytest.raises(InputError, match="need more overlap"):
+            run_demo(tmp_path / "demo", scene=photos, backend="cpu", progress=False)
+        assert not (tmp_path / "demo").exists()
+
+
+def _some_photos(speckled: Path, into: Path, first: int, count: int = 12) -> Path:
+    """``count`` consecutive orbit views from ``first``, named 00.png, 01.png, ..."""
+    into.mkdir()
+    for k, src in enumerate(sorted((speckled / "images").iterdir())[first:first + count]):
+        shutil.copy(src, into / f"{k:02d}.png")
+    return into
+
+
+@pytest.mark.slow
+def test_sfm_redoes_its_steps_when_the_photos_change_under_the_same_names(speckled, tmp_path):
+    photos = _some_photos(speckled, tmp_path / "photos", 0)
+    run_sfm(photos, tmp_path / "scene", progress=False)
+    old = {p.name: read_image(p) for p in photos.iterdir()}
+    shutil.rmtree(photos)
+    _some_photos(speckled, photos, 20)
+    result = run_sfm(photos, tmp_path / "scene", overwrite=True, progress=False)
+    assert result.registered == 12
+    for view in load_scene(result.scene).views:  # undistorted: compare at the photo's size
+        image = view.load_image().astype(float)
+        new = cv2.resize(read_image(photos / view.name), image.shape[1::-1]).astype(float)
+        before = cv2.resize(old[view.name], image.shape[1::-1]).astype(float)
+        assert np.abs(image - new).mean() < 0.25 * np.abs(image - before).mean()
+
+
+@pytest.mark.slow
+def test_photos_of_two_sizes_register_with_a_camera_each(speckled, tmp_path):
+    """A phone mixes sizes (portrait and landscape, or a cropped photo): one shared camera
+    cannot fit both, so each photo gets its own."""
+    photos = _some_photos(speckled, tmp_path / "photos", 0)
+    image = read_image(photos / "05.png")
+    cv2.imwrite(str(photos / "05.png"), cv2.cvtColor(cv2.resize(image, (240, 240)), cv2.COLOR_RGB2BGR))
+    result = run_sfm(photos, tmp_path / "scene", progress=False)
+    assert result.registered == 12
+    with pytest.raises(InputError, match=r"2 sizes \(240x240, 320x320\)"):
+        run_sfm(photos, tmp_path / "one_camera", SfmConfig(single_camera=True), progress=False)
+    assert not (tmp_path / "one_camera").exists()
+
+
+def test_the_photo_search_skips_scene_folders_and_hidden_ones(tmp_path):
+    photos = tmp_path / "photos"
+    for name in ("a.jpg", "trip/b.png", "scene/images/c.png", "old/.sfm/frames/d.png", ".thumbs/e.png",
+                 "copy/images_2/f.png"):
+        (photos / name).parent.mkdir(parents=True, exist_ok=True)
+        cv2.imwrite(str(photos / name), np.full((8, 8, 3), 128, np.uint8))
+    (photos / "scene" / "scene.json").write_text("{}")
+    (photos / "copy" / "sparse").mkdir()
+    assert _input_images(photos) == ["a.jpg", "trip/b.png"]
+
+
+def test_a_second_sfm_on_one_output_is_refused_and_a_full_disk_is_one_sentence(tmp_path, monkeypatch):
+    photos = tmp_path / "photos"
+    photos.mkdir()
+    for k in range(3):
+        cv2.imwrite(str(photos / f"{k}.png"), np.full((64, 64, 3), 40 * k, np.uint8))
+    with exclusive(tmp_path / "scene" / ".sfm" / "lock", tmp_path / "scene", "this scene"):
+        with pytest.raises(InputError, match="is writing this scene"):
+            run_sfm(photos, tmp_path / "scene", progress=False)
+    monkeypatch.setattr(shutil, "disk_usage", lambda path: shutil._ntuple_diskusage(10**9, 10**9 - 10**6, 10**6))
+    with pytest.raises(InputError, match=r"0.00 GB free, structure from motion needs about 0.0\d GB"):
+        run_sfm(photos, tmp_path / "full", progress=False)
+    assert not (tmp_path / "full").exists()

@@ -54,6 +54,33 @@ def test_resume_continues_the_same_loss_curve(small_scene, tmp_path):
     assert all(torch.equal(x, y) for x, y in zip(a.tensors().values(), b.tensors().values()))
 
 
+def test_resume_keeps_its_options_and_its_scene(small_scene, tmp_path):
+    """An option asked for on resume must be the recorded one (``iters`` may grow); options
+    left at their defaults are taken from the run. A moved copy of the scene is the same
+    scene; a copy with one photo changed is not."""
+    cfg = TrainConfig(iters=20, backend="cpu", seed=2)
+    train(small_scene.root, tmp_path / "run", cfg, stop_after=5, progress=False)
+    for asked, message in ((TrainConfig(iters=20, backend="cpu", seed=3), "seed = 2, not 3"),
+                           (TrainConfig(iters=20, backend="cpu", seed=2, masks=None), "masks = 'object_mask'"),
+                           (TrainConfig(iters=10, backend="cpu", seed=2), "only lengthen it, not shorten it to 10")):
+        with pytest.raises(InputError, match=message):
+            train(small_scene.root, tmp_path / "run", asked, resume=True, progress=False)
+    with pytest.raises(InputError, match="seed = 2, not 0"):  # asked on a command line, though the default
+        train(small_scene.root, tmp_path / "run", TrainConfig(), resume=True, given={"seed"}, progress=False)
+    moved = shutil.copytree(small_scene.root, tmp_path / "moved")
+    train(moved, tmp_path / "run", TrainConfig(), resume=True, stop_after=10, progress=False)
+    changed = shutil.copytree(small_scene.root, tmp_path / "changed")
+    first = sorted((changed / "images").iterdir())[0]
+    cv2.imwrite(str(first), 255 - cv2.imread(str(first)))
+    with pytest.raises(InputError, match=f"not the scene .* \\(the image of view {first.name} differs\\)"):
+        train(changed, tmp_path / "run", TrainConfig(), resume=True, progress=False)
+    result = train(small_scene.root, tmp_path / "run", TrainConfig(iters=30), resume=True, progress=False)
+    assert result.finished and result.step == 30
+    record = json.loads((tmp_path / "run" / "config.json").read_text())
+    assert record["iters"] == 30 and record["seed"] == 2
+    assert set(record["scene_fingerprint"]["views"]) == {v.name for v in load_scene(small_scene.root).views}
+
+
 def test_config_keeps_what_a_run_was_trained_with():
     """A config round-trips through its JSON; a run recorded before ``geometry_from_masks``
     existed (its object loss shaped the geometry) resumes with that coupling."""

@@ -26,6 +26,7 @@ from dataset_tools.corruption.blobs import PERMUTE_ONLY, BlobModel, corrupt_mask
 from dataset_tools.corruption.ops import coarsen
 from dataset_tools.errors import InputError
 from dataset_tools.names import plain_name
+from dataset_tools.overlap import refuse_overlap, scene_inputs
 from dataset_tools.image_files import encode_png
 from dataset_tools.label_maps import matched_error
 from dataset_tools.scene import load_scene
@@ -68,9 +69,7 @@ def corrupt_scene(
     """
     scene_dir = Path(scene_dir)
     _check(model, severity, coarse)
-    plain_name(out_masks, "--out-masks")
-    if out_masks == masks:
-        raise InputError(f"--out-masks {out_masks}: would overwrite the exact masks; choose another name.")
+    refuse_overlap(scene_dir / plain_name(out_masks, "--out-masks"), scene_inputs(scene_dir, [masks]))
     scene = load_scene(scene_dir, masks=masks)
     if scene.mask_dir is None:
         raise InputError(f"{scene_dir / masks}: no masks to corrupt; generate the scene with `python -m dataset_tools synth`.")

@@ -23,6 +23,7 @@ images registered), each item renamed into place, ``scene.json`` last.
 
 from __future__ import annotations
 
+import hashlib
 import itertools
 import json
 import shutil
@@ -37,6 +38,8 @@ from tqdm import tqdm
 from dataset_tools.atomic import require_folder_path, write_bytes_atomic
 from dataset_tools.cameras import turned_frames
 from dataset_tools.errors import InputError
+from dataset_tools.locks import exclusive
+from dataset_tools.overlap import refuse_overlap
 from dataset_tools.image_files import IMAGE_SUFFIXES, write_downsampled
 from dataset_tools.sfm.frames import VIDEO_SUFFIXES, sample_frames
 
@@ -102,10 +105,19 @@ class SfmResult:
                 "texture off the repeated surface in view (docs/sfm.md).")
 
 
+def _scene_folders(photos: Path) -> set[Path]:
+    """Scene folders inside ``photos`` (an earlier output, or a copy of one): never photos."""
+    marks = (*photos.rglob("scene.json"), *photos.rglob("sparse"), *photos.rglob(".sfm"))
+    return {m.parent for m in marks}
+
+
 def _input_images(photos: Path) -> list[str]:
-    """The image files of a folder (sub-folders too), relative, sorted; each checked whole."""
+    """The image files of a folder (sub-folders too, but no hidden folder or scene folder),
+    relative, sorted; each checked whole."""
+    scenes = _scene_folders(photos)
     names = sorted(str(p.relative_to(photos)) for p in photos.rglob("*") if p.suffix in IMAGE_SUFFIXES
-                   and not any(part.startswith(".") for part in p.relative_to(photos).parts))
+                   and not any(part.startswith(".") for part in p.relative_to(photos).parts)
+                   and not any(p.is_relative_to(s) for s in scenes))
     if not names:
         raise InputError(f"{photos}: holds no JPEG or PNG images; pass a folder of photos or a video file.")
     for name in names:
@@ -116,6 +128,39 @@ def _input_images(photos: Path) -> list[str]:
         except (OSError, SyntaxError, ValueError) as e:
             raise InputError(f"{photos / name}: not a readable image ({e}); remove or replace it.") from None
     return names
+
+
+def content_digest(files: list[Path]) -> str:
+    """A hash of the names, sizes and bytes of ``files``: the steps of a run are redone when the
+    photos change, even under the same names (about 1 s a GB)."""
+    h = hashlib.blake2b(digest_size=16)
+    for f in files:
+        h.update(f"{f.name}\0{f.stat().st_size}\0".encode())
+        with open(f, "rb") as stream:
+            while chunk := stream.read(1 << 20):
+                h.update(chunk)
+    return h.hexdigest()
+
+
+def _image_sizes(folder: Path, names: list[str]) -> list[tuple[int, int]]:
+    """The distinct (width, height) of the images, sorted."""
+    sizes = set()
+    for name in names:
+        with Image.open(folder / name) as im:
+            sizes.add(im.size)
+    return sorted(sizes)
+
+
+def _check_free_space(photos: Path, out: Path, n_images: int) -> None:
+    """Refuse to start on a disk without room for the work: the database (about 2 MB an image),
+    the undistorted images and their smaller copies (about 3x the photos)."""
+    source = [photos] if photos.is_file() else [p for p in photos.rglob("*") if p.is_file()]
+    need = 3 * sum(p.stat().st_size for p in source) + n_images * 2_000_000 + 50_000_000
+    existing = next(p for p in (out, *out.parents) if p.exists())
+    free = shutil.disk_usage(existing).free
+    if free < need:
+        raise InputError(f"{existing}: {free / 1e9:.2f} GB free, structure from motion needs about "
+                         f"{need / 1e9:.2f} GB; free some disk space or write --out elsewhere.")
 
 
 def pixel_scale(side: int) -> float:
@@ -203,11 +248,25 @@ def run_sfm(photos: Path | str, out: Path | str, cfg: SfmConfig = SfmConfig(), *
     if video and photos.suffix not in VIDEO_SUFFIXES:
         raise InputError(f"{photos}: not a folder of photos nor a video ({', '.join(VIDEO_SUFFIXES[:5])}).")
     require_folder_path(out)
+    refuse_overlap(out, [("the photos", photos)])
     if (out / "scene.json").exists() and not overwrite:
         raise InputError(f"{out}: already holds a scene; pass --force to make it again or choose another --out.")
-    start = time.perf_counter()
     work = out / ".sfm"
-    work.mkdir(parents=True, exist_ok=True)
+    new_out, new_work = not out.exists(), not work.exists()
+    try:
+        with exclusive(work / "lock", out, "this scene"):
+            return _run_sfm_locked(pycolmap, photos, out, work, video, cfg, overwrite, progress)
+    except InputError:  # a refusal leaves nothing behind; an interruption keeps the finished steps
+        if new_work:
+            shutil.rmtree(work, ignore_errors=True)
+        if new_out and out.is_dir() and not any(out.iterdir()):
+            out.rmdir()
+        raise
+
+
+def _run_sfm_locked(pycolmap, photos: Path, out: Path, work: Path, video: bool, cfg: SfmConfig, overwrite: bool,
+                    progress: bool) -> SfmResult:
+    start = time.perf_counter()
     steps = _Steps(work)
     pycolmap.logging.minloglevel = 2  # warnings and errors only; progress is shown here
     # On several threads COLMAP's CPU SIFT gives slightly different keypoints from run to run,
@@ -216,31 +275,39 @@ def run_sfm(photos: Path | str, out: Path | str, cfg: SfmConfig = SfmConfig(), *
     bar = tqdm(total=len(STEPS) + 1, desc="sfm", unit="step", disable=not progress)
 
     # 1. images
-    options = {"source": str(photos.resolve()), "frames": cfg.frames if video else None}
+    found = None if video else _input_images(photos)
+    _check_free_space(photos, out, cfg.frames if video else len(found))
+    options = {"source": str(photos.resolve()), "frames": cfg.frames if video else None,
+               "content": content_digest([photos] if video else [photos / n for n in found])}
     image_dir = work / "frames" if video else photos
     if not steps.finished("images", options):
         shutil.rmtree(work / "frames", ignore_errors=True)
-        names = sample_frames(photos, image_dir, cfg.frames, progress=progress) if video else _input_images(photos)
-        steps.record("images", options, names=names)
+        names = sample_frames(photos, image_dir, cfg.frames, progress=progress) if video else found
+        steps.record("images", options, names=names, sizes=_image_sizes(image_dir, names))
     names = steps.done["images"]["names"]
+    sizes = steps.done["images"].get("sizes", [])
     bar.set_postfix_str(f"{len(names)} images")
     bar.update(1)
 
     # 2. features
     database = work / "database.db"
     single = video if cfg.single_camera is None else cfg.single_camera
+    mixed = len(sizes) > 1
+    if mixed and single:
+        raise InputError(f"{photos}: the images have {len(sizes)} sizes ({', '.join(f'{w}x{h}' for w, h in sizes)}) "
+                         "and one camera cannot fit them; resize them to one size or let each size have its camera.")
     with Image.open(image_dir / names[0]) as im:
         side = min(max(im.size), cfg.max_image_size)
     peak = cfg.peak_threshold or sift_peak_threshold(side)
     options = {"camera_model": cfg.camera_model, "single_camera": single, "max_image_size": cfg.max_image_size,
-               "peak_threshold": peak, "deterministic": cfg.deterministic}
+               "peak_threshold": peak, "deterministic": cfg.deterministic, "camera_per_image": mixed}
     if not steps.finished("features", options):
         database.unlink(missing_ok=True)
         extraction = pycolmap.FeatureExtractionOptions(max_image_size=cfg.max_image_size, use_gpu=False,
                                                        num_threads=threads)
         extraction.sift.peak_threshold = peak
         pycolmap.extract_features(database, image_dir, image_names=names,
-                                  camera_mode=pycolmap.CameraMode.SINGLE if single else pycolmap.CameraMode.PER_FOLDER,
+                                  camera_mode=_camera_mode(pycolmap, single, mixed),
                                   reader_options=pycolmap.ImageReaderOptions(camera_model=cfg.camera_model),
                                   extraction_options=extraction, device=pycolmap.Device.cpu)
         steps.record("features", options)
@@ -313,6 +380,14 @@ def run_sfm(photos: Path | str, out: Path | str, cfg: SfmConfig = SfmConfig(), *
     bar.close()
     return SfmResult(out, len(names), mapped["registered"], time.perf_counter() - start, mapped["other_models"],
                      mapped.get("flips", []))
+
+
+def _camera_mode(pycolmap, single: bool, mixed: bool) -> pycolmap.CameraMode:
+    """One camera for all images, one per image where they have several sizes (phones mix
+    portrait and landscape), else one per folder of photos."""
+    if single:
+        return pycolmap.CameraMode.SINGLE
+    return pycolmap.CameraMode.PER_IMAGE if mixed else pycolmap.CameraMode.PER_FOLDER
 
 
 def _rebuild_database_without_matches(pycolmap, database: Path) -> None:

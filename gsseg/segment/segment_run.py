@@ -68,12 +68,13 @@ def label_gaussians(run: Run, contributions: Contributions, options: LabelOption
 
 def segment_run(run_dir: Path | str, scene_dir: Path | str | None = None, *, options: LabelOptions = LabelOptions(),
                 masks: str | None = None, split: str = "train", backend: str | Backend = "auto",
-                progress: bool = True) -> Segmentation:
+                other_scene: bool = False, progress: bool = True) -> Segmentation:
     """Label every Gaussian of a run from the masks of ``split`` (the training views by
     default; ``masks``: the folder, by default the one the run was trained on) and the run's
     classifier; write ``RUN/labels.npz`` and the contribution matrix they were chosen from,
-    ``RUN/contributions.npz`` (for relabelling without recomputing it)."""
-    run = load_run(run_dir)
+    ``RUN/contributions.npz`` (for relabelling without recomputing it); ``other_scene``: vote
+    with the masks of a scene other than the run's."""
+    run = load_run(run_dir, other_scene=other_scene)
     masks = masks or run.masks
     contributions = mask_contributions(run, scene_dir, masks=masks, split=split, backend=backend, progress=progress)
     if not len(contributions.labels) and options.method != "classifier":

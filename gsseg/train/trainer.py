@@ -14,7 +14,8 @@ import math
 import shutil
 import time
 import warnings
-from dataclasses import dataclass
+from collections.abc import Collection
+from dataclasses import dataclass, fields, replace
 from pathlib import Path
 
 import numpy as np
@@ -23,14 +24,16 @@ from tqdm import tqdm
 
 from dataset_tools.atomic import require_folder_path
 from dataset_tools.errors import InputError
+from dataset_tools.fingerprint import scene_fingerprint
 from dataset_tools.interrupts import Interrupted, stop_requests
+from dataset_tools.overlap import refuse_overlap, scene_entries
 from dataset_tools.scene import Scene, View, load_scene
 from gsseg.environment import Environment, background_image, mean_up, profile_bins
 from gsseg.gaussians import gaussians_from_points, make_classifier, random_points
 from gsseg.ply import write_ply
 from gsseg.render import Backend, RenderOutput, get_backend, render
 from gsseg.run_folder import RunFolder, write_json, write_torch
-from gsseg.train.config import RunRecord, TrainConfig
+from gsseg.train.config import RunRecord, TrainConfig, scene_difference
 from gsseg.train.losses import knn_identity_loss, object_loss, photometric_loss, psnr
 from gsseg.train.optim import GaussianOptimizer
 from gsseg.train.strategy import DensifyOptions, DensifyStrategy
@@ -116,19 +119,50 @@ def _environment(cfg: TrainConfig, views: list[View]) -> Environment | None:
                        bins=profile_bins(max(max(v.camera.fx, v.camera.fy) for v in views)))
 
 
-def _settled_config(folder: RunFolder, cfg: TrainConfig, resume: bool) -> tuple[TrainConfig, bool]:
-    """The config to train with and whether to resume: the saved one when resuming (with
-    ``iters`` taken from ``cfg`` if it changes). A folder whose start never reached a
-    checkpoint is started afresh either way."""
+def _saved_config(folder: RunFolder) -> TrainConfig:
+    """The options recorded in a run's config.json, refused in one sentence when damaged."""
+    try:
+        return TrainConfig.from_json(json.loads(folder.config.read_text()))
+    except (ValueError, KeyError, TypeError, AttributeError) as e:
+        raise InputError(f"{folder.config}: damaged run file ({type(e).__name__}); restore it, or start the run "
+                         "again in a new folder.") from None
+
+
+def _asked_options(cfg: TrainConfig, given: Collection[str] | None) -> set[str]:
+    """The options a resume was asked for: ``given``, or those of ``cfg`` that are not the
+    defaults."""
+    if given is not None:
+        return set(given)
+    default = TrainConfig()
+    return {f.name for f in fields(TrainConfig) if getattr(cfg, f.name) != getattr(default, f.name)}
+
+
+def _resumed_config(saved: TrainConfig, cfg: TrainConfig, asked: set[str], folder: RunFolder) -> TrainConfig:
+    """The saved options, refusing any asked option that differs from them; ``iters`` may only
+    grow (the schedule then stretches to it)."""
+    for name in sorted(asked - {"iters"}):
+        if getattr(cfg, name) != getattr(saved, name):
+            raise InputError(f"{folder.config}: the run was trained with {name} = {getattr(saved, name)!r}, not "
+                             f"{getattr(cfg, name)!r}; leave the option out to resume, or start a new run elsewhere.")
+    if "iters" not in asked or cfg.iters is None or cfg.iters == saved.timing.iters:
+        return saved
+    if cfg.iters < saved.timing.iters:
+        raise InputError(f"{folder.config}: the run was trained towards {saved.timing.iters} iterations; a resume may "
+                         f"only lengthen it, not shorten it to {cfg.iters}.")
+    return replace(saved, iters=cfg.iters)
+
+
+def _settled_config(folder: RunFolder, cfg: TrainConfig, resume: bool,
+                    given: Collection[str] | None) -> tuple[TrainConfig, bool]:
+    """The config to train with and whether to resume: the saved one when resuming (where
+    :func:`_resumed_config` allows). A folder whose start never reached a checkpoint is
+    started afresh either way."""
     started = folder.config.is_file()
     has_checkpoint = bool(folder.checkpoint_files())
     if resume:
         if not started:
             raise InputError(f"{folder.root} holds no run to resume; start it without --resume.")
-        saved = TrainConfig.from_json(json.loads(folder.config.read_text()))
-        if cfg.iters not in (None, saved.iters):
-            saved = TrainConfig.from_json({**saved.to_json(), "iters": cfg.iters})
-        return saved, has_checkpoint
+        return _resumed_config(_saved_config(folder), cfg, _asked_options(cfg, given), folder), has_checkpoint
     if started and (has_checkpoint or folder.finished):
         raise InputError(f"{folder.root} already holds a run; continue it with --resume or choose another --out.")
     return cfg, False
@@ -225,15 +259,18 @@ def _loss_and_backward(state: _State, view: TrainView, cfg: TrainConfig, backend
 
 
 def train(scene_dir: Path | str, run: Path | str, cfg: TrainConfig, *, resume: bool = False,
-          stop_after: int | None = None, other_scene: bool = False, cache_views: str = "auto",
-          progress: bool = True) -> TrainResult:
+          given: Collection[str] | None = None, stop_after: int | None = None, other_scene: bool = False,
+          cache_views: str = "auto", progress: bool = True) -> TrainResult:
     """Train 3D-GS with object features on a scene folder and write the run folder.
 
     Args:
         scene_dir: the scene (COLMAP model, images, optional masks).
         run: the output run folder.
-        cfg: the options; with ``resume`` those saved in the run are used (``iters`` may change).
-        resume: continue from the latest checkpoint of ``run``.
+        cfg: the options; with ``resume`` those saved in the run are used.
+        resume: continue from the latest checkpoint of ``run``; an option of ``cfg`` that was
+            asked for and differs from the saved one is refused (``iters`` may only grow).
+        given: the names of the options of ``cfg`` that were asked for (a command line's);
+            None: those that differ from :class:`TrainConfig`'s defaults.
         stop_after: write a checkpoint and stop at this step (continue later with ``resume``).
         other_scene: let ``resume`` continue on another scene than the run's.
         cache_views: ``memory``, ``disk`` or ``auto``: where the views wait between the steps
@@ -248,10 +285,12 @@ def train(scene_dir: Path | str, run: Path | str, cfg: TrainConfig, *, resume: b
     if stop_after is not None and stop_after < 1:
         raise InputError(f"--stop-after {stop_after}: give a step of 1 or more.")
     require_folder_path(folder.root)
+    refuse_overlap(folder.root, scene_entries(scene_dir))
     created = not folder.root.exists()
     try:
         with folder.lock():
-            return _train_locked(folder, Path(scene_dir), cfg, resume, stop_after, other_scene, cache_views,
+            cfg, restore = _settled_config(folder, cfg, resume, given)
+            return _train_locked(folder, Path(scene_dir), cfg, restore, stop_after, other_scene, cache_views,
                                  progress)
     except BaseException:
         if created and not folder.config.exists():  # a start that wrote nothing leaves nothing
@@ -259,20 +298,22 @@ def train(scene_dir: Path | str, run: Path | str, cfg: TrainConfig, *, resume: b
         raise
 
 
-def _train_locked(folder: RunFolder, scene_dir: Path, cfg: TrainConfig, resume: bool, stop_after: int | None,
+def _train_locked(folder: RunFolder, scene_dir: Path, cfg: TrainConfig, restore: bool, stop_after: int | None,
                   other_scene: bool, cache_views: str, progress: bool) -> TrainResult:
-    cfg, restore = _settled_config(folder, cfg, resume)
     backend = get_backend(cfg.backend)
     scene = load_scene(scene_dir, images=cfg.images, masks=cfg.masks)
     if cfg.masks is not None and scene.mask_dir is None:
         raise InputError(f"{scene_dir / cfg.masks}: mask folder not found; build masks with `hqmask build` "
                          "or train on colour alone with --masks none.")
     if restore and not other_scene:
-        trained_on = json.loads(folder.config.read_text()).get("scene")
-        if trained_on and Path(trained_on) != scene_dir.resolve():
-            raise InputError(f"{folder.root} was trained on {trained_on}, not {scene_dir.resolve()}; "
-                             "pass that scene, or --allow-other-scene to continue on this one.")
-    train_views = scene.split("train") or scene.views
+        difference = scene_difference(RunRecord.from_json(json.loads(folder.config.read_text())), scene)
+        if difference is not None:
+            raise InputError(f"{scene_dir}: not the scene {folder.root} was trained on ({difference}); pass that "
+                             "scene, or --allow-other-scene to continue on this one.")
+    train_views = scene.split("train")
+    if not train_views:
+        raise InputError(f"{scene_dir}: every view is a test view, none is left to train on; list fewer views "
+                         "under split.test in scene.json.")
     extent = camera_extent(scene.views)
     views = TrainViews(train_views, lambda step: _view_at(step, len(train_views), cfg.seed), mode=cache_views,
                        device=backend.device, progress=progress)
@@ -281,7 +322,8 @@ def _train_locked(folder: RunFolder, scene_dir: Path, cfg: TrainConfig, resume: 
         if restore:
             state.load_state_dict(_latest_good_checkpoint(folder, backend.device))
         write_json(folder.config, RunRecord(cfg, str(scene_dir.resolve()), backend.name, extent,
-                                            scene.views[0].camera.near, views.names).to_json())
+                                            scene.views[0].camera.near, views.names,
+                                            scene_fingerprint(scene)).to_json())
         return _loop(folder, state, views, cfg, backend, stop_after, progress)
     finally:
         views.close()

@@ -26,14 +26,40 @@ from gsseg.segment.reassign import METHODS
 from gsseg.viewer.session import ViewCamera, ViewerSession, browser_camera
 
 
+RESOLVE_TIMEOUT_S = 5.0
+
+
+def resolve_host(host: str, timeout: float = RESOLVE_TIMEOUT_S) -> str:
+    """The numeric address of ``host``, refused in one sentence when it does not resolve
+    within ``timeout`` seconds (a name lookup on a machine without a network can hang)."""
+    found: list = []
+    lookup = threading.Thread(target=lambda: found.append(_lookup(host)), daemon=True)
+    lookup.start()
+    lookup.join(timeout)
+    if not found or isinstance(found[0], OSError):
+        why = f"{found[0].strerror or found[0]}" if found else f"no answer in {timeout:.0f} s"
+        raise InputError(f"cannot serve on {host} ({why}); pass an address of this machine with --host, "
+                         "such as 127.0.0.1 or 0.0.0.0.")
+    return found[0]
+
+
+def _lookup(host: str) -> str | OSError:
+    try:
+        return socket.getaddrinfo(host, None, type=socket.SOCK_STREAM)[0][4][0]
+    except (OSError, UnicodeError) as e:
+        return e if isinstance(e, OSError) else OSError(str(e))
+
+
 def require_free_port(host: str, port: int) -> None:
-    """Refuse a port another process listens on (viser would silently take the next one)."""
-    with socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET, socket.SOCK_STREAM) as s:
+    """Refuse a host that is no address of this machine, or a port another process listens
+    on (viser would silently take the next one); port 0 checks the host alone."""
+    address = resolve_host(host)
+    with socket.socket(socket.AF_INET6 if ":" in address else socket.AF_INET, socket.SOCK_STREAM) as s:
         try:
-            s.bind((host, port))
+            s.bind((address, port))
         except OSError as e:
-            raise InputError(f"cannot serve on {host}:{port} ({e.strerror}); pass another --port, or stop the "
-                             "program that uses it.") from None
+            raise InputError(f"cannot serve on {host}:{port} ({e.strerror}); pass another --port or --host, or stop "
+                             "the program that uses it.") from None
 
 
 class Viewer:
@@ -50,8 +76,7 @@ class Viewer:
                  max_size: int = 640) -> None:
         import viser
 
-        if port:
-            require_free_port(host, port)
+        require_free_port(host, port)
         self.session = session
         self.max_size = max_size
         self.views = session.scene.split("train")
@@ -252,9 +277,10 @@ class Viewer:
 
 
 def serve(run_dir: Path | str, *, scene_dir: Path | str | None = None, host: str = "127.0.0.1", port: int = 8080,
-          max_size: int = 640, backend: str = "auto", on_ready=print) -> None:
-    """Serve a run until Ctrl-C or SIGTERM; ``on_ready`` is called with a line saying where."""
-    session = ViewerSession(load_run(run_dir), scene_dir=scene_dir, backend=backend)
+          max_size: int = 640, backend: str = "auto", other_scene: bool = False, on_ready=print) -> None:
+    """Serve a run until Ctrl-C or SIGTERM; ``on_ready`` is called with a line saying where;
+    ``other_scene``: show it on a scene other than the run's."""
+    session = ViewerSession(load_run(run_dir, other_scene=other_scene), scene_dir=scene_dir, backend=backend)
     viewer = Viewer(session, host=host, port=port, max_size=max_size)
     on_ready(f"serving {run_dir} at {viewer.url} (Ctrl-C stops)")
     if session.segments_missing:

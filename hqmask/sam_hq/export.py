@@ -20,6 +20,7 @@ import torch
 from torch import nn
 
 from dataset_tools.atomic import atomic_directory
+from dataset_tools.overlap import refuse_overlap
 from dataset_tools.errors import InputError
 from hqmask.sam_hq.model import DECODER, DECODER_OUTPUTS, ENCODER, ENCODER_OUTPUTS, MODEL_JSON, ModelInfo
 
@@ -128,6 +129,8 @@ def export_checkpoint(
         raise InputError(f"--model-type {model_type}: use one of {', '.join(MODEL_TYPES)}.")
     if checkpoint is not None and not Path(checkpoint).is_file():
         raise InputError(f"{checkpoint}: checkpoint not found; download it from https://github.com/SysCV/sam-hq.")
+    if checkpoint is not None:
+        refuse_overlap(out_dir, [("the checkpoint", Path(checkpoint))])
     try:
         from segment_anything_hq import sam_model_registry
         from segment_anything_hq.utils.onnx import SamOnnxModel

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from dataset_tools.atomic import write_bytes_atomic
+from dataset_tools.checked_files import read_checked, write_checked
 from dataset_tools.errors import InputError
 from hqmask.sam_hq.transforms import preprocess, transform_coords
 
@@ -168,8 +169,9 @@ class SamHQ:
         if self.cache_dir is not None:
             key = hashlib.sha1(np.ascontiguousarray(image).tobytes() + str(image.shape).encode()).hexdigest()
             cached = self.cache_dir / self.fingerprint / f"{key}.npz"
-            if cached.exists():
-                with np.load(cached) as z:
+            data = read_checked(cached)
+            if data is not None:
+                with np.load(io.BytesIO(data)) as z:
                     return ImageEmbedding(z["image_embeddings"], z["interm_embeddings"], image.shape[:2])
         x = preprocess(image, self.info.image_size, self._mean, self._std)
         embeddings, interm = self.encoder.run(list(ENCODER_OUTPUTS), {"image": x})
@@ -177,7 +179,7 @@ class SamHQ:
         if cached is not None:
             buffer = io.BytesIO()
             np.savez(buffer, image_embeddings=embeddings, interm_embeddings=interm)
-            write_bytes_atomic(cached, buffer.getvalue())
+            write_checked(cached, buffer.getvalue())
         return out
 
     def decode(self, embedding: ImageEmbedding, coords: np.ndarray, labels: np.ndarray) -> Prediction:
