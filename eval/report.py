@@ -33,7 +33,7 @@ from gsseg.segment.reassign import Segmentation
 
 PANELS = ("photo", "ground truth", "predicted (visible)", "removal", "extraction", "recolour")
 TRUTH_PANELS = ("removal", "the view without the object", "extraction", "the object alone")
-EDIT_HEAD = ["object", "removal PSNR (dB)", "removal PSNR, object's region", "removal PSNR, region seen",
+EDIT_HEAD = ["object", "ground-truth match", "removal PSNR (dB)", "removal PSNR, object's region", "removal PSNR, region seen",
              "extraction IoU", "extraction IoU, seen part", "extraction PSNR inside", "leak"]
 
 
@@ -125,9 +125,9 @@ def _sections(ev: Evaluation) -> list[tuple[str, list[str], list[list[str]]]]:
     sections = [("", summary_head, [[str(s["views"]), *scores, _fmt(s["psnr"], 2), _fmt(s["ssim"]), lpips]])]
     if truth:
         label_of = {g: p for p, g in ev.id_map.items()}
-        sections.append(("Objects", ["object", "predicted label", "IoU visible", "acc visible", "IoU extracted",
+        sections.append(("Objects", ["object", "ground-truth match", "IoU visible", "acc visible", "IoU extracted",
                                      "acc extracted"],
-                         [[str(o), str(label_of.get(o, "none")), *(_fmt(v[f"{p}_{m}"]) for p in PROTOCOLS
+                         [[str(label_of.get(o, "none")), str(o), *(_fmt(v[f"{p}_{m}"]) for p in PROTOCOLS
                                                                    for m in ("iou", "acc"))]
                           for o, v in ev.per_object().items()]))
     views = []
@@ -139,9 +139,10 @@ def _sections(ev: Evaluation) -> list[tuple[str, list[str], list[list[str]]]]:
                      views))
     if ev.edits:
         sections.append(("Edits against ground truth", EDIT_HEAD, [
-            [str(obj), *(_fmt(v, 3 if "iou" in k or k == "leak" else 2) for k, v in summarize_edits(
-                [r for r in ev.edits if r["object"] == obj]).items() if k != "pairs")]
-            for obj in sorted({r["object"] for r in ev.edits})]))
+            [str(label), str(obj), *(_fmt(v, 3 if "iou" in k or k == "leak" else 2) for k, v in
+                                     summarize_edits([r for r in ev.edits if r["object"] == obj]).items()
+                                     if k != "pairs")]
+            for obj, label in sorted({(r["object"], r["label"]) for r in ev.edits})]))
     return sections
 
 
@@ -170,7 +171,7 @@ def write_report(ev: Evaluation, renders: list[ViewRenders], edits: dict[str, li
     truth_pngs = {stem: encode_png(row) for stem, row in (truth or {}).items()}
     curve = training_plot(history)
     gt = ev.id_map.get(selected)
-    edit_note = f"edits of predicted label {selected}" + (f" (ground-truth object {gt})" if gt is not None else "")
+    edit_note = f"edits of object {selected}" + (f" (ground-truth match: object {gt})" if gt is not None else "")
     panels = " | ".join(p for p in PANELS if p != "ground truth" or ev.objects)
     with atomic_directory(out_dir, overwrite=overwrite) as tmp:
         ev.save(tmp / "metrics.json")

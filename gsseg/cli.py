@@ -148,19 +148,33 @@ def view(run: Path, scene: Path | None, **options) -> None:
     click.echo("viewer stopped")
 
 
+def _object_option(ctx: click.Context, param: click.Parameter, value: str | None) -> int | None:
+    """``--object``: an object's number (1..255), or ``background`` for object 0."""
+    if value is None or value == "background":
+        return None if value is None else 0
+    if not value.isdigit() or not 1 <= int(value) <= 255:
+        hint = "; object 0 is the background: ask for it by name, --object background" if value == "0" else ""
+        raise click.BadParameter(f"{value!r} is not an object number 1..255 or 'background'{hint}")
+    return int(value)
+
+
 @cli.command()
 @click.argument("run", type=click.Path(path_type=Path))
 @click.option("--out", required=True, type=click.Path(path_type=Path), help="File to write (.ply or .splat).")
-@click.option("--object", "object_id", type=click.IntRange(0, 255), default=None,
-              help="Export this object's Gaussians alone (its ID in labels.npz).")
+@click.option("--object", "object_id", default=None, callback=_object_option,
+              help="Export this object's Gaussians alone: its number in labels.npz, or 'background'.")
 @click.option("--format", "fmt", type=click.Choice(["ply", "splat"]), default=None,
               help="ply: 3D-GS PLY + a label property; splat: 32-byte records for web viewers (default: from --out).")
+@click.option("--environment/--no-environment", default=None,
+              help="Add the learned background as a shell of Gaussians far outside the scene, so that other "
+                   "viewers show what `gsseg render` shows [default: for the whole model, not for one object].")
 @click.option("--force", is_flag=True, help="Replace --out if it exists.")
-def export(run: Path, out: Path, object_id: int | None, fmt: str | None, force: bool) -> None:
+def export(run: Path, out: Path, object_id: int | None, fmt: str | None, environment: bool | None,
+           force: bool) -> None:
     """Write RUN's model, or one object of it, for other 3D-GS viewers and editors."""
     from gsseg.export import export_run
 
-    click.echo(f"wrote {export_run(run, out, object_id=object_id, fmt=fmt, overwrite=force)}")
+    click.echo(f"wrote {export_run(run, out, object_id=object_id, fmt=fmt, environment=environment, overwrite=force)}")
 
 
 @cli.command()
@@ -181,8 +195,9 @@ def demo(out: Path, scene: Path | None, images: str | None, iters: int, max_gaus
     result = run_demo(out, scene=scene, images=images, iters=iters, max_gaussians=max_gaussians, backend=backend,
                       overwrite=force)
     score = "" if result.miou is None else f"mIoU {result.miou:.3f} (visible); "
-    click.echo(f"object {result.object_id} at {np.round(result.point, 3).tolist()} removed, extracted and recoloured "
-               f"in {result.out / 'run' / 'edits'}; {score}{result.seconds / 60:.1f} min")
+    match = "" if result.match is None else f" (ground-truth match: object {result.match})"
+    click.echo(f"object {result.object_id}{match} at {np.round(result.point, 3).tolist()} removed, extracted and "
+               f"recoloured in {result.out / 'run' / 'edits'}; {score}{result.seconds / 60:.1f} min")
     click.echo(f"report: {result.report}")
     click.echo(f"in the browser: gsseg view {result.out / 'run'}")
     if result.warning:

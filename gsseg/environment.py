@@ -24,7 +24,8 @@ import torch.nn.functional as F
 
 from dataset_tools.cameras import PinholeCamera
 from dataset_tools.errors import InputError
-from gsseg.sh import eval_sh, num_coeffs
+from gsseg.gaussians import OBJ_FEAT_DIM, Gaussians
+from gsseg.sh import eval_sh, num_coeffs, rgb_to_sh_dc
 
 
 def ray_directions(camera: PinholeCamera, cam_from_world: torch.Tensor) -> torch.Tensor:
@@ -116,3 +117,72 @@ def background_image(environment: Environment | None, camera: PinholeCamera,
     if environment is None:
         return None
     return environment.to(cam_from_world.device)(camera, cam_from_world)
+
+
+# The environment as ordinary Gaussians, for renderers that know nothing of it (exports).
+SHELL_DISTANCE = 50.0  # the shell's radius in camera extents: a parallax of at most ~1 degree
+SHELL_PIXELS = 2.0  # neighbouring shell Gaussians this many pixels apart at the finest camera
+SHELL_MAX_GAUSSIANS = 200_000  # the spacing widens past this count
+SHELL_OPACITY = 0.99  # the most a 3D-GS renderer lets one Gaussian cover
+
+
+def fibonacci_directions(count: int) -> np.ndarray:
+    """``count`` unit directions spread evenly over the sphere (a Fibonacci lattice): (count, 3)."""
+    k = np.arange(count) + 0.5
+    z = 1.0 - 2.0 * k / count
+    azimuth = math.pi * (3.0 - math.sqrt(5.0)) * k
+    r = np.sqrt(1.0 - z * z)
+    return np.stack([r * np.cos(azimuth), r * np.sin(azimuth), z], 1)
+
+
+def _quats_from_z(dirs: np.ndarray) -> np.ndarray:
+    """(N, 4) (w, x, y, z) quaternions turning the local z axis onto the unit ``dirs`` (N, 3)."""
+    w = 1.0 + dirs[:, 2]
+    q = np.stack([w, -dirs[:, 1], dirs[:, 0], np.zeros(len(dirs))], 1)
+    q[w < 1e-6] = (0.0, 1.0, 0.0, 0.0)  # straight down: half a turn about x
+    return q / np.linalg.norm(q, axis=1, keepdims=True)
+
+
+def shell_spacing(finest_focal: float) -> float:
+    """The angle between neighbouring shell Gaussians (radians): ``SHELL_PIXELS`` pixels at a
+    focal length of ``finest_focal`` pixels, widened so that the sphere needs at most
+    ``SHELL_MAX_GAUSSIANS``."""
+    return max(SHELL_PIXELS / finest_focal, math.sqrt(4 * math.pi / SHELL_MAX_GAUSSIANS))
+
+
+@torch.no_grad()
+def environment_shell(environment: Environment, center: np.ndarray, radius: float, spacing: float) -> Gaussians:
+    """The environment as a sphere of flat, nearly opaque Gaussians about ``center``.
+
+    Each Gaussian takes the environment's colour in its direction from ``center``, as SH degree
+    0, so that any 3D-GS renderer shows behind the model what ``rgb + (1 - alpha) * env``
+    shows; a camera at distance d from ``center`` sees it turned by at most d / ``radius``
+    radians. Neighbours are ``spacing`` radians apart, each a disk tangent to the sphere with
+    a standard deviation of one spacing, so the shell is opaque between them.
+
+    Args:
+        environment: the learned environment.
+        center: (3,) the shell's centre (the cameras' mean centre).
+        radius: its radius, far outside the scene.
+        spacing: angle between neighbouring Gaussians, radians.
+
+    Returns:
+        Gaussians (N, ...) with zero object features; N = ceil(4 pi / spacing^2).
+    """
+    dirs = fibonacci_directions(math.ceil(4 * math.pi / spacing**2))
+    d = torch.as_tensor(dirs, dtype=torch.float32)
+    env = environment.to("cpu")
+    colour = eval_sh(env.degree, env.coeffs[0], d)
+    if env.profile is not None:
+        colour = colour + env.elevation_colour(d)
+    n = len(dirs)
+    sigma = spacing * radius
+    return Gaussians(
+        means=torch.as_tensor(np.asarray(center, np.float64) + radius * dirs, dtype=torch.float32),
+        log_scales=torch.log(torch.tensor([sigma, sigma, 1e-3 * sigma])).repeat(n, 1),
+        quats=torch.as_tensor(_quats_from_z(dirs), dtype=torch.float32),
+        opacity_logits=torch.full((n,), math.log(SHELL_OPACITY / (1 - SHELL_OPACITY))),
+        sh_dc=rgb_to_sh_dc(colour.clamp_min(0.0)),
+        sh_rest=torch.zeros(n, num_coeffs(3) - 1, 3),
+        obj_feat=torch.zeros(n, OBJ_FEAT_DIM),
+    )

@@ -20,9 +20,10 @@ import torch
 from dataset_tools.atomic import write_bytes_atomic
 from dataset_tools.errors import InputError
 from dataset_tools.overlap import refuse_overlap, run_inputs
+from gsseg.environment import SHELL_DISTANCE, environment_shell, shell_spacing
 from gsseg.gaussians import Gaussians
 from gsseg.ply import write_ply
-from gsseg.run import load_run
+from gsseg.run import Run, load_run
 from gsseg.sh import C0
 
 FORMATS = ("ply", "splat")
@@ -54,21 +55,42 @@ def read_splat(path: Path | str) -> np.ndarray:
     return np.frombuffer(data, SPLAT_RECORD)
 
 
+def shell_for(run: Run) -> Gaussians:
+    """The run's environment as a shell of Gaussians (:func:`gsseg.environment.environment_shell`)
+    about the cameras' mean centre, ``SHELL_DISTANCE`` camera extents away."""
+    recorded = run.record.scene_fingerprint
+    if recorded is not None:
+        poses = [np.asarray(v["pose"]).reshape(3, 4) for v in recorded["views"].values()]
+        focal = max(max(v["camera"][:2]) for v in recorded["views"].values())
+    else:  # runs from before the fingerprint: their scene
+        views = run.scene().views
+        poses, focal = [v.cam_from_world for v in views], max(max(v.camera.fx, v.camera.fy) for v in views)
+    center = np.mean([-p[:, :3].T @ p[:, 3] for p in poses], axis=0)
+    return environment_shell(run.environment, center, SHELL_DISTANCE * run.record.extent, shell_spacing(focal))
+
+
 def export_run(run_dir: Path | str, out: Path | str, *, object_id: int | None = None, fmt: str | None = None,
-               overwrite: bool = False) -> Path:
+               environment: bool | None = None, overwrite: bool = False) -> Path:
     """Write a run's model (or the Gaussians of ``object_id`` alone) to ``out`` as ``fmt``
     (default: from the suffix of ``out``, ``.ply`` or ``.splat``), atomically; an existing
-    ``out`` is replaced only with ``overwrite``, and never one inside the run folder."""
+    ``out`` is replaced only with ``overwrite``, and never one inside the run folder.
+
+    ``environment``: add the run's learned background as a shell of Gaussians (label 0), so
+    that a renderer that knows nothing of it shows what ``gsseg render`` shows; None: for the
+    whole model of a run that has one, not for one object."""
     out = Path(out)
     refuse_overlap(out, run_inputs(run_dir))
     if out.is_dir():
         raise InputError(f"{out} is a folder; give a file name for the export.")
-    if out.exists() and not overwrite:
-        raise InputError(f"{out}: already exists; pass --force to replace it or choose another --out.")
     fmt = fmt or out.suffix.lstrip(".").lower()
     if fmt not in FORMATS:
         raise InputError(f"{out}: cannot tell the format; end the name in .ply or .splat, or pass --format.")
+    if out.exists() and not overwrite:
+        raise InputError(f"{out}: already exists; pass --force to replace it or choose another --out.")
     run = load_run(run_dir)
+    if environment and run.environment is None:
+        raise InputError(f"{run.root} was trained without an environment (black behind the Gaussians); export it "
+                         "without one.")
     g = run.gaussians
     labels = None
     if object_id is not None or run.folder.labels.is_file():
@@ -79,6 +101,10 @@ def export_run(run_dir: Path | str, out: Path | str, *, object_id: int | None = 
             raise InputError(f"object {object_id} holds no Gaussian in {run.folder.labels}; pick one of "
                              f"{sorted(set(np.unique(labels).tolist()) - {0})}.")
         g, labels = g.select(torch.from_numpy(keep)), labels[keep]
+    if environment or (environment is None and object_id is None and run.environment is not None):
+        shell = shell_for(run)
+        g = Gaussians(**{k: torch.cat([v, getattr(shell, k)]) for k, v in g.tensors().items()})
+        labels = None if labels is None else np.concatenate([labels, np.zeros(len(shell), labels.dtype)])
     if fmt == "ply":
         return write_ply(g, out, labels=labels)
     write_bytes_atomic(out, splat_records(g).tobytes())

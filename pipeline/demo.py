@@ -65,6 +65,7 @@ class DemoResult:
     miou: float | None
     seconds: float
     warning: str | None = None  # structure from motion's, on cameras posed on the far side
+    match: int | None = None  # the ground-truth object the edited one was matched to, where there is truth
 
 
 def _demo_object(scene_dir: Path, run: Run, labels: np.ndarray, default: int, synth_point: np.ndarray | None,
@@ -171,4 +172,5 @@ def _run_demo(out: Path, scene: Path | None, images: str | None, cfg: TrainConfi
         ev = report_run(run_dir, scene_dir, report, gt_masks=gt_masks, object_id=object_id, backend=backend,
                         progress=progress)
     miou = ev.summary()["visible"]["miou"]
-    return DemoResult(out, report / "report.html", object_id, point, miou, time.perf_counter() - start, warning)
+    return DemoResult(out, report / "report.html", object_id, point, miou, time.perf_counter() - start, warning,
+                      ev.id_map.get(object_id))

@@ -369,6 +369,8 @@ CASES += [
     ("gsseg", "view {w}/run --host 256.1.1.1", "cannot serve on 256.1.1.1"),
     ("gsseg", "view {w}/run --host no.such.host.invalid --port 0", "cannot serve on"),
     ("gsseg", "export {w}/run --out {w}/lpips.onnx --format ply", "already exists"),
+    ("gsseg", "export {w}/run --out {w}/new.ply --object 0", "object 0 is the background"),
+    ("gsseg", "export {w}/run --out {w}/new.ply --object chair", "not an object number"),
     ("hqmask", "build {w}/scene --out-masks n --engine ray --address 127.0.0.1:1", "no Ray cluster answers"),
 ]
 

@@ -135,7 +135,7 @@ def test_report_writes_tables_images_and_a_self_contained_page(segmented, small_
     test_views = [v["view"] for v in metrics["views"]]
     assert test_views and all((out / "images" / f"{v}.png").is_file() for v in test_views)
     md = (out / "report.md").read_text()
-    assert "| object | predicted label |" in md and "images/training.png" in md
+    assert "| object | ground-truth match |" in md and "images/training.png" in md
     page = (out / "report.html").read_text()
     assert page.count("data:image/png;base64,") == len(test_views) + 1 and "src='images/" not in page
     r = subprocess.run([script("gseval"), "compare", str(segmented), str(segmented)], capture_output=True, text=True)

@@ -19,6 +19,7 @@ summed afterwards, so results do not depend on thread timing.
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numba
 import numpy as np
@@ -416,3 +417,14 @@ def accumulate_weights(means2d, conics, opacities, offsets, ids, width, height, 
     for w_id in range(1, n_workers):
         out += buffers[w_id]
     return out
+
+
+def compiled_on_disk() -> bool:
+    """Whether numba's cache on disk holds the kernels a training step runs (binning, blending
+    and its backward pass), so that the first step of a process loads them instead of
+    compiling them (about half a minute). True when numba's cache cannot be inspected."""
+    try:
+        return all(k.signatures or Path(k._cache._cache_file._index_path).is_file()
+                   for k in (bin_gaussians, blend_forward, blend_backward))
+    except AttributeError:  # another numba's internals
+        return True

@@ -12,6 +12,7 @@ from __future__ import annotations
 import json
 import math
 import shutil
+import sys
 import time
 import warnings
 from collections.abc import Collection
@@ -23,15 +24,17 @@ import torch
 from tqdm import tqdm
 
 from dataset_tools.atomic import require_folder_path
+from dataset_tools.cameras import PinholeCamera
 from dataset_tools.errors import InputError
 from dataset_tools.fingerprint import scene_fingerprint
 from dataset_tools.interrupts import Interrupted, stop_requests
 from dataset_tools.overlap import refuse_overlap, scene_entries
 from dataset_tools.scene import Scene, View, load_scene
 from gsseg.environment import Environment, background_image, mean_up, profile_bins
-from gsseg.gaussians import gaussians_from_points, make_classifier, random_points
+from gsseg.gaussians import Gaussians, gaussians_from_points, make_classifier, random_points
 from gsseg.ply import write_ply
 from gsseg.render import Backend, RenderOutput, get_backend, render
+from gsseg.render.cpu_kernels import compiled_on_disk
 from gsseg.run_folder import RunFolder, write_json, write_torch
 from gsseg.train.config import RunRecord, TrainConfig, scene_difference
 from gsseg.train.losses import knn_identity_loss, object_loss, photometric_loss, psnr
@@ -329,9 +332,26 @@ def _train_locked(folder: RunFolder, scene_dir: Path, cfg: TrainConfig, restore:
         views.close()
 
 
+def _warm_up(backend: Backend, progress: bool) -> None:
+    """Compile (or load from numba's cache) the CPU kernels on a tiny render and its backward
+    pass before the progress bar starts, saying so on the first run, so that the bar's
+    estimate times training steps alone."""
+    if backend.name != "cpu":
+        return
+    if progress and not compiled_on_disk():
+        tqdm.write("compiling the CPU kernels (first run only, about half a minute)", file=sys.stderr)
+    xyz = np.array([[0.0, 0.0, 2.0], [0.2, 0.0, 2.5], [0.0, 0.2, 3.0], [-0.2, 0.0, 2.2]])
+    tiny = gaussians_from_points(xyz, np.full((4, 3), 128, np.uint8), initial_opacity=0.5)
+    tiny = Gaussians(**{k: v.clone().requires_grad_(True) for k, v in tiny.tensors().items()})
+    out = render(tiny, PinholeCamera(16, 16, 16.0, 16.0, 8.0, 8.0), torch.eye(4)[:3], with_features=True,
+                 feature_geometry_grad=False, backend=backend)
+    (out.rgb.sum() + out.features.sum()).backward()
+
+
 def _loop(folder: RunFolder, state: _State, views: TrainViews, cfg: TrainConfig, backend: Backend,
           stop_after: int | None, progress: bool) -> TrainResult:
     timing = cfg.timing
+    _warm_up(backend, progress)
     last = min(timing.iters, stop_after) if stop_after is not None else timing.iters
     start_time = time.perf_counter()
     with stop_requests() as stop, tqdm(total=timing.iters, initial=state.step, desc="training", unit="it",

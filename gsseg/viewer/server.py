@@ -13,6 +13,7 @@ import html
 import socket
 import threading
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -146,7 +147,8 @@ class Viewer:
                 return
             with self._render_lock:
                 frame = self.session.frame(self.client_view(client))
-            client.scene.set_background_image(frame, format="jpeg", jpeg_quality=92)
+            if client.client_id in self._dirty:  # the tab may have closed meanwhile
+                client.scene.set_background_image(frame, format="jpeg", jpeg_quality=92)
 
     def _click(self, event) -> None:
         view = self.client_view(event.client)
@@ -175,8 +177,7 @@ class Viewer:
 
     def _add_panel(self) -> None:
         gui, session = self.server.gui, self.session
-        gui.add_markdown(f"**{html.escape(str(session.run.root))}**: {len(session.run.gaussians):,} Gaussians, "
-                         f"rendered by the `{session.backend.name}` backend.")
+        self._header = gui.add_markdown(self._header_text())
         self._status = gui.add_markdown(session.segments_missing or "Click an object to select it.")
         off = session.segmentation is None
         with gui.add_folder("Edit"):
@@ -258,7 +259,14 @@ class Viewer:
         self._say(f"{done} object {step.object_id}; Undo takes it back, Save writes it.")
         self._changed()
 
+    def _header_text(self) -> str:
+        """The run, the Gaussians shown now (after the edits) and the backend."""
+        shown = len(self.session.current()[0])
+        return (f"**{html.escape(str(self.session.run.root))}**: {shown:,} Gaussians, rendered by the "
+                f"`{self.session.backend.name}` backend.")
+
     def _changed(self) -> None:
+        self._header.content = self._header_text()
         self._objects.content = self._objects_table()
         self.refresh()
 
@@ -280,6 +288,8 @@ def serve(run_dir: Path | str, *, scene_dir: Path | str | None = None, host: str
           max_size: int = 640, backend: str = "auto", other_scene: bool = False, on_ready=print) -> None:
     """Serve a run until Ctrl-C or SIGTERM; ``on_ready`` is called with a line saying where;
     ``other_scene``: show it on a scene other than the run's."""
+    # A frame queued for a tab that closed meanwhile is dropped; viser warns of it with a source line.
+    warnings.filterwarnings("ignore", message=r"Queued a \w+ on a closed connection", category=UserWarning)
     session = ViewerSession(load_run(run_dir, other_scene=other_scene), scene_dir=scene_dir, backend=backend)
     viewer = Viewer(session, host=host, port=port, max_size=max_size)
     on_ready(f"serving {run_dir} at {viewer.url} (Ctrl-C stops)")
