@@ -121,6 +121,8 @@ def background_image(environment: Environment | None, camera: PinholeCamera,
 
 # The environment as ordinary Gaussians, for renderers that know nothing of it (exports).
 SHELL_DISTANCE = 50.0  # the shell's radius in camera extents: a parallax of at most ~1 degree
+SHELL_FAR = 500.0  # ... but nearer than this (scene units): web viewers clip at 1000 by default
+SHELL_NEAREST = 5.0  # ... and never nearer than this many camera extents
 SHELL_PIXELS = 2.0  # neighbouring shell Gaussians this many pixels apart at the finest camera
 SHELL_MAX_GAUSSIANS = 200_000  # the spacing widens past this count
 SHELL_OPACITY = 0.99  # the most a 3D-GS renderer lets one Gaussian cover
@@ -141,6 +143,12 @@ def _quats_from_z(dirs: np.ndarray) -> np.ndarray:
     q = np.stack([w, -dirs[:, 1], dirs[:, 0], np.zeros(len(dirs))], 1)
     q[w < 1e-6] = (0.0, 1.0, 0.0, 0.0)  # straight down: half a turn about x
     return q / np.linalg.norm(q, axis=1, keepdims=True)
+
+
+def shell_radius(extent: float) -> float:
+    """The shell's radius for cameras ``extent`` apart: ``SHELL_DISTANCE`` extents, at most
+    ``SHELL_FAR`` scene units where that leaves ``SHELL_NEAREST`` extents."""
+    return max(min(SHELL_DISTANCE * extent, SHELL_FAR), SHELL_NEAREST * extent)
 
 
 def shell_spacing(finest_focal: float) -> float:

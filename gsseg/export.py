@@ -20,7 +20,7 @@ import torch
 from dataset_tools.atomic import write_bytes_atomic
 from dataset_tools.errors import InputError
 from dataset_tools.overlap import refuse_overlap, run_inputs
-from gsseg.environment import SHELL_DISTANCE, environment_shell, shell_spacing
+from gsseg.environment import environment_shell, shell_radius, shell_spacing
 from gsseg.gaussians import Gaussians
 from gsseg.ply import write_ply
 from gsseg.run import Run, load_run
@@ -57,7 +57,7 @@ def read_splat(path: Path | str) -> np.ndarray:
 
 def shell_for(run: Run) -> Gaussians:
     """The run's environment as a shell of Gaussians (:func:`gsseg.environment.environment_shell`)
-    about the cameras' mean centre, ``SHELL_DISTANCE`` camera extents away."""
+    about the cameras' mean centre, :func:`gsseg.environment.shell_radius` away."""
     recorded = run.record.scene_fingerprint
     if recorded is not None:
         poses = [np.asarray(v["pose"]).reshape(3, 4) for v in recorded["views"].values()]
@@ -66,7 +66,7 @@ def shell_for(run: Run) -> Gaussians:
         views = run.scene().views
         poses, focal = [v.cam_from_world for v in views], max(max(v.camera.fx, v.camera.fy) for v in views)
     center = np.mean([-p[:, :3].T @ p[:, 3] for p in poses], axis=0)
-    return environment_shell(run.environment, center, SHELL_DISTANCE * run.record.extent, shell_spacing(focal))
+    return environment_shell(run.environment, center, shell_radius(run.record.extent), shell_spacing(focal))
 
 
 def export_run(run_dir: Path | str, out: Path | str, *, object_id: int | None = None, fmt: str | None = None,

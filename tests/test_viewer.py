@@ -18,12 +18,12 @@ import pytest
 import torch
 from helpers import random_gaussians, script
 from plyfile import PlyData
-from reference_splatting import read_splats, render_reference
 from scipy import ndimage
 from scipy.spatial.transform import Rotation
 
 from dataset_tools.errors import InputError
 from dataset_tools.scene import load_scene
+from eval.standard_render import read_splats, render_reference
 from gsseg.export import export_run, read_splat, splat_records
 from gsseg.ply import read_ply
 from gsseg.run import load_run
@@ -103,7 +103,7 @@ def test_export_ply_keeps_the_3dgs_layout_and_adds_the_labels(segmented, tmp_pat
 @pytest.mark.slow
 def test_an_export_in_a_standard_renderer_looks_like_gsseg_render(trained, small_scene, tmp_path):
     """The exported PLY rendered by an independent implementation of the 3D-GS conventions
-    (tests/reference_splatting.py), on black, against the project's render over its learned
+    (eval/standard_render.py), on black, against the project's render over its learned
     environment, on every view: the shell that carries the environment brings it within 30
     dB; without the shell the background is missing."""
     run = load_run(trained)
@@ -363,6 +363,9 @@ def test_the_viewer_in_headless_chromium_selects_and_removes_by_click(segmented,
         browser.find_element(By.XPATH, "//button[normalize-space(.)='Remove']").click()
         _wait(lambda: viewer.session.steps, what="the removal")
         _wait(lambda: changes(region, highlighted) and changes(region, shown), what="the object to go")
+        left = f"{len(viewer.session.current()[0]):,} Gaussians"  # the header counts what is shown
+        assert left != f"{len(viewer.session.run.gaussians):,} Gaussians"
+        _wait(lambda: left in browser.find_element(By.TAG_NAME, "body").text, what="the count after the removal")
         if target := os.environ.get("VIEWER_SCREENSHOT"):
             browser.get_screenshot_as_file(target)
     finally:

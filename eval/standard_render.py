@@ -1,5 +1,6 @@
-"""An independent reference renderer of 3D-GS PLY files, for tests: the conventions of the
-original 3D-GS rasterizer (EWA splatting with its 0.3 px low-pass, 3-sigma extents, opacity
+"""A reference renderer of 3D-GS PLY files, independent of the project's rasterizer, to check
+that an export looks in other viewers as it looks here: the conventions of the original 3D-GS
+rasterizer (EWA splatting with its 0.3 px low-pass, 3-sigma extents, opacity
 capped at 0.99, alphas under 1/255 skipped, front-to-back compositing by view depth that
 stops below a transmittance of 1e-4, SH evaluated at the direction from the camera centre
 plus 0.5, clamped at 0) written from the paper in NumPy, one Gaussian at a time. It reads the
