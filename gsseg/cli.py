@@ -110,7 +110,10 @@ def segment(run: Path, scene: Path, masks: str, backend: str, other_scene: bool,
 @cli.command()
 @click.argument("run", type=click.Path(path_type=Path))
 @click.option("--point", type=float, nargs=3, default=None, help="X Y Z of a point on the object.")
-@click.option("--click", "click_", type=(str, float, float), default=None, help="VIEW U V: a pixel of a view.")
+@click.option("--click", "click_", type=(str, float, float), multiple=True,
+              help="VIEW U V: a pixel of a view on the object; repeat it to join objects (the parts of one).")
+@click.option("--exclude-click", type=(str, float, float), multiple=True,
+              help="VIEW U V: a pixel on what must not be selected; inside the selection it splits it.")
 @click.option("--object-id", type=int, default=None, help="The object's label.")
 @click.option("--op", type=click.Choice(["remove", "extract", "recolor"]), required=True)
 @click.option("--color", type=click.IntRange(0, 255), nargs=3, default=None, help="R G B (0..255) for --op recolor.")
@@ -120,11 +123,13 @@ def segment(run: Path, scene: Path, masks: str, backend: str, other_scene: bool,
 @click.option("--backend", type=click.Choice(["auto", "cpu", "torch", "gsplat"]), default="auto", show_default=True)
 @click.option("--force", is_flag=True, help="Replace the edit folder if it exists.")
 @other_scene_option
-def edit(run: Path, point, click_, scene, force: bool, **options) -> None:
-    """Select an object by a 3D point, a click or its ID; remove, extract or recolour it."""
+def edit(run: Path, point, click_, exclude_click, scene, force: bool, **options) -> None:
+    """Select an object by a 3D point, clicks or its ID; remove, extract or recolour it."""
     from gsseg.edits import edit_run
+    from gsseg.segment.clicks import Click
 
-    out = edit_run(run, point=point or None, click=click_, scene_dir=scene, overwrite=force, **options)
+    clicks = [Click(v, u, w) for v, u, w in click_] + [Click(v, u, w, positive=False) for v, u, w in exclude_click]
+    out = edit_run(run, point=point or None, clicks=clicks, scene_dir=scene, overwrite=force, **options)
     click.echo(f"wrote {out}")
 
 

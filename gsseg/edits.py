@@ -20,6 +20,7 @@ from gsseg.gaussians import Gaussians
 from gsseg.ply import write_ply
 from gsseg.render import Backend, get_backend
 from gsseg.run import Run, load_run
+from gsseg.segment.clicks import Click, select_by_points
 from gsseg.segment.prompts import pick_object, point_from_click
 from gsseg.sh import C0, rgb_to_sh_dc
 
@@ -62,15 +63,25 @@ def apply_edit(g: Gaussians, selected: np.ndarray, op: str, rgb: tuple[float, fl
     return recolor(g, sel, rgb)
 
 
-def edit_run(run_dir: Path | str, op: str, *, point=None, click=None, object_id: int | None = None,
-             color: tuple[int, int, int] | None = None, name: str | None = None, scene_dir: Path | str | None = None,
-             split: str = "test", k: int = 20, fps: int = 8, backend: str | Backend = "auto", overwrite: bool = False,
-             other_scene: bool = False, progress: bool = True) -> Path:
-    """Select an object (a 3D ``point``, a ``click`` = (view, u, v) or an ``object_id``), apply
-    ``op`` and write ``RUN/edits/NAME/``: ``gaussians.ply``, ``renders/<view>.png`` of the
-    scene's ``split`` views, ``video.mp4`` of those renders, and ``edit.json``."""
-    if sum(x is not None for x in (point, click, object_id)) != 1:
-        raise InputError("give exactly one of --point, --click or --object-id.")
+def edit_run(run_dir: Path | str, op: str, *, point=None, clicks: list[Click] | tuple[Click, ...] = (),
+             object_id: int | None = None, color: tuple[int, int, int] | None = None, name: str | None = None,
+             scene_dir: Path | str | None = None, split: str = "test", k: int = 20, fps: int = 8,
+             backend: str | Backend = "auto", overwrite: bool = False, other_scene: bool = False,
+             progress: bool = True) -> Path:
+    """Select Gaussians, apply ``op`` and write ``RUN/edits/NAME/``: ``gaussians.ply``,
+    ``renders/<view>.png`` of the scene's ``split`` views, ``video.mp4`` of those renders, and
+    ``edit.json``.
+
+    The selection is an ``object_id``, or the object under a 3D ``point`` or a positive click,
+    or (:func:`gsseg.segment.clicks.select_by_points`) several of them joined, split by the
+    negative ``clicks`` that land on them."""
+    positive = [c for c in clicks if c.positive]
+    negative = [c for c in clicks if not c.positive]
+    if (object_id is not None) + (point is not None or bool(positive)) != 1:
+        raise InputError("give --object-id, or --point and/or --click (with --exclude-click to split).")
+    if negative and object_id is not None:
+        raise InputError("--exclude-click splits the selection of --click or --point; give those instead of "
+                         "--object-id.")
     if name is not None:
         plain_name(name, "--name")
     if point is not None and not np.isfinite(np.asarray(point, float)).all():
@@ -82,22 +93,31 @@ def edit_run(run_dir: Path | str, op: str, *, point=None, click=None, object_id:
     segmentation = run.labels()
     backend = get_backend(backend)
     scene = run.scene(scene_dir)
-    if click is not None:
-        view = scene.view(str(click[0]))
-        point = point_from_click(run.gaussians, view.camera, view.cam_from_world, float(click[1]), float(click[2]),
-                                 backend=backend)
-    if point is not None:
-        object_id = pick_object(run.gaussians.means.numpy(), segmentation.labels, np.asarray(point), k)
-    selected = segmentation.selection(int(object_id))
+    lifted = {c: point_from_click(run.gaussians, scene.view(c.view).camera, scene.view(c.view).cam_from_world,
+                                  c.u, c.v, backend=backend) for c in clicks}
+    positives = ([np.asarray(point, float)] if point is not None else []) + [lifted[c] for c in positive]
+    means = run.gaussians.means.numpy()
+    if object_id is None and len(positives) == 1 and not negative:
+        object_id = pick_object(means, segmentation.labels, positives[0], k)
+    if object_id is not None:
+        selected = segmentation.selection(int(object_id))
+        default_name = f"{op}_{object_id}"
+    else:
+        selected = select_by_points(means, run.gaussians.obj_feat.detach().numpy(), segmentation.labels,
+                                    np.stack(positives), np.stack([lifted[c] for c in negative]) if negative
+                                    else None, k)
+        objects = sorted(set(np.unique(segmentation.labels[selected]).tolist()))
+        default_name = f"{op}_{'+'.join(map(str, objects))}" + ("_split" if negative else "")
     if not selected.any():
         raise InputError(f"object {object_id} of {run.folder.labels} holds no Gaussian; pick another object or "
                          "segment the run again.")
     rgb = tuple(c / 255 for c in color) if color is not None else None
     edited = apply_edit(run.gaussians, selected, op, rgb)
-    record = {"op": op, "object_id": int(object_id), "point": None if point is None else np.asarray(point).tolist(),
-              "click": None if click is None else list(map(str, click)), "color": color,
-              "selected_gaussians": int(selected.sum()), "labels": segmentation.settings()}
-    return write_edit(run, edited, run.folder.edit(name or f"{op}_{object_id}"), record, scene=scene, split=split,
+    record = {"op": op, "object_id": None if object_id is None else int(object_id),
+              "point": None if point is None else np.asarray(point).tolist(),
+              "clicks": [{"view": c.view, "u": c.u, "v": c.v, "positive": c.positive} for c in clicks],
+              "color": color, "selected_gaussians": int(selected.sum()), "labels": segmentation.settings()}
+    return write_edit(run, edited, run.folder.edit(name or default_name), record, scene=scene, split=split,
                       fps=fps, backend=backend, overwrite=overwrite, progress=progress)
 
 

@@ -249,8 +249,10 @@ CASES = [
     ("gsseg", "segment {w}/run --scene {w}/other", "not the scene"),
     ("gsseg", "segment {w}/nowhere", "has no config.json"),
     # gsseg edit
-    ("gsseg", "edit {w}/run --op remove", "exactly one of"),
-    ("gsseg", "edit {w}/run --op remove --object-id 1 --point 0 0 0", "exactly one of"),
+    ("gsseg", "edit {w}/run --op remove", "give --object-id, or --point"),
+    ("gsseg", "edit {w}/run --op remove --object-id 1 --point 0 0 0", "give --object-id, or --point"),
+    ("gsseg", "edit {w}/run --op remove --object-id 1 --exclude-click 0001 5 5", "give those instead"),
+    ("gsseg", "edit {w}/run --op remove --exclude-click 0001 5 5", "give --object-id, or --point"),
     ("gsseg", "edit {w}/run --op remove --point nan nan nan", "finite"),
     ("gsseg", "edit {w}/run --op remove --point 99 99 99", "outside the scene bounds"),
     ("gsseg", "edit {w}/run --op recolor --object-id 1 --color 300 0 0", "300"),

@@ -93,7 +93,9 @@ class Viewer:
         self._add_panel()
         self.server.on_client_connect(self._connect)
         self.server.on_client_disconnect(lambda client: self._dirty.pop(client.client_id, threading.Event()).set())
-        self.server.scene.on_click()(self._click)
+        self.server.scene.on_click()(lambda event: self._click(event, "select"))
+        self.server.scene.on_click(modifier="cmd/ctrl")(lambda event: self._click(event, "add"))
+        self.server.scene.on_click(modifier="shift")(lambda event: self._click(event, "exclude"))
 
     @property
     def url(self) -> str:
@@ -150,16 +152,24 @@ class Viewer:
             if client.client_id in self._dirty:  # the tab may have closed meanwhile
                 client.scene.set_background_image(frame, format="jpeg", jpeg_quality=92)
 
-    def _click(self, event) -> None:
+    def _click(self, event, mode: str) -> None:
+        """A click selects (``select``), ctrl-click joins (``add``), shift-click splits
+        (``exclude``): :meth:`ViewerSession.select_at`."""
         view = self.client_view(event.client)
         u, v = event.screen_pos[0] * view.camera.width, event.screen_pos[1] * view.camera.height
         try:
             with self._render_lock:
-                object_id = self.session.select_at(view, u, v)
+                object_id = self.session.select_at(view, u, v, mode)
         except InputError as e:
             self._say(str(e))
             return
-        self._say("Background: nothing selected." if object_id is None else f"Selected object **{object_id}**.")
+        selection = self.session.selection()
+        if object_id is not None:
+            self._say(f"Selected object **{object_id}** (ctrl-click joins another, shift-click splits it).")
+        elif selection is None:
+            self._say("Background: nothing selected.")
+        else:
+            self._say(f"Selected {int(selection.sum()):,} Gaussians by {len(self.session.clicks)} clicks.")
         self.refresh()
 
     # --- the scene and the panel ----------------------------------------------------------
@@ -203,7 +213,8 @@ class Viewer:
         @undo.on_click
         def _(_) -> None:
             step = session.undo()
-            self._say("Nothing to undo." if step is None else f"Took back: {step.op} of object {step.object_id}.")
+            what = "" if step is None else ("the selection" if step.object_id is None else f"object {step.object_id}")
+            self._say("Nothing to undo." if step is None else f"Took back: {step.op} of {what}.")
             self._changed()
 
         @save.on_click
@@ -256,7 +267,8 @@ class Viewer:
             self._say(str(e))
             return
         done = {"remove": "Removed", "extract": "Extracted", "recolor": "Recoloured"}[op]
-        self._say(f"{done} object {step.object_id}; Undo takes it back, Save writes it.")
+        what = "the selection" if step.object_id is None else f"object {step.object_id}"
+        self._say(f"{done} {what}; Undo takes it back, Save writes it.")
         self._changed()
 
     def _header_text(self) -> str:

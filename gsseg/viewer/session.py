@@ -7,7 +7,7 @@ from __future__ import annotations
 import math
 import threading
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -22,6 +22,7 @@ from gsseg.gaussians import Gaussians
 from gsseg.render import get_backend
 from gsseg.render.contributions import Contributions
 from gsseg.run import Run
+from gsseg.segment.clicks import select_by_points
 from gsseg.segment.prompts import object_at_point, point_from_click
 from gsseg.segment.reassign import Segmentation
 from gsseg.segment.segment_run import LabelOptions, label_gaussians, mask_contributions
@@ -60,11 +61,14 @@ def browser_camera(wxyz: np.ndarray, position: np.ndarray, fov_y: float, width: 
 
 @dataclass(frozen=True)
 class EditStep:
-    """One edit of the viewer: ``op`` on object ``object_id`` (``color`` R G B for recolour)."""
+    """One edit of the viewer: ``op`` on object ``object_id`` (``color`` R G B for recolour),
+    or, for a selection made by several clicks (``object_id`` None), on the (N,) bool
+    ``selection`` of the model the step was applied to."""
 
     op: str
-    object_id: int
+    object_id: int | None
     color: tuple[int, int, int] | None = None
+    selection: np.ndarray | None = field(default=None, compare=False, repr=False)
 
 
 class ViewerSession:
@@ -84,7 +88,9 @@ class ViewerSession:
         self.scene = run.scene(scene_dir)
         self.segmentation: Segmentation | None = run.labels() if run.folder.labels.is_file() else None
         self.steps: list[EditStep] = []
-        self.selected: int | None = None
+        self.selected: int | None = None  # the object selected by one click
+        self.clicks: list[tuple[np.ndarray, bool]] = []  # 3D points (and sides) of the clicks selecting now
+        self._click_selection: np.ndarray | None = None  # (N,) bool: a selection made by several clicks
         self.show_segments = False
         self._contributions: Contributions | None = None
         self._current: tuple[Gaussians, Segmentation | None] | None = None
@@ -104,7 +110,7 @@ class ViewerSession:
             if self._current is None:
                 g, seg = self.run.gaussians, self.segmentation
                 for step in self.steps:
-                    selected = seg.selection(step.object_id)
+                    selected = step.selection if step.object_id is None else seg.selection(step.object_id)
                     rgb = None if step.color is None else tuple(c / 255 for c in step.color)
                     g = apply_edit(g, selected, step.op, rgb)
                     if step.op != "recolor":
@@ -119,30 +125,65 @@ class ViewerSession:
             return []
         return [(int(o), int(s.sum())) for o, s in zip(seg.objects, seg.selections) if s.any()]
 
-    def select_at(self, view: ViewCamera, u: float, v: float) -> int | None:
-        """Select the object seen at pixel (u, v) of ``view`` by the rule of ``gsseg edit
-        --click``: the rendered depth there, then the label mode of the ``k`` nearest Gaussians.
-        The object ID, or None (and nothing selected) for the background."""
+    def select_at(self, view: ViewCamera, u: float, v: float, mode: str = "select") -> int | None:
+        """Select what is seen at pixel (u, v) of ``view`` by the rules of ``gsseg edit``.
+
+        ``select`` (a click): the object there (the rendered depth, then the label mode of
+        the ``k`` nearest Gaussians), or nothing on the background. ``add`` (ctrl-click) joins
+        the object there to the selection, ``exclude`` (shift-click) splits the selection
+        there (:func:`gsseg.segment.clicks.select_by_points`). The selected object's ID, or
+        None for the background or a selection of several clicks (see :meth:`selection`)."""
+        if mode not in ("select", "add", "exclude"):
+            raise ValueError(f"unknown selection mode {mode!r}")
         g, seg = self.current()
         if seg is None:
             raise InputError(self.segments_missing)
         point = point_from_click(g, view.camera, view.cam_from_world, u, v, backend=self.backend)
-        object_id = object_at_point(g.means.numpy(), seg.labels, point, self.k)
         with self._lock:
-            self.selected = object_id or None
-        return self.selected
+            if mode == "select" or not self.clicks:
+                if mode == "exclude":
+                    raise InputError("shift-click splits a selection: click an object first.")
+                object_id = object_at_point(g.means.numpy(), seg.labels, point, self.k)
+                self.selected, self._click_selection = object_id or None, None
+                self.clicks = [(point, True)] if object_id else []
+                return self.selected
+            self.clicks.append((point, mode == "add"))
+            positives = np.stack([p for p, positive in self.clicks if positive])
+            negatives = [p for p, positive in self.clicks if not positive]
+            self._click_selection = select_by_points(g.means.numpy(), g.obj_feat.detach().numpy(), seg.labels,
+                                                     positives, np.stack(negatives) if negatives else None, self.k)
+            self.selected = None
+            return None
+
+    def selection(self) -> np.ndarray | None:
+        """(N,) bool: the Gaussians of the current model selected now, or None."""
+        g, seg = self.current()
+        with self._lock:
+            if self._click_selection is not None:
+                return self._click_selection
+            if self.selected is None or seg is None or self.selected not in seg.objects:
+                return None
+            return seg.selection(self.selected)
+
+    def _forget_clicks(self) -> None:
+        self.clicks, self._click_selection = [], None
 
     def edit(self, op: str, color: tuple[int, int, int] | None = None) -> EditStep:
         """Apply ``op`` to the selected object; the step is kept for :meth:`undo` and :meth:`save`."""
         check_edit(op, color)
         with self._lock:
-            if self.selected is None:
+            selection = self.selection()
+            if selection is None:
                 raise InputError("select an object first: click on it in the scene.")
-            step = EditStep(op, self.selected, None if color is None else tuple(int(c) for c in color))
+            step = EditStep(op, self.selected, None if color is None else tuple(int(c) for c in color),
+                            None if self.selected is not None else selection.copy())
             self.steps.append(step)
             self._current = None
             if op == "remove":
                 self.selected = None
+                self._forget_clicks()
+            elif op == "extract" and self._click_selection is not None:
+                self._click_selection = np.ones(int(selection.sum()), bool)  # the whole model is the selection
             return step
 
     def undo(self) -> EditStep | None:
@@ -151,6 +192,7 @@ class ViewerSession:
             if not self.steps:
                 return None
             self._current = None
+            self._forget_clicks()
             return self.steps.pop()
 
     def relabel(self, method: str, gamma_p: float) -> float:
@@ -168,6 +210,7 @@ class ViewerSession:
         with self._lock:
             self.segmentation = segmentation
             self._current = None
+            self._forget_clicks()
             if self.selected is not None and self.selected not in segmentation.objects:
                 self.selected = None
         return seconds
@@ -195,8 +238,9 @@ class ViewerSession:
         """(H, W, 3) uint8: the current model seen from ``view``, coloured by label when
         ``show_segments``, the selected object highlighted."""
         g, seg = self.current()
-        if seg is not None and (self.show_segments or self.selected is not None):
-            g = _painted(g, seg, self.show_segments, self.selected)
+        selection = self.selection()
+        if seg is not None and (self.show_segments or selection is not None):
+            g = _painted(g, seg, self.show_segments, selection)
         return self.run.render_rgb(view, gaussians=g, backend=self.backend)
 
     def save(self, name: str, *, split: str = "test", overwrite: bool = False) -> Path:
@@ -207,21 +251,24 @@ class ViewerSession:
             raise InputError("nothing to save: remove, extract or recolour an object first.")
         g, _ = self.current()
         seg = self.segmentation
-        record = {"steps": [{"op": s.op, "object_id": s.object_id, "color": s.color} for s in steps],
+        record = {"steps": [{"op": s.op, "object_id": s.object_id, "color": s.color,
+                             **({} if s.selection is None else {"selected_gaussians": int(s.selection.sum())})}
+                            for s in steps],
                   "labels": seg.settings(), "gaussians": len(g)}
         return write_edit(self.run, g, self.run.folder.edit(name), record, scene=self.scene, split=split,
                           backend=self.backend, overwrite=overwrite, progress=False)
 
 
-def _painted(g: Gaussians, seg: Segmentation, by_label: bool, selected: int | None) -> Gaussians:
-    """``g`` with every Gaussian in its label's colour (``by_label``) and the ``selected``
-    object drawn halfway towards :data:`HIGHLIGHT`; view-dependent colour dropped where painted."""
+def _painted(g: Gaussians, seg: Segmentation, by_label: bool, selected: np.ndarray | None) -> Gaussians:
+    """``g`` with every Gaussian in its label's colour (``by_label``) and the (N,) bool
+    ``selected`` ones drawn halfway towards :data:`HIGHLIGHT`; view-dependent colour dropped
+    where painted."""
     sh_dc, sh_rest = g.sh_dc.clone(), g.sh_rest.clone()
     if by_label:
         sh_dc = rgb_to_sh_dc(torch.from_numpy(label_palette()[seg.labels] / 255.0).float())
         sh_rest.zero_()
     if selected is not None:
-        mask = torch.from_numpy(seg.selection(selected))
+        mask = torch.from_numpy(selected)
         sh_dc[mask] = 0.5 * sh_dc[mask] + 0.5 * rgb_to_sh_dc(torch.tensor(HIGHLIGHT))
         sh_rest[mask] = 0
     return Gaussians(**{**g.tensors(), "sh_dc": sh_dc, "sh_rest": sh_rest})
