@@ -81,6 +81,16 @@ def test_resume_keeps_its_options_and_its_scene(small_scene, tmp_path):
     assert set(record["scene_fingerprint"]["views"]) == {v.name for v in load_scene(small_scene.root).views}
 
 
+@pytest.mark.parametrize("iters, resets", [(None, [1000]), (3000, [1000]), (1500, []), (1000, []),
+                                           (6000, [2000]), (12000, [4000])])
+def test_a_shorter_run_drops_opacity_resets_rather_than_compress_them(iters, resets):
+    """A reset needs about as many steps to recover from whatever the run's length: its period
+    stretches with ``--iters`` but never shrinks, and resets come only while densifying."""
+    timing = TrainConfig(iters=iters).timing
+    assert [s for s in range(1, timing.iters + 1) if timing.resets_opacity_at(s)] == resets
+    assert timing.densify_until == round(2000 * timing.iters / 3000)  # the rest still scales
+
+
 def test_config_keeps_what_a_run_was_trained_with():
     """A config round-trips through its JSON; a run recorded before ``geometry_from_masks``
     existed (its object loss shaped the geometry) resumes with that coupling."""

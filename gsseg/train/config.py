@@ -26,6 +26,11 @@ class Schedule:
     max_gaussians: int
     object_loss_pixels: int  # pixels drawn per view for the cross-entropy; 0 = every pixel
 
+    def resets_opacity_at(self, step: int) -> bool:
+        """Whether the opacities are reset after ``step``: every ``opacity_reset_every`` steps
+        while densification runs."""
+        return step < self.densify_until and step % self.opacity_reset_every == 0
+
 
 SCHEDULES = {
     # 3D-GS and the paper: 30k iterations, densification 500..15k every 100, opacity reset every 3k.
@@ -108,7 +113,14 @@ class TrainConfig:
     @property
     def timing(self) -> Schedule:
         """The schedule, stretched or shrunk to ``iters`` when it is given, with the cap
-        ``max_gaussians`` when it is given."""
+        ``max_gaussians`` when it is given.
+
+        The opacity reset's period stretches but never shrinks: after a reset the model needs a
+        number of steps to win its opacities back that does not fall with the run's length (on
+        the statue photos the demo's 1500 steps, a reset at step 500 took the training PSNR
+        from 24 to 17 dB and left it at 21 dB; without it the run ends at 25 dB). A schedule
+        shorter than its own then has fewer resets, or none (a reset comes only before the end
+        of densification)."""
         base = SCHEDULES[self.schedule]
         if self.max_gaussians is not None:
             base = replace(base, max_gaussians=self.max_gaussians)
@@ -119,6 +131,7 @@ class TrainConfig:
                   if f.name not in ("iters", "max_gaussians", "object_loss_pixels")}
         # Gradient statistics need a few views between densification steps.
         scaled["densify_every"] = max(scaled["densify_every"], min(10, base.densify_every))
+        scaled["opacity_reset_every"] = max(scaled["opacity_reset_every"], base.opacity_reset_every)
         return replace(base, iters=self.iters, **scaled)
 
     def to_json(self) -> dict:

@@ -121,7 +121,7 @@ class DensifyStrategy:
         if s.densify_from < step < s.densify_until and step % s.densify_every == 0:
             gen = torch.Generator(self.stats.count.device).manual_seed(self.seed * 1_000_003 + step)
             densify_and_prune(opt, self.stats, self.options, step > s.opacity_reset_every, gen)
-        if step < s.densify_until and step % s.opacity_reset_every == 0:
+        if s.resets_opacity_at(step):
             opacities = torch.clamp_max(opt.gaussians.opacities.detach(), 0.01)
             opt.reset("opacity_logits", torch.logit(opacities))
 

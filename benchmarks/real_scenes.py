@@ -1,0 +1,242 @@
+"""Benchmark: real photos with object masks drawn by people (``../shared/data/real``), through
+the README's path: photos -> ``sfm`` -> ``hqmask build`` -> ``gsseg train`` -> ``gsseg
+segment`` -> clicks, scored as SPIn-NeRF / NVOS score a selection (docs/evaluation.md):
+
+- **single click**: one click in the first view at the deepest point of the person's mask;
+  the IoU and pixel accuracy of the selected Gaussians' render against the mask in every
+  other view (mIoU, mAcc);
+- **NoC@90**: clicks added in the first view, each at the deepest pixel of the largest error
+  region there (positive in a miss, negative in a false positive: ``gsseg edit --click`` /
+  ``--exclude-click``), until the mIoU over the other views reaches 0.90 (at most 10);
+- **the masks**: per view the IoU of the mask ID that best covers the person's mask, of the
+  union of the IDs mostly inside it, and how often the best ID is the same one.
+
+The people's masks are drawn on the photos; they are carried into each undistorted view
+through the camera that SfM estimated for the photo. Every stage's wall time is recorded;
+finished stages in ``--work`` are reused. Prints and writes JSON.
+
+    python -m benchmarks.real_scenes [--real ../shared/data/real] [--scenes statue,dtu_scan24]
+        [--work /tmp/real_scenes] [--iters N] [--max-gaussians N] [--out FILE]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+from scipy import ndimage
+
+from benchmarks import record
+from dataset_tools import colmap
+from dataset_tools.errors import InputError
+from dataset_tools.image_files import read_mask
+from dataset_tools.scene import View, load_scene
+from dataset_tools.sfm import run_sfm
+from eval.metrics import binary_scores
+from eval.report import markdown_table
+from gsseg.render_views import segment_pixels
+from gsseg.run import Run, load_run
+from gsseg.segment.clicks import select_by_points
+from gsseg.segment.prompts import point_from_click
+from gsseg.segment.segment_run import segment_run
+from gsseg.train import TrainConfig, train
+from hqmask.build import BuildConfig, build_masks
+from pipeline.demo import demo_images
+
+MASKS = "hqmask"
+TARGET = 0.90
+MAX_CLICKS = 10
+
+
+def people_masks(scene_dir: Path, images: str, drawn: Path) -> dict[str, np.ndarray]:
+    """The people's masks (PNG 0/255, the photo's stem) in each undistorted view of the scene
+    that SfM made, by view name: (H, W) bool."""
+    sfm = scene_dir / ".sfm"
+    model = json.loads((sfm / "steps.json").read_text())["mapping"]["model"]
+    photos = {im.name: im.camera for im in colmap.read_model(sfm / "sparse" / model).images}
+    out = {}
+    for view in load_scene(scene_dir, images=images, masks=None).views:
+        path = drawn / f"{Path(view.name).stem}.png"
+        if not path.is_file() or view.name not in photos:
+            continue
+        mask = read_mask(path) > 127
+        source = colmap.resize_source_camera(photos[view.name], mask.shape[1], mask.shape[0])
+        maps = colmap.undistortion_maps(source, view.camera)
+        out[view.name] = colmap.remap(mask.astype(np.uint8), maps, nearest=True).astype(bool)
+    return out
+
+
+def rendered_selection(run: Run, selected: np.ndarray, view: View) -> np.ndarray:
+    """(H, W) bool: where the ``selected`` Gaussians win the blended weight (``render --what
+    segments`` of a two-label segmentation)."""
+    pose = torch.as_tensor(view.cam_from_world, dtype=torch.float32)
+    return segment_pixels(run.gaussians, selected.astype(np.uint8), view.camera, pose, backend="cpu") == 1
+
+
+def deepest_pixel(region: np.ndarray) -> tuple[float, float]:
+    """(u, v) of the pixel of ``region`` farthest from its border."""
+    depth = ndimage.distance_transform_edt(np.pad(region, 1))[1:-1, 1:-1]
+    row, col = np.unravel_index(depth.argmax(), depth.shape)
+    return col + 0.5, row + 0.5
+
+
+class Clicker:
+    """Selections of a segmented run by clicks in one view, scored in the others."""
+
+    def __init__(self, run: Run, views: list[View], truth: dict[str, np.ndarray]):
+        self.run, self.first, self.others, self.truth = run, views[0], views[1:], truth
+        self.labels = run.labels().labels
+        self.means, self.features = run.gaussians.means.numpy(), run.gaussians.obj_feat.detach().numpy()
+        self.positives: list[np.ndarray] = []
+        self.negatives: list[np.ndarray] = []
+        self.selected = np.zeros(len(self.labels), bool)
+
+    def click(self, u: float, v: float, positive: bool) -> None:
+        """Add a click at pixel (u, v) of the first view; a click on nothing opaque, or a
+        positive one on the background, is spent without changing the selection."""
+        try:
+            point = point_from_click(self.run.gaussians, self.first.camera, self.first.cam_from_world, u, v,
+                                     backend="cpu")
+            positives = self.positives + [point] if positive else self.positives
+            negatives = self.negatives if positive else self.negatives + [point]
+            self.selected = select_by_points(self.means, self.features, self.labels, np.stack(positives),
+                                             np.stack(negatives) if negatives else None)
+            self.positives, self.negatives = positives, negatives
+        except InputError:
+            pass
+
+    def scores(self) -> tuple[float, float]:
+        """mIoU and mAcc of the selection over the other views."""
+        pairs = [binary_scores(rendered_selection(self.run, self.selected, v), self.truth[v.name])
+                 for v in self.others]
+        return float(np.mean([p[0] for p in pairs])), float(np.mean([p[1] for p in pairs]))
+
+    def next_click(self, tried: list[tuple[float, float]]) -> tuple[float, float, bool] | None:
+        """The deepest pixel of the largest error region of the first view that holds no
+        earlier click: (u, v, positive), or None when there is none."""
+        shown = rendered_selection(self.run, self.selected, self.first)
+        truth = self.truth[self.first.name]
+        regions = []
+        for positive, error in ((True, truth & ~shown), (False, shown & ~truth)):
+            ids, n = ndimage.label(error)
+            regions += [(int((ids == k).sum()), positive, ids == k) for k in range(1, n + 1)]
+        for _, positive, region in sorted(regions, key=lambda r: -r[0]):
+            if not any(region[int(v), int(u)] for u, v in tried):
+                return (*deepest_pixel(region), positive)
+        return None
+
+
+def interactive(run: Run, views: list[View], truth: dict[str, np.ndarray]) -> dict:
+    """The single-click scores and the clicks to reach :data:`TARGET` (NoC@90)."""
+    clicker = Clicker(run, views, truth)
+    u, v = deepest_pixel(truth[views[0].name])
+    clicker.click(u, v, True)
+    miou, macc = clicker.scores()
+    curve, tried = [miou], [(u, v)]
+    while curve[-1] < TARGET and len(curve) < MAX_CLICKS:
+        nxt = clicker.next_click(tried)
+        if nxt is None:
+            break
+        clicker.click(*nxt)
+        tried.append(nxt[:2])
+        curve.append(clicker.scores()[0])
+    reached = [k + 1 for k, m in enumerate(curve) if m >= TARGET]
+    return {"single_click_miou": miou, "single_click_macc": macc, "noc90": reached[0] if reached else None,
+            "miou_by_clicks": curve, "clicks": [[float(a), float(b)] for a, b in tried]}
+
+
+def mask_scores(scene_dir: Path, images: str, truth: dict[str, np.ndarray]) -> dict:
+    """Per view: the IoU of the best single mask ID, of the union of the IDs mostly inside the
+    person's mask; and the share of views whose best ID is the commonest best ID."""
+    scene = load_scene(scene_dir, images=images, masks=MASKS)
+    best, union, winners = [], [], []
+    for view in scene.views:
+        if view.name not in truth or view.mask_path is None:
+            continue
+        ids, person = view.load_mask(), truth[view.name]
+        present = [i for i in np.unique(ids) if i]
+        ious = {i: binary_scores(ids == i, person)[0] for i in present}
+        winner = max(ious, key=ious.get) if ious else 0
+        best.append(ious.get(winner, 0.0))
+        winners.append(int(winner))
+        inside = [i for i in present if (person[ids == i]).mean() > 0.5]
+        union.append(binary_scores(np.isin(ids, inside), person)[0])
+    common = max(set(winners), key=winners.count) if winners else 0
+    return {"best_id_iou": float(np.mean(best)), "union_iou": float(np.mean(union)),
+            "consistency": winners.count(common) / max(len(winners), 1), "ids_that_win": len(set(winners))}
+
+
+def run_scene(name: str, real: Path, work: Path, iters: int | None, max_gaussians: int | None) -> dict:
+    """Every stage of one scene, with its wall time; finished stages in ``work`` are reused."""
+    times, out = {}, work / name
+    start = time.perf_counter()
+    scene_dir = run_sfm(real / name / "photos", out / "scene").scene if not (out / "scene" / "scene.json").is_file() \
+        else out / "scene"
+    times["sfm_s"] = time.perf_counter() - start
+    images = demo_images(scene_dir)
+    start = time.perf_counter()
+    if not (scene_dir / MASKS).is_dir():
+        build_masks(scene_dir, BuildConfig(proposer="graph", associate="tracks", out_masks=MASKS, images=images))
+    times["masks_s"] = time.perf_counter() - start
+    run_dir = out / "run"
+    start = time.perf_counter()
+    if not (run_dir / "gaussians.ply").is_file():
+        train(scene_dir, run_dir, TrainConfig(iters=iters, masks=MASKS, images=images, max_gaussians=max_gaussians))
+    times["train_s"] = time.perf_counter() - start
+    start = time.perf_counter()
+    segment_run(run_dir, scene_dir)
+    times["segment_s"] = time.perf_counter() - start
+    truth = people_masks(scene_dir, images, real / name / "masks")
+    run = load_run(run_dir)
+    views = [v for v in run.scene().views if v.name in truth]
+    start = time.perf_counter()
+    clicks = interactive(run, views, truth)
+    times["clicks_s"] = time.perf_counter() - start
+    return {"scene": name, "images": images, "views": len(views), "registered": len(run.scene().views),
+            "photos": len(list((real / name / "photos").iterdir())), "gaussians": len(run.gaussians),
+            "iters": run.config.timing.iters, **clicks, "masks": mask_scores(scene_dir, images, truth), **times}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--real", type=Path, default=Path("../shared/data/real"))
+    parser.add_argument("--scenes", default="statue,dtu_scan24")
+    parser.add_argument("--work", type=Path, default=Path("/tmp/real_scenes"))
+    parser.add_argument("--iters", type=int, default=None, help="Training iterations (default: the CPU schedule's).")
+    parser.add_argument("--max-gaussians", type=int, default=None)
+    parser.add_argument("--out", default=None, help="JSON file (default: benchmarks/results/real_scenes.json).")
+    args = parser.parse_args()
+    results = {"scenes": []}
+    for name in args.scenes.split(","):
+        results["scenes"].append(run_scene(name, args.real, args.work, args.iters, args.max_gaussians))
+        print(json.dumps(results["scenes"][-1], indent=2))
+    record.save("real_scenes", results, out=args.out)
+
+
+def report(r: dict) -> tuple[str, str]:
+    def noc(x: dict) -> str:
+        return str(x["noc90"]) if x["noc90"] is not None else f">{MAX_CLICKS}"
+
+    headline = "; ".join(f"{x['scene']}: one click mIoU {x['single_click_miou']:.3f}, NoC@90 {noc(x)}"
+                         for x in r["scenes"])
+    rows = [[x["scene"], f"{x['registered']}/{x['photos']}", x["images"], str(x["iters"]), f"{x['gaussians']:,}",
+             f"{x['single_click_miou']:.3f}", f"{x['single_click_macc']:.3f}", noc(x),
+             " ".join(f"{m:.2f}" for m in x["miou_by_clicks"]),
+             f"{x['masks']['best_id_iou']:.2f} / {x['masks']['union_iou']:.2f} / {x['masks']['consistency']:.2f}",
+             " / ".join(f"{x[k]:.0f}" for k in ("sfm_s", "masks_s", "train_s", "segment_s", "clicks_s"))]
+            for x in r["scenes"]]
+    table = markdown_table(["scene", "registered", "images", "iterations", "Gaussians", "mIoU, 1 click",
+                            "mAcc, 1 click", "NoC@90", "mIoU after each click",
+                            "masks: best ID / union / consistency", "seconds: sfm / masks / train / segment / clicks"],
+                           rows)
+    return headline, ("People's masks of the real captures (docs/evaluation.md has the protocols); the first view "
+                      "is clicked, the others scored. A stage reused from an earlier run shows about 0 s.\n\n"
+                      + table)
+
+
+if __name__ == "__main__":
+    main()
