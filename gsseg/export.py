@@ -85,9 +85,10 @@ def export_run(run_dir: Path | str, out: Path | str, *, object_id: int | None = 
     fmt = fmt or out.suffix.lstrip(".").lower()
     if fmt not in FORMATS:
         raise InputError(f"{out}: cannot tell the format; end the name in .ply or .splat, or pass --format.")
+    run = load_run(run_dir)
+    refuse_overlap(out, run.inputs())  # nor anything of the scene it was trained on
     if out.exists() and not overwrite:
         raise InputError(f"{out}: already exists; pass --force to replace it or choose another --out.")
-    run = load_run(run_dir)
     if environment and run.environment is None:
         raise InputError(f"{run.root} was trained without an environment (black behind the Gaussians); export it "
                          "without one.")

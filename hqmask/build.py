@@ -25,7 +25,7 @@ from dataset_tools.errors import InputError
 from dataset_tools.image_files import encode_png, read_mask
 from dataset_tools.locks import exclusive_folder
 from dataset_tools.names import plain_name
-from dataset_tools.overlap import refuse_overlap, scene_inputs
+from dataset_tools.overlap import refuse_overlap, scene_entries, scene_inputs
 from dataset_tools.scene import Scene, View, load_scene
 from hqmask.association import associate_flow, associate_tracks
 from hqmask.association.anchors import sighting, triangulate
@@ -153,8 +153,8 @@ def build_masks(scene_dir: Path | str, cfg: BuildConfig, *, engine: Engine = Eng
     out_dir = scene_dir / cfg.out_masks
     reads = scene_inputs(scene_dir, [cfg.from_masks])
     refuse_overlap(out_dir, reads)
-    if cfg.dataset:
-        refuse_overlap(cfg.dataset, [*reads, ("the mask folder it writes", out_dir)])
+    if cfg.dataset:  # a dataset is no part of the scene: it may replace nothing in it
+        refuse_overlap(cfg.dataset, [*scene_entries(scene_dir), ("the mask folder it writes", out_dir)])
     make = partial(make_proposer, cfg.proposer, cfg.model, device=cfg.device, threads=cfg.threads,
                    points_per_side=cfg.points_per_side,
                    embedding_cache=scene_dir / CACHE / "sam-hq-embeddings" if cfg.cache_embeddings else None)
