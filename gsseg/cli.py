@@ -168,18 +168,28 @@ def _object_option(ctx: click.Context, param: click.Parameter, value: str | None
 @click.option("--out", required=True, type=click.Path(path_type=Path), help="File to write (.ply or .splat).")
 @click.option("--object", "object_id", default=None, callback=_object_option,
               help="Export this object's Gaussians alone: its number in labels.npz, or 'background'.")
+@click.option("--point", type=float, nargs=3, default=None, help="Export the object under X Y Z alone.")
+@click.option("--click", "click_", type=(str, float, float), multiple=True,
+              help="VIEW U V: export the object clicked alone; repeat to join objects (as gsseg edit).")
+@click.option("--exclude-click", type=(str, float, float), multiple=True,
+              help="VIEW U V: split the clicked selection there (as gsseg edit).")
+@click.option("--scene", default=None, type=click.Path(path_type=Path), help="The run's scene, where it moved.")
 @click.option("--format", "fmt", type=click.Choice(["ply", "splat"]), default=None,
               help="ply: 3D-GS PLY + a label property; splat: 32-byte records for web viewers (default: from --out).")
 @click.option("--environment/--no-environment", default=None,
               help="Add the learned background as a shell of Gaussians far outside the scene, so that other "
                    "viewers show what `gsseg render` shows [default: for the whole model, not for one object].")
 @click.option("--force", is_flag=True, help="Replace --out if it exists.")
-def export(run: Path, out: Path, object_id: int | None, fmt: str | None, environment: bool | None,
-           force: bool) -> None:
-    """Write RUN's model, or one object of it, for other 3D-GS viewers and editors."""
+def export(run: Path, out: Path, object_id: int | None, point, click_, exclude_click, scene: Path | None,
+           fmt: str | None, environment: bool | None, force: bool) -> None:
+    """Write RUN's model, or one object or clicked selection of it, for other 3D-GS viewers."""
     from gsseg.export import export_run
+    from gsseg.segment.clicks import Click
 
-    click.echo(f"wrote {export_run(run, out, object_id=object_id, fmt=fmt, environment=environment, overwrite=force)}")
+    clicks = [Click(v, u, w) for v, u, w in click_] + [Click(v, u, w, positive=False) for v, u, w in exclude_click]
+    path = export_run(run, out, object_id=object_id, point=point or None, clicks=clicks, scene_dir=scene, fmt=fmt,
+                      environment=environment, overwrite=force)
+    click.echo(f"wrote {path}")
 
 
 @cli.command()

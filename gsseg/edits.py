@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass
 from pathlib import Path
 
 import cv2
@@ -22,6 +23,7 @@ from gsseg.render import Backend, get_backend
 from gsseg.run import Run, load_run
 from gsseg.segment.clicks import Click, select_by_points
 from gsseg.segment.prompts import pick_object, point_from_click
+from gsseg.segment.reassign import Segmentation
 from gsseg.sh import C0, rgb_to_sh_dc
 
 OPS = ("remove", "extract", "recolor")
@@ -63,29 +65,68 @@ def apply_edit(g: Gaussians, selected: np.ndarray, op: str, rgb: tuple[float, fl
     return recolor(g, sel, rgb)
 
 
+@dataclass
+class Selection:
+    """Gaussians chosen by a prompt: ``mask`` (N,) bool, the ``object_id`` when it is one
+    object, and ``name``, a folder-name-safe summary (the object, or the objects joined, with
+    ``_split`` where an excluding click split them)."""
+
+    mask: np.ndarray
+    object_id: int | None
+    name: str
+
+
+def check_prompts(point, clicks: list[Click] | tuple[Click, ...], object_id: int | None) -> None:
+    """Refuse prompts that do not make one selection: exactly one of an object ID or points
+    and clicks, excluding clicks only with points or clicks, finite points."""
+    positive = any(c.positive for c in clicks)
+    if (object_id is not None) + (point is not None or positive) != 1:
+        raise InputError("give --object-id, or --point and/or --click (with --exclude-click to split).")
+    if object_id is not None and clicks:
+        raise InputError("--exclude-click splits the selection of --click or --point; give those instead of "
+                         "--object-id.")
+    if point is not None and not np.isfinite(np.asarray(point, float)).all():
+        raise InputError(f"--point {' '.join(map(str, point))}: give three finite coordinates.")
+
+
+def select(run: Run, segmentation: Segmentation, scene: Scene, *, point=None,
+           clicks: list[Click] | tuple[Click, ...] = (), object_id: int | None = None, k: int = 20,
+           backend: str | Backend = "auto") -> Selection:
+    """The Gaussians of an ``object_id``, of the object under a 3D ``point`` or one positive
+    click, or (:func:`gsseg.segment.clicks.select_by_points`) of several joined and split by
+    the negative ``clicks`` that land on them; clicks name views of ``scene``."""
+    check_prompts(point, clicks, object_id)
+    backend = get_backend(backend)
+    lifted = {c: point_from_click(run.gaussians, scene.view(c.view).camera, scene.view(c.view).cam_from_world,
+                                  c.u, c.v, backend=backend) for c in clicks}
+    positives = ([np.asarray(point, float)] if point is not None else []) + [lifted[c] for c in clicks if c.positive]
+    negatives = [lifted[c] for c in clicks if not c.positive]
+    means = run.gaussians.means.numpy()
+    if object_id is None and len(positives) == 1 and not negatives:
+        object_id = pick_object(means, segmentation.labels, positives[0], k)
+    if object_id is not None:
+        mask = segmentation.selection(int(object_id))
+        if not mask.any():
+            raise InputError(f"object {object_id} of {run.folder.labels} holds no Gaussian; pick another object or "
+                             "segment the run again.")
+        return Selection(mask, int(object_id), str(object_id))
+    mask = select_by_points(means, run.gaussians.obj_feat.detach().numpy(), segmentation.labels,
+                            np.stack(positives), np.stack(negatives) if negatives else None, k)
+    objects = sorted(set(np.unique(segmentation.labels[mask]).tolist()))
+    return Selection(mask, None, "+".join(map(str, objects)) + ("_split" if negatives else ""))
+
+
 def edit_run(run_dir: Path | str, op: str, *, point=None, clicks: list[Click] | tuple[Click, ...] = (),
              object_id: int | None = None, color: tuple[int, int, int] | None = None, name: str | None = None,
              scene_dir: Path | str | None = None, split: str = "test", k: int = 20, fps: int = 8,
              backend: str | Backend = "auto", overwrite: bool = False, other_scene: bool = False,
              progress: bool = True) -> Path:
-    """Select Gaussians, apply ``op`` and write ``RUN/edits/NAME/``: ``gaussians.ply``,
-    ``renders/<view>.png`` of the scene's ``split`` views, ``video.mp4`` of those renders, and
-    ``edit.json``.
-
-    The selection is an ``object_id``, or the object under a 3D ``point`` or a positive click,
-    or (:func:`gsseg.segment.clicks.select_by_points`) several of them joined, split by the
-    negative ``clicks`` that land on them."""
-    positive = [c for c in clicks if c.positive]
-    negative = [c for c in clicks if not c.positive]
-    if (object_id is not None) + (point is not None or bool(positive)) != 1:
-        raise InputError("give --object-id, or --point and/or --click (with --exclude-click to split).")
-    if negative and object_id is not None:
-        raise InputError("--exclude-click splits the selection of --click or --point; give those instead of "
-                         "--object-id.")
+    """Select Gaussians (:func:`select`), apply ``op`` and write ``RUN/edits/NAME/``:
+    ``gaussians.ply``, ``renders/<view>.png`` of the scene's ``split`` views, ``video.mp4`` of
+    those renders, and ``edit.json``."""
+    check_prompts(point, clicks, object_id)
     if name is not None:
         plain_name(name, "--name")
-    if point is not None and not np.isfinite(np.asarray(point, float)).all():
-        raise InputError(f"--point {' '.join(map(str, point))}: give three finite coordinates.")
     check_edit(op, color)
     if color is not None and not all(0 <= c <= 255 for c in color):
         raise InputError(f"--color {' '.join(map(str, color))}: give three values in 0..255.")
@@ -93,31 +134,13 @@ def edit_run(run_dir: Path | str, op: str, *, point=None, clicks: list[Click] | 
     segmentation = run.labels()
     backend = get_backend(backend)
     scene = run.scene(scene_dir)
-    lifted = {c: point_from_click(run.gaussians, scene.view(c.view).camera, scene.view(c.view).cam_from_world,
-                                  c.u, c.v, backend=backend) for c in clicks}
-    positives = ([np.asarray(point, float)] if point is not None else []) + [lifted[c] for c in positive]
-    means = run.gaussians.means.numpy()
-    if object_id is None and len(positives) == 1 and not negative:
-        object_id = pick_object(means, segmentation.labels, positives[0], k)
-    if object_id is not None:
-        selected = segmentation.selection(int(object_id))
-        default_name = f"{op}_{object_id}"
-    else:
-        selected = select_by_points(means, run.gaussians.obj_feat.detach().numpy(), segmentation.labels,
-                                    np.stack(positives), np.stack([lifted[c] for c in negative]) if negative
-                                    else None, k)
-        objects = sorted(set(np.unique(segmentation.labels[selected]).tolist()))
-        default_name = f"{op}_{'+'.join(map(str, objects))}" + ("_split" if negative else "")
-    if not selected.any():
-        raise InputError(f"object {object_id} of {run.folder.labels} holds no Gaussian; pick another object or "
-                         "segment the run again.")
+    chosen = select(run, segmentation, scene, point=point, clicks=clicks, object_id=object_id, k=k, backend=backend)
     rgb = tuple(c / 255 for c in color) if color is not None else None
-    edited = apply_edit(run.gaussians, selected, op, rgb)
-    record = {"op": op, "object_id": None if object_id is None else int(object_id),
-              "point": None if point is None else np.asarray(point).tolist(),
+    edited = apply_edit(run.gaussians, chosen.mask, op, rgb)
+    record = {"op": op, "object_id": chosen.object_id, "point": None if point is None else np.asarray(point).tolist(),
               "clicks": [{"view": c.view, "u": c.u, "v": c.v, "positive": c.positive} for c in clicks],
-              "color": color, "selected_gaussians": int(selected.sum()), "labels": segmentation.settings()}
-    return write_edit(run, edited, run.folder.edit(name or default_name), record, scene=scene, split=split,
+              "color": color, "selected_gaussians": int(chosen.mask.sum()), "labels": segmentation.settings()}
+    return write_edit(run, edited, run.folder.edit(name or f"{op}_{chosen.name}"), record, scene=scene, split=split,
                       fps=fps, backend=backend, overwrite=overwrite, progress=progress)
 
 

@@ -20,10 +20,12 @@ import torch
 from dataset_tools.atomic import write_bytes_atomic
 from dataset_tools.errors import InputError
 from dataset_tools.overlap import refuse_overlap, run_inputs
+from gsseg.edits import check_prompts, select
 from gsseg.environment import environment_shell, shell_radius, shell_spacing
 from gsseg.gaussians import Gaussians
 from gsseg.ply import write_ply
 from gsseg.run import Run, load_run
+from gsseg.segment.clicks import Click
 from gsseg.sh import C0
 
 FORMATS = ("ply", "splat")
@@ -69,15 +71,18 @@ def shell_for(run: Run) -> Gaussians:
     return environment_shell(run.environment, center, shell_radius(run.record.extent), shell_spacing(focal))
 
 
-def export_run(run_dir: Path | str, out: Path | str, *, object_id: int | None = None, fmt: str | None = None,
-               environment: bool | None = None, overwrite: bool = False) -> Path:
-    """Write a run's model (or the Gaussians of ``object_id`` alone) to ``out`` as ``fmt``
-    (default: from the suffix of ``out``, ``.ply`` or ``.splat``), atomically; an existing
-    ``out`` is replaced only with ``overwrite``, and never one inside the run folder.
+def export_run(run_dir: Path | str, out: Path | str, *, object_id: int | None = None, point=None,
+               clicks: list[Click] | tuple[Click, ...] = (), scene_dir: Path | str | None = None,
+               fmt: str | None = None, environment: bool | None = None, overwrite: bool = False) -> Path:
+    """Write a run's model (or the Gaussians of ``object_id`` alone, or of the selection of a
+    ``point`` and ``clicks`` in views of the run's scene or ``scene_dir``: :func:`gsseg.edits.select`)
+    to ``out`` as ``fmt`` (default: from the suffix of ``out``, ``.ply`` or ``.splat``),
+    atomically; an existing ``out`` is replaced only with ``overwrite``, and never one inside
+    the run folder.
 
     ``environment``: add the run's learned background as a shell of Gaussians (label 0), so
     that a renderer that knows nothing of it shows what ``gsseg render`` shows; None: for the
-    whole model of a run that has one, not for one object."""
+    whole model of a run that has one, not for an object or a selection."""
     out = Path(out)
     refuse_overlap(out, run_inputs(run_dir))
     if out.is_dir():
@@ -93,8 +98,11 @@ def export_run(run_dir: Path | str, out: Path | str, *, object_id: int | None = 
         raise InputError(f"{run.root} was trained without an environment (black behind the Gaussians); export it "
                          "without one.")
     g = run.gaussians
+    prompted = point is not None or bool(clicks)
+    if prompted:
+        check_prompts(point, clicks, object_id)
     labels = None
-    if object_id is not None or run.folder.labels.is_file():
+    if object_id is not None or prompted or run.folder.labels.is_file():
         labels = run.labels().labels
     if object_id is not None:
         keep = labels == object_id
@@ -102,7 +110,11 @@ def export_run(run_dir: Path | str, out: Path | str, *, object_id: int | None = 
             raise InputError(f"object {object_id} holds no Gaussian in {run.folder.labels}; pick one of "
                              f"{sorted(set(np.unique(labels).tolist()) - {0})}.")
         g, labels = g.select(torch.from_numpy(keep)), labels[keep]
-    if environment or (environment is None and object_id is None and run.environment is not None):
+    elif prompted:
+        keep = select(run, run.labels(), run.scene(scene_dir), point=point, clicks=clicks).mask
+        g, labels = g.select(torch.from_numpy(keep)), labels[keep]
+    whole = object_id is None and not prompted
+    if environment or (environment is None and whole and run.environment is not None):
         shell = shell_for(run)
         g = Gaussians(**{k: torch.cat([v, getattr(shell, k)]) for k, v in g.tensors().items()})
         labels = None if labels is None else np.concatenate([labels, np.zeros(len(shell), labels.dtype)])

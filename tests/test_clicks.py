@@ -97,6 +97,11 @@ def test_exclude_click_splits_an_object_joined_to_another(segmented, tmp_path):
     assert (alone & truth).sum() / (alone | truth).sum() > 0.95
     record = json.loads((run_dir / "edits" / f"extract_{a}_split" / "edit.json").read_text())
     assert [c["positive"] for c in record["clicks"]] == [True, False] and record["object_id"] is None
+    exported = tmp_path / "alone.ply"  # the selection is an object like any other for export
+    r = subprocess.run([script("gsseg"), "export", str(run_dir), "--out", str(exported), "--click", va, str(ua),
+                        str(wa), "--exclude-click", vb, str(ub), str(wb)], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert len(read_ply(exported)) == alone.sum()  # no environment shell for a selection
     seg.save(run.folder.labels)  # the original labels: two clicks join the two objects
     joined = chosen(edit("--click", va, str(ua), str(wa), "--click", vb, str(ub), str(wb), "--name", "joined"))
     np.testing.assert_array_equal(joined, (seg.labels == a) | (seg.labels == b))
