@@ -88,7 +88,8 @@ def report(r: dict) -> tuple[str, str]:
                          for x in r["scenes"])
     rows = [[x["scene"], f"{x['size'][0]}x{x['size'][1]}", str(x["views"]), str(x["iters"]), f"{x['gaussians']:,}",
              f"{x['test_psnr']:.2f}", f"{x['test_ssim']:.3f}",
-             f"{x['peak_psnr']:.2f} at {x['peak_step']} / {x['final_psnr']:.2f}", f"{x['sfm_s']:.0f} / {x['train_s']:.0f}"]
+             f"{x['peak_psnr']:.2f} at {x['peak_step']} / {x['final_psnr']:.2f}",
+             f"{x['sfm_s']:.0f} / {x['train_s']:.0f}"]
             for x in r["scenes"]]
     table = markdown_table(["scene", "size", "views", "iterations", "Gaussians", "test PSNR", "test SSIM",
                             "training PSNR: peak / end", "seconds: sfm / train"], rows)

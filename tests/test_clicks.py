@@ -21,7 +21,6 @@ from gsseg.render_views import segment_pixels
 from gsseg.run import load_run
 from gsseg.segment.clicks import select_by_points, split_by_graph
 from gsseg.segment.prompts import point_from_click
-from gsseg.segment.reassign import Segmentation
 
 
 def test_a_negative_click_splits_two_blobs_along_the_graph_not_across_it():
@@ -62,12 +61,9 @@ def _clickable(run, labels: np.ndarray, objects: list[int]) -> dict[int, tuple[s
     return found
 
 
-@pytest.mark.slow
-def test_exclude_click_splits_an_object_joined_to_another(segmented, tmp_path):
-    """The two largest objects of the test run given one label (as the weight-free masks join
-    a dark head to the dark bush behind it): one click selects both; an excluding click on the
-    second leaves the first alone (IoU > 0.95 with its own Gaussians); two clicks on the
-    parts join them again."""
+def _joined(segmented: Path, tmp_path: Path):
+    """A copy of the test run whose two largest objects a and b share a's label in labels.npz:
+    (run folder, run, its original labels, the joined labels (N,), a, b)."""
     run_dir = Path(shutil.copytree(segmented, tmp_path / "run"))
     run = load_run(run_dir)
     seg = run.labels()
@@ -76,6 +72,16 @@ def test_exclude_click_splits_an_object_joined_to_another(segmented, tmp_path):
     merged = np.where(seg.labels == b, a, seg.labels).astype(np.uint8)
     objects = np.array([o for o in seg.objects if o != b], np.uint8)
     replace(seg, labels=merged, objects=objects, selections=merged[None] == objects[:, None]).save(run.folder.labels)
+    return run_dir, run, seg, merged, a, b
+
+
+@pytest.mark.slow
+def test_exclude_click_splits_an_object_joined_to_another(segmented, tmp_path):
+    """The two largest objects of the test run given one label (as the weight-free masks join
+    a dark head to the dark bush behind it): one click selects both; an excluding click on the
+    second leaves the first alone (IoU > 0.95 with its own Gaussians); two clicks on the
+    parts join them again."""
+    run_dir, run, seg, merged, a, b = _joined(segmented, tmp_path)
     clicks = _clickable(run, seg.labels, [a, b])
 
     def edit(*args: str) -> Path:
@@ -113,14 +119,7 @@ def test_the_viewers_shift_click_splits_what_gsseg_edit_exclude_click_splits(seg
     ``gsseg edit --click --exclude-click`` selects; removing it keeps the rest; undo restores."""
     from gsseg.viewer.session import ViewCamera, ViewerSession
 
-    run_dir = Path(shutil.copytree(segmented, tmp_path / "run"))
-    run = load_run(run_dir)
-    seg = run.labels()
-    counts = np.bincount(seg.labels, minlength=256)
-    a, b = (int(o) for o in np.argsort(-counts[1:])[:2] + 1)
-    merged = np.where(seg.labels == b, a, seg.labels).astype(np.uint8)
-    objects = np.array([o for o in seg.objects if o != b], np.uint8)
-    replace(seg, labels=merged, objects=objects, selections=merged[None] == objects[:, None]).save(run.folder.labels)
+    run_dir, run, seg, merged, a, b = _joined(segmented, tmp_path)
     clicks = _clickable(run, seg.labels, [a, b])
     session = ViewerSession(load_run(run_dir), backend="cpu")
     scene = run.scene()
