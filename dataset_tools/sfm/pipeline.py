@@ -68,7 +68,7 @@ class SfmConfig:
     scale_thresholds: bool = True  # the mapper's pixel thresholds scaled to the image size; False: COLMAP's
     overlap: int = 10  # sequential matching: each image with its next ``overlap``
     keyframes: int = 30  # sequential matching: keyframes matched exhaustively among themselves
-    deterministic: bool = True  # SIFT and mapping on one thread: the same photos and seed give the same model
+    deterministic: bool = True  # SIFT, matching and mapping on one thread: the same photos and seed, the same model
     seed: int = 0  # of the two-view verification's RANSAC and of the mapper
 
     def check(self) -> None:
@@ -270,7 +270,8 @@ def _run_sfm_locked(pycolmap, photos: Path, out: Path, work: Path, video: bool, 
     steps = _Steps(work)
     pycolmap.logging.minloglevel = 2  # warnings and errors only; progress is shown here
     # On several threads COLMAP's CPU SIFT gives slightly different keypoints from run to run,
-    # and its bundle adjustment (Ceres) rounds differently: one thread gives the same model again.
+    # its matcher writes the verified pairs in another order, and its bundle adjustment (Ceres)
+    # rounds differently: one thread gives the same model again.
     threads = 1 if cfg.deterministic else -1
     bar = tqdm(total=len(STEPS) + 1, desc="sfm", unit="step", disable=not progress)
 
@@ -319,7 +320,7 @@ def _run_sfm_locked(pycolmap, photos: Path, out: Path, work: Path, video: bool, 
     options = {"matcher": matcher, "overlap": cfg.overlap, "keyframes": cfg.keyframes, "seed": cfg.seed}
     if not steps.finished("matches", options):
         _rebuild_database_without_matches(pycolmap, database)
-        matching = pycolmap.FeatureMatchingOptions(use_gpu=False)
+        matching = pycolmap.FeatureMatchingOptions(use_gpu=False, num_threads=threads)
         verification = pycolmap.TwoViewGeometryOptions()
         verification.ransac.random_seed = cfg.seed
         if matcher == "exhaustive":
