@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks import record
-from dataset_tools.sfm import run_sfm
+from benchmarks.real_scenes import posed_scene
 from eval.metrics import psnr, ssim
 from eval.report import markdown_table
 from gsseg.run import load_run
@@ -44,9 +44,7 @@ def curve_summary(history: list[dict]) -> dict:
 def run_scene(name: str, real: Path, work: Path, iters: int | None, max_gaussians: int | None) -> dict:
     out = work / name
     start = time.perf_counter()
-    scene_dir = out / "scene"
-    if not (scene_dir / "scene.json").is_file():
-        run_sfm(real / name / "photos", scene_dir)
+    scene_dir = posed_scene(real / name / "photos", out / "scene")
     sfm_s = time.perf_counter() - start
     images = demo_images(scene_dir)
     start = time.perf_counter()

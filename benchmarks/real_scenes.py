@@ -70,6 +70,13 @@ def people_masks(scene_dir: Path, images: str, drawn: Path) -> dict[str, np.ndar
     return out
 
 
+def posed_scene(photos: Path, out: Path) -> Path:
+    """The scene folder ``sfm`` makes of ``photos`` at ``out``, made once and then reused."""
+    if not (out / "scene.json").is_file():
+        run_sfm(photos, out)
+    return out
+
+
 def rendered_selection(run: Run, selected: np.ndarray, view: View) -> np.ndarray:
     """(H, W) bool: where the ``selected`` Gaussians win the blended weight (``render --what
     segments`` of a two-label segmentation)."""
@@ -174,8 +181,7 @@ def run_scene(name: str, real: Path, work: Path, iters: int | None, max_gaussian
     """Every stage of one scene, with its wall time; finished stages in ``work`` are reused."""
     times, out = {}, work / name
     start = time.perf_counter()
-    scene_dir = run_sfm(real / name / "photos", out / "scene").scene if not (out / "scene" / "scene.json").is_file() \
-        else out / "scene"
+    scene_dir = posed_scene(real / name / "photos", out / "scene")
     times["sfm_s"] = time.perf_counter() - start
     images = demo_images(scene_dir)
     start = time.perf_counter()

@@ -18,6 +18,7 @@ import numpy as np
 import torch
 
 from dataset_tools.atomic import write_bytes_atomic
+from dataset_tools.cameras import CameraPose, PinholeCamera
 from dataset_tools.errors import InputError
 from dataset_tools.overlap import refuse_overlap, run_inputs
 from gsseg.edits import check_prompts, select
@@ -62,12 +63,12 @@ def shell_for(run: Run) -> Gaussians:
     about the cameras' mean centre, :func:`gsseg.environment.shell_radius` away."""
     recorded = run.record.scene_fingerprint
     if recorded is not None:
-        poses = [np.asarray(v["pose"]).reshape(3, 4) for v in recorded["views"].values()]
-        focal = max(max(v["camera"][:2]) for v in recorded["views"].values())
+        cameras = [CameraPose(PinholeCamera(*v["size"], *v["camera"]), np.asarray(v["pose"]).reshape(3, 4))
+                   for v in recorded["views"].values()]
     else:  # runs from before the fingerprint: their scene
-        views = run.scene().views
-        poses, focal = [v.cam_from_world for v in views], max(max(v.camera.fx, v.camera.fy) for v in views)
-    center = np.mean([-p[:, :3].T @ p[:, 3] for p in poses], axis=0)
+        cameras = run.scene().views
+    center = np.mean([c.center for c in cameras], axis=0)
+    focal = max(max(c.camera.fx, c.camera.fy) for c in cameras)
     return environment_shell(run.environment, center, shell_radius(run.record.extent), shell_spacing(focal))
 
 
@@ -101,9 +102,8 @@ def export_run(run_dir: Path | str, out: Path | str, *, object_id: int | None = 
     prompted = point is not None or bool(clicks)
     if prompted:
         check_prompts(point, clicks, object_id)
-    labels = None
-    if object_id is not None or prompted or run.folder.labels.is_file():
-        labels = run.labels().labels
+    segmentation = run.labels() if object_id is not None or prompted or run.folder.labels.is_file() else None
+    labels = None if segmentation is None else segmentation.labels
     if object_id is not None:
         keep = labels == object_id
         if not keep.any():
@@ -111,7 +111,7 @@ def export_run(run_dir: Path | str, out: Path | str, *, object_id: int | None = 
                              f"{sorted(set(np.unique(labels).tolist()) - {0})}.")
         g, labels = g.select(torch.from_numpy(keep)), labels[keep]
     elif prompted:
-        keep = select(run, run.labels(), run.scene(scene_dir), point=point, clicks=clicks).mask
+        keep = select(run, segmentation, run.scene(scene_dir), point=point, clicks=clicks).mask
         g, labels = g.select(torch.from_numpy(keep)), labels[keep]
     whole = object_id is None and not prompted
     if environment or (environment is None and whole and run.environment is not None):

@@ -82,12 +82,12 @@ class Run:
         return self.config.images
 
     def scene(self, scene_dir: Path | str | None = None, *, masks: str | None = None,
-              images: str | None = None, other_scene: bool = False) -> Scene:
+              images: str | None = None) -> Scene:
         """The scene the run was trained on, at the run's image size; ``scene_dir`` names it
         where it moved, and is refused when it is not the scene the run recorded (its views,
-        cameras, poses or images differ) unless ``other_scene``."""
+        cameras, poses or images differ) unless the run was loaded with ``other_scene``."""
         scene = load_scene(scene_dir or self.record.scene, images=images or self.images, masks=masks)
-        difference = None if other_scene or self.other_scene else scene_difference(self.record, scene)
+        difference = None if self.other_scene else scene_difference(self.record, scene)
         if difference is not None:
             raise InputError(f"{scene.root}: not the scene {self.root} was trained on ({difference}); pass that "
                              "scene, or --allow-other-scene to use this one.")
