@@ -70,7 +70,8 @@ def train(scene: Path, run: Path, schedule: str, resume: bool, allow_other_scene
 @click.option("--out", required=True, type=click.Path(path_type=Path), help="Folder to write.")
 @click.option("--split", type=click.Choice(["train", "test", "all"]), default="test", show_default=True)
 @click.option("--what", default="rgb,labels", show_default=True,
-              help="Comma-separated: rgb, labels (classifier argmax), segments (labels.npz, after `gsseg segment`).")
+              help="Comma-separated: rgb, labels (classifier argmax), segments (labels.npz, after `gsseg segment`), "
+                   "depth (float32 .npy, for `hqmask build --depth`).")
 @click.option("--colorize", is_flag=True, help="Also write colour versions of the label maps.")
 @click.option("--images", default=None, help="Image folder defining the cameras (default: the run's).")
 @click.option("--backend", type=click.Choice(["auto", "cpu", "torch", "gsplat"]), default="auto", show_default=True)

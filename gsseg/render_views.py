@@ -10,13 +10,14 @@ from tqdm import tqdm
 
 from dataset_tools.atomic import atomic_directory
 from dataset_tools.errors import InputError
+from dataset_tools.depth_maps import write_depth
 from dataset_tools.image_files import colorize_labels, write_png
 from dataset_tools.overlap import refuse_overlap
 from gsseg.gaussians import Gaussians
-from gsseg.render import Backend, get_backend, render, to_uint8
+from gsseg.render import Backend, get_backend, render, surface_depth, to_uint8
 from gsseg.run import load_run
 
-PRODUCTS = ("rgb", "labels", "segments")
+PRODUCTS = ("rgb", "labels", "segments", "depth")
 
 
 def classify_pixels(features: torch.Tensor, classifier: torch.nn.Linear) -> torch.Tensor:
@@ -53,8 +54,9 @@ def render_run(
     progress: bool = True,
 ) -> Path:
     """Render the views of ``split`` and write ``out/rgb/<stem>.png``, ``out/labels/<stem>.png``
-    (raw 8-bit classifier argmax) and ``out/segments/<stem>.png`` (raw 8-bit labels of
-    ``RUN/labels.npz``, by largest blended weight); with ``colorize`` also
+    (raw 8-bit classifier argmax), ``out/segments/<stem>.png`` (raw 8-bit labels of
+    ``RUN/labels.npz``, by largest blended weight) and ``out/depth/<stem>.npy`` (camera depth,
+    :mod:`dataset_tools.depth_maps`, for ``hqmask build --depth``); with ``colorize`` also
     ``out/<kind>_color/<stem>.png``. The folder appears complete or not at all; ``other_scene``
     renders on a scene other than the run's."""
     unknown = set(what) - set(PRODUCTS)
@@ -74,6 +76,8 @@ def render_run(
             result = run.render(view, with_features="labels" in what, backend=backend)
             if "rgb" in what:
                 write_png(tmp / "rgb" / f"{view.stem}.png", to_uint8(result.rgb))
+            if "depth" in what:
+                write_depth(tmp / "depth" / f"{view.stem}.npy", surface_depth(result))
             maps = {}
             if "labels" in what:
                 maps["labels"] = classify_pixels(result.features, classifier).cpu().numpy().astype(np.uint8)

@@ -3,12 +3,14 @@ multi-view consensus -> noise removal -> ID maps.
 
 Proposals of the expensive proposers are cached per view under
 ``SCENE/.hqmask_cache/<cache name>/`` (the proposer and, for ``sam-hq``, the model and
-grid) so an interrupted run resumes where it stopped; the
+grid; for ``graph`` with ``--depth``, a digest of the depth maps) so an interrupted run
+resumes where it stopped; the
 output mask folder appears whole, atomically, at the end.
 """
 
 from __future__ import annotations
 
+import hashlib
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import partial
@@ -20,6 +22,7 @@ from tqdm import tqdm
 
 from dataset_tools.atomic import atomic_directory, write_bytes_atomic
 from dataset_tools.checked_files import read_checked, write_checked
+from dataset_tools.depth_maps import read_depth
 from dataset_tools.engine import Engine
 from dataset_tools.errors import InputError
 from dataset_tools.image_files import encode_png, read_mask
@@ -56,6 +59,7 @@ class BuildConfig:
     threads: int = 0
     points_per_side: int = 32
     cache_embeddings: bool = False
+    depth: str | None = None  # folder of <stem>.npy depth maps (``gsseg render --what depth``); graph only
 
 
 @dataclass
@@ -73,11 +77,11 @@ def association_for(scene: Scene, associate: str) -> str:
     return "tracks" if len(scene.points) and any(len(v.point_ids) for v in scene.views) else "flow"
 
 
-def propose_view(proposer: Proposer, job: tuple[np.ndarray, View, Path | None]) -> np.ndarray:
-    """The painted proposals of one (image, view, cache file or None) as an (H, W) uint8
-    segment map, written to the cache file when there is one."""
-    image, view, cached = job
-    seg = proposer.propose(image, view).paint()
+def propose_view(proposer: Proposer, job: tuple[np.ndarray, View, Path | None, np.ndarray | None]) -> np.ndarray:
+    """The painted proposals of one (image, view, cache file or None, depth map or None) as an
+    (H, W) uint8 segment map, written to the cache file when there is one."""
+    image, view, cached, depth = job
+    seg = proposer.propose(image, view, depth).paint()
     if seg.max() > 255:
         raise InputError(f"{view.image_path}: the proposer made {seg.max()} segments, more than 255; raise --min-area.")
     seg = seg.astype(np.uint8)
@@ -93,17 +97,35 @@ def read_cached_segments(path: Path | None) -> np.ndarray | None:
     return seg if seg is not None and seg.ndim == 2 and seg.dtype == np.uint8 else None
 
 
+def read_depths(scene: Scene, folder: Path) -> tuple[list[np.ndarray], str]:
+    """Every view's depth map from ``folder/<stem>.npy`` (checked against the view's size), and
+    a digest of them all that names the proposals made with them in the cache."""
+    if not folder.is_dir():
+        raise InputError(f"{folder}: depth folder not found; write it with `gsseg render RUN --what depth "
+                         "--split all --out DIR` and pass DIR/depth.")
+    depths = [read_depth(folder / f"{view.stem}.npy", (view.camera.width, view.camera.height)) for view in scene.views]
+    digest = hashlib.blake2b(digest_size=8)
+    for depth in depths:
+        digest.update(depth.tobytes())
+    return depths, digest.hexdigest()
+
+
 def _segments(scene: Scene, proposer: Proposer, make: Callable[[], Proposer], cfg: BuildConfig,
               images: list[np.ndarray], engine: Engine, progress: bool) -> list[np.ndarray]:
     """Per view, the painted proposals as an (H, W) uint8 segment map, cleaned: read from the
     cache, or proposed on ``engine`` (where each Ray worker makes its proposer once with
     ``make``) and cached view by view, so that an interrupted build resumes."""
-    cache = None if proposer.cache_name is None else scene.root / CACHE / proposer.cache_name
+    depths: list[np.ndarray | None] = [None] * len(scene.views)
+    name = proposer.cache_name
+    if cfg.depth is not None:
+        depths, digest = read_depths(scene, Path(cfg.depth))
+        name = None if name is None else f"{name}-depth-{digest}"
+    cache = None if name is None else scene.root / CACHE / name
     paths = [None if cache is None else cache / f"{view.stem}.png" for view in scene.views]
     segments = {k: seg for k, path in enumerate(paths)
                 if not cfg.force and (seg := read_cached_segments(path)) is not None}
     todo = [k for k in range(len(paths)) if k not in segments]
-    fresh = engine.map_stateful(make, propose_view, [(images[k], scene.views[k], paths[k]) for k in todo],
+    fresh = engine.map_stateful(make, propose_view, [(images[k], scene.views[k], paths[k], depths[k]) for k in todo],
                                 local_state=proposer, desc=f"proposing ({cfg.proposer})", progress=progress)
     segments.update(zip(todo, fresh))
     return [clean_mask(segments[k], cfg.min_area) for k in range(len(paths))]
@@ -150,8 +172,13 @@ def build_masks(scene_dir: Path | str, cfg: BuildConfig, *, engine: Engine = Eng
         raise InputError(f"--consensus {cfg.consensus}: use 0 (off) or a number of neighbouring views.")
     if cfg.proposer == "existing" and not cfg.from_masks:
         raise InputError("--proposer existing needs --from-masks NAME, the mask folder to re-associate.")
+    if cfg.depth is not None and cfg.proposer != "graph":
+        raise InputError(f"--depth: only the graph proposer cuts its masks at depth jumps; leave --depth out with "
+                         f"--proposer {cfg.proposer}.")
     out_dir = scene_dir / cfg.out_masks
     reads = scene_inputs(scene_dir, [cfg.from_masks])
+    if cfg.depth is not None:
+        reads.append(("the depth maps it reads", Path(cfg.depth)))
     refuse_overlap(out_dir, reads)
     if cfg.dataset:  # a dataset is no part of the scene: it may replace nothing in it
         refuse_overlap(cfg.dataset, [*scene_entries(scene_dir), ("the mask folder it writes", out_dir)])

@@ -36,6 +36,9 @@ def cli() -> None:
 @click.option("--threads", type=int, default=0, show_default=True, help="ONNX Runtime threads for sam-hq (0: its choice).")
 @click.option("--points-per-side", type=int, default=32, show_default=True, help="Point grid of the sam-hq generator.")
 @click.option("--cache-embeddings", is_flag=True, help="Keep sam-hq image embeddings under SCENE/.hqmask_cache.")
+@click.option("--depth", default=None,
+              help="Folder of depth maps (`gsseg render RUN --what depth --split all` writes OUT/depth): "
+                   "the graph proposer cuts its masks where depth jumps.")
 @engine_options
 def build(scenes: tuple[Path, ...], engine, **options) -> None:
     """Propose, clean and associate consistent object masks for every view of each SCENE.

@@ -32,6 +32,8 @@ class Proposer(Protocol):
     #: on), or None for proposers not worth caching.
     cache_name: str | None
 
-    def propose(self, image: np.ndarray, view: View) -> Proposals:
-        """Candidate masks for ``image`` (H, W, 3) uint8, the loaded image of ``view``."""
+    def propose(self, image: np.ndarray, view: View, depth: np.ndarray | None = None) -> Proposals:
+        """Candidate masks for ``image`` (H, W, 3) uint8, the loaded image of ``view``;
+        ``depth`` (H, W), the view's camera depth (0: nothing opaque) where the build has one
+        (a proposer may ignore it)."""
         ...

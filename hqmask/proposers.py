@@ -4,7 +4,9 @@
   colour on a region adjacency graph (scikit-image), and background removed: regions that
   touch the image border, and regions whose colour is close to a large border region (a
   tiled floor whose inner tiles do not reach the border), are background. Adjacent
-  foreground regions of similar hue are joined into one object.
+  foreground regions of similar hue are joined into one object. Given the view's depth (a
+  first 3D-GS pass rendered, ``hqmask build --depth``), regions are first cut where the depth
+  jumps and never joined across a jump (:mod:`hqmask.occlusions`).
 - ``existing``: masks already on disk (e.g. a corrupted folder), one proposal per ID.
 - ``sam-hq``: SAM-HQ's automatic mask generator through ONNX Runtime (``--model DIR``).
 """
@@ -18,6 +20,7 @@ import numpy as np
 
 from dataset_tools.errors import InputError
 from dataset_tools.scene import View
+from hqmask.occlusions import cut_at_edges, occlusion_edges
 from hqmask.proposals import Proposals, Proposer
 
 
@@ -32,19 +35,44 @@ class ExistingMasks:
 
     cache_name = None
 
-    def propose(self, image: np.ndarray, view: View) -> Proposals:
+    def propose(self, image: np.ndarray, view: View, depth: np.ndarray | None = None) -> Proposals:
         ids = view.load_mask()
         if ids is None:
             return Proposals(np.zeros((0, *image.shape[:2]), bool), np.zeros(0))
         return _from_label_map(ids)
 
 
-def _adjacent_pairs(seg: np.ndarray) -> np.ndarray:
-    """Unique pairs (a < b) of region labels that touch (4-neighbourhood). Returns (M, 2)."""
-    pairs = [np.stack([seg[:, :-1].ravel(), seg[:, 1:].ravel()], 1), np.stack([seg[:-1].ravel(), seg[1:].ravel()], 1)]
-    p = np.concatenate(pairs)
+def _touching(seg: np.ndarray, edges: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Unique pairs (a < b) of region labels that touch (4-neighbourhood), where neither
+    pixel of the touching pair lies on ``edges`` (H, W) bool, when given. Returns the pairs
+    (M, 2) and how many pixel pairs touch (M,)."""
+    free = np.ones(seg.shape, bool) if edges is None else ~edges
+    across, down = free[:, :-1] & free[:, 1:], free[:-1] & free[1:]
+    p = np.concatenate([np.stack([seg[:, :-1][across], seg[:, 1:][across]], 1),
+                        np.stack([seg[:-1][down], seg[1:][down]], 1)])
     p = np.sort(p[p[:, 0] != p[:, 1]], axis=1)
-    return np.unique(p, axis=0)
+    return np.unique(p, axis=0, return_counts=True)
+
+
+def _join_detached_parts(objects: np.ndarray, pairs: np.ndarray, touches: np.ndarray, min_touch: int) -> np.ndarray:
+    """Objects that touch exactly one other object and no background other than across a depth
+    jump are parts of it (a head that a bush behind it outlines, above its torso): they take
+    its label. ``objects`` (n,): each region's object, -1 for background; ``pairs`` (M, 2) of
+    regions touching off the jumps by ``touches`` (M,) pixel pairs, counted from ``min_touch``.
+    Returns (n,) the objects after joining."""
+    from hqmask.association.common import UnionFind
+
+    a, b = objects[pairs[:, 0]], objects[pairs[:, 1]]
+    keep = (a != b) & (touches >= min_touch)
+    neighbours: dict[int, set[int]] = {}
+    for x, y in zip(a[keep], b[keep]):
+        neighbours.setdefault(int(x), set()).add(int(y))
+        neighbours.setdefault(int(y), set()).add(int(x))
+    uf = UnionFind(len(objects))
+    for label, around in neighbours.items():
+        if label >= 0 and len(around) == 1 and (other := next(iter(around))) >= 0:
+            uf.union(label, other)
+    return np.where(objects >= 0, uf.roots()[np.maximum(objects, 0)], -1)
 
 
 @dataclass
@@ -56,7 +84,8 @@ class GraphProposer:
     the border, and regions within ``background_distance`` (CIELAB) of a border region covering
     at least ``reference_fraction`` of the image. Objects: adjacent foreground regions whose hue
     differs by less than ``hue_degrees`` are joined (two-tone textures stay one object); regions
-    under ``min_fraction`` of the image are dropped.
+    under ``min_fraction`` of the image are dropped. With a depth map, regions are cut where
+    the log depth jumps by more than ``depth_jump`` and touch only where it does not.
     """
 
     scale: float = 100.0
@@ -66,17 +95,23 @@ class GraphProposer:
     reference_fraction: float = 0.02
     hue_degrees: float = 30.0
     min_fraction: float = 0.002
+    depth_jump: float = 0.2
     cache_name = "graph"
 
-    def propose(self, image: np.ndarray, view: View) -> Proposals:
+    def propose(self, image: np.ndarray, view: View, depth: np.ndarray | None = None) -> Proposals:
         from skimage import color, graph, segmentation
 
         from hqmask.association.common import UnionFind
 
         H, W = image.shape[:2]
         lab = color.rgb2lab(image)
-        seg = segmentation.felzenszwalb(image, scale=self.scale, sigma=self.sigma, min_size=max(20, int(0.0005 * H * W)))
+        min_size = max(20, int(0.0005 * H * W))
+        seg = segmentation.felzenszwalb(image, scale=self.scale, sigma=self.sigma, min_size=min_size)
         seg = graph.cut_threshold(seg, graph.rag_mean_color(lab, seg), self.merge_threshold)
+        edges = None
+        if depth is not None:
+            edges = occlusion_edges(depth, self.depth_jump)
+            seg = cut_at_edges(seg, edges, min_size)
         n = int(seg.max()) + 1
         counts = np.bincount(seg.ravel(), minlength=n).astype(float)
         mean = np.stack([np.bincount(seg.ravel(), lab[..., c].ravel(), n) for c in range(3)], 1) / np.maximum(counts, 1)[:, None]
@@ -88,11 +123,14 @@ class GraphProposer:
             background |= np.linalg.norm(mean[:, None] - mean[None, reference], axis=2).min(1) < self.background_distance
         hue = np.degrees(np.arctan2(mean[:, 2], mean[:, 1]))
         uf = UnionFind(n)
-        for a, b in _adjacent_pairs(seg):
+        pairs, touches = _touching(seg, edges)
+        for a, b in pairs:
             if not (background[a] or background[b]) and abs((hue[a] - hue[b] + 180) % 360 - 180) < self.hue_degrees:
                 uf.union(int(a), int(b))
         obj = uf.roots()
         obj[background] = -1
+        if edges is not None:
+            obj = _join_detached_parts(obj, pairs, touches, min_touch=max(3, int(0.01 * np.sqrt(H * W))))
         objects = obj[seg]
         labels, areas = np.unique(objects[objects >= 0], return_counts=True)
         labels = labels[areas >= self.min_fraction * H * W]
@@ -109,7 +147,7 @@ class SamHQProposer:
         points = generator.config.points_per_side
         self.cache_name = f"sam-hq-{generator.model.fingerprint}-p{points}"
 
-    def propose(self, image: np.ndarray, view: View) -> Proposals:
+    def propose(self, image: np.ndarray, view: View, depth: np.ndarray | None = None) -> Proposals:
         return self.generator.generate(image).proposals()
 
 

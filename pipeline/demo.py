@@ -8,13 +8,16 @@
    cleaned (``hqmask build``);
 3. 3D-GS with object features trained on those masks (CPU schedule, shortened, at most
    30k Gaussians);
-4. prior-guided reassignment with the 3D regularisations (``gsseg segment --smooth 16
+4. the masks built again, cut where the trained model's depth jumps (``gsseg render --what
+   depth``, ``hqmask build --depth``): a dark head in front of a dark bush is two objects
+   to colour alone, not to the depth;
+5. prior-guided reassignment with the 3D regularisations (``gsseg segment --smooth 16
    --fill-interiors``): the rims and interiors that the masks leave to the background go
    with their object, so that a removal leaves no outline of it;
-5. the object under a 3D point (the first object's centre in the synthetic scene, the
+6. the object under a 3D point (the first object's centre in the synthetic scene, the
    surface under the centre pixel of the first test view otherwise) removed, extracted
    and recoloured (``gsseg edit``);
-6. the report (``gseval report``) against the exact masks where the scene has them.
+7. the report (``gseval report``) against the exact masks where the scene has them.
 """
 
 from __future__ import annotations
@@ -37,6 +40,7 @@ from dataset_tools.synth import SynthConfig, generate_scene
 from eval.report import default_object, report_run
 from gsseg.edits import edit_run
 from gsseg.render import Backend, get_backend
+from gsseg.render_views import render_run
 from gsseg.run import Run, load_run
 from gsseg.segment.prompts import pick_object, point_from_click
 from gsseg.segment.segment_run import LabelOptions, segment_run
@@ -51,6 +55,7 @@ DEMO_ITERS = 1500
 DEMO_MAX_GAUSSIANS = 30_000  # about two per pixel of a 128x128 view; keeps the demo under 10 min on 2 cores
 DEMO_MAX_SIDE = 640  # on your scene: the largest image copy at most this large
 MASKS = "hqmask"
+DEPTH_MASKS = "hqmask_depth"  # the masks built again at the trained model's depth jumps
 # A removed object's rim and interior stay behind without the 3D regularisations (the can of
 # ../shared/data/beer leaves a glassy outline); benchmarks.edit_quality measures what they cost.
 DEMO_LABELS = LabelOptions(smooth=16, fill=True)
@@ -101,12 +106,25 @@ def demo_images(scene: Path) -> str:
     return present[-1]
 
 
+def masks_at_depth_jumps(run_dir: Path, scene_dir: Path, images: str, out_masks: str, depth_dir: Path, *,
+                         backend: str | Backend = "auto", progress: bool = True) -> Path:
+    """The mask stage's second pass: the trained run's depth of every view at the size of
+    ``images`` (``depth_dir/depth/<stem>.npy``), then the masks built again from it into
+    ``scene_dir/out_masks`` (the ``graph`` proposer, cut at its depth jumps). Returns the mask
+    folder."""
+    render_run(run_dir, scene_dir, depth_dir, split="all", what=("depth",), images=images, backend=backend,
+               progress=progress)
+    return build_masks(scene_dir, BuildConfig(proposer="graph", associate="tracks", out_masks=out_masks, images=images,
+                                              depth=str(depth_dir / "depth")), progress=progress).out_dir
+
+
 def run_demo(out: Path | str, *, scene: Path | str | None = None, images: str | None = None, iters: int = DEMO_ITERS,
              max_gaussians: int = DEMO_MAX_GAUSSIANS, backend: str = "auto", overwrite: bool = False,
              progress: bool = True) -> DemoResult:
     """Run the pipeline into ``out``: ``out/scene`` (the synthetic scene; for photos or a video,
     the scene structure from motion makes of them; for a scene folder, links to it, so that
-    its masks are written here and never into ``scene``), ``out/run``, ``out/report``. Every
+    its masks are written here and never into ``scene``), ``out/run``, ``out/depth`` (the
+    run's depth maps), ``out/report``. Every
     option is checked before any work; ``images`` defaults to the largest copy at most 640 px."""
     start = time.perf_counter()
     out = Path(out)
@@ -122,7 +140,7 @@ def run_demo(out: Path | str, *, scene: Path | str | None = None, images: str | 
                        else [("the photos", scene)])
     if out.exists() and any(out.iterdir()) and not overwrite:
         raise InputError(f"{out}: already exists and is not empty; pass --force or choose another --out.")
-    for owned in ("scene", "run", "report"):  # --force: the demo's own outputs, nothing else
+    for owned in ("scene", "run", "depth", "report"):  # --force: the demo's own outputs, nothing else
         if (out / owned).is_symlink() or (out / owned).is_file():
             (out / owned).unlink()
         elif (out / owned).exists():
@@ -159,7 +177,9 @@ def _run_demo(out: Path, scene: Path | None, images: str | None, cfg: TrainConfi
                 progress=progress)
     run_dir = out / "run"
     train(scene_dir, run_dir, cfg, progress=progress)
-    segmentation = segment_run(run_dir, scene_dir, options=DEMO_LABELS, masks=MASKS, backend=backend,
+    masks_at_depth_jumps(run_dir, scene_dir, mask_images, DEPTH_MASKS, out / "depth", backend=backend,
+                         progress=progress)
+    segmentation = segment_run(run_dir, scene_dir, options=DEMO_LABELS, masks=DEPTH_MASKS, backend=backend,
                                progress=progress)
     run = load_run(run_dir)
     object_id, point = _demo_object(scene_dir, run, segmentation.labels, default_object(segmentation), synth_point,

@@ -18,7 +18,7 @@ from gsseg.gaussians import Gaussians
 from gsseg.render.backends import BACKENDS, Backend, get_backend
 from gsseg.sh import eval_sh
 
-__all__ = ["BACKENDS", "Backend", "RenderOutput", "get_backend", "render", "to_uint8"]
+__all__ = ["BACKENDS", "Backend", "RenderOutput", "get_backend", "render", "surface_depth", "to_uint8"]
 
 
 @dataclass
@@ -46,6 +46,14 @@ class RenderOutput:
 def to_uint8(rgb: torch.Tensor) -> np.ndarray:
     """(H, W, 3) colour in [0, 1] -> (H, W, 3) uint8 array, rounded."""
     return (rgb.detach().clamp(0, 1) * 255 + 0.5).to(torch.uint8).cpu().numpy()
+
+
+def surface_depth(out: RenderOutput, min_alpha: float = 0.5) -> np.ndarray:
+    """(H, W) float32 camera depth of the surface each pixel sees: the blended depth over the
+    blended opacity where that opacity is at least ``min_alpha``, 0 elsewhere."""
+    alpha = out.alpha.detach().cpu().numpy()
+    depth = out.depth.detach().cpu().numpy() / np.maximum(alpha, 1e-6)
+    return np.where(alpha >= min_alpha, depth, 0.0).astype(np.float32)
 
 
 def render(

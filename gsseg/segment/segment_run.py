@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from dataset_tools.errors import InputError
@@ -73,9 +73,15 @@ def segment_run(run_dir: Path | str, scene_dir: Path | str | None = None, *, opt
     default; ``masks``: the folder, by default the one the run was trained on) and the run's
     classifier; write ``RUN/labels.npz`` and the contribution matrix they were chosen from,
     ``RUN/contributions.npz`` (for relabelling without recomputing it); ``other_scene``: vote
-    with the masks of a scene other than the run's."""
+    with the masks of a scene other than the run's.
+
+    The classifier's classes are the IDs of the masks the run was trained on; another folder
+    (masks rebuilt at the run's depth jumps, ``hqmask build --depth``) numbers its objects
+    anew, so with it the prior is left out: ``gamma_p`` is 0 and the labels record it."""
     run = load_run(run_dir, other_scene=other_scene)
     masks = masks or run.masks
+    if masks != run.masks and options.method == "prior":
+        options = replace(options, gamma_p=0.0)
     contributions = mask_contributions(run, scene_dir, masks=masks, split=split, backend=backend, progress=progress)
     if not len(contributions.labels) and options.method != "classifier":
         raise InputError(f"{Path(scene_dir or run.record.scene) / masks} holds no masks for the {split} views; "

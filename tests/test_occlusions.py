@@ -1,0 +1,176 @@
+"""Masks cut where the depth jumps (``hqmask/occlusions.py``, ``hqmask build --depth``): known
+answers on drawn images, the depth maps' round trip and their errors, and a build that uses the
+exact depth of a synthetic scene."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from dataset_tools import InputError, load_scene
+from dataset_tools.depth_maps import read_depth, write_depth
+from dataset_tools.synth.generator import render_view
+from hqmask.build import CACHE, BuildConfig, build_masks
+from hqmask.occlusions import cut_at_edges, occlusion_edges
+from hqmask.proposers import GraphProposer
+
+
+def test_a_step_in_depth_is_an_edge_and_a_tilted_plane_is_not():
+    rows = np.linspace(1.0, 3.0, 64)[:, None] * np.ones((1, 64))  # a floor seen at a slant: depth x3 over 64 rows
+    assert not occlusion_edges(rows.astype(np.float32), 0.2).any()
+    step = np.ones((64, 64), np.float32)
+    step[:, 32:] = 1.5  # a 50% jump between columns 31 and 32
+    edges = occlusion_edges(step, 0.2)
+    assert edges[:, 31:33].all() and not edges[:, :31].any() and not edges[:, 33:].any()
+    sky = np.ones((64, 64), np.float32)
+    sky[:, 40:] = 0  # nothing opaque: beyond everything
+    assert occlusion_edges(sky, 0.2)[:, 39:41].all()
+
+
+def test_cut_at_edges_splits_only_the_region_that_spans_a_jump():
+    seg = np.zeros((40, 60), np.int64)
+    seg[:, 30:] = 1
+    edges = np.zeros_like(seg, bool)
+    edges[:, 14:16] = True  # crosses region 0 only
+    out = cut_at_edges(seg, edges, min_size=20)
+    assert len(np.unique(out)) == 3
+    assert len(np.unique(out[:, :14])) == 1 and len(np.unique(out[:, 16:30])) == 1
+    assert out[0, 0] != out[0, 20] and len(np.unique(out[:, 30:])) == 1
+    assert (np.unique(out[:, 14:16]) == np.unique(out[:, :16])).all()  # edge pixels join a side
+    tiny = np.zeros_like(seg, bool)
+    tiny[:, 3:5] = True  # leaves a 3-column sliver of 120 pixels under min_size
+    assert len(np.unique(cut_at_edges(seg, tiny, min_size=200))) == 2
+
+
+def _drawn(shapes: list[tuple[str, tuple, tuple[int, int, int], float]], size: int = 128):
+    """An image and its depth: grey floor far behind (depth 5), shapes drawn in order, each
+    ("circle", (cx, cy, r) | "rect", (x0, y0, x1, y1), colour, depth)."""
+    image = np.full((size, size, 3), 150, np.uint8)
+    depth = np.full((size, size), 5.0, np.float32)
+    for kind, geometry, colour, z in shapes:
+        mask = np.zeros((size, size), np.uint8)
+        if kind == "circle":
+            cv2.circle(mask, geometry[:2], geometry[2], 1, -1)
+        else:
+            cv2.rectangle(mask, geometry[:2], geometry[2:], 1, -1)
+        image[mask > 0], depth[mask > 0] = colour, z
+    return image, depth
+
+
+def test_one_colour_at_two_depths_is_two_objects():
+    dark = (40, 60, 40)
+    image, depth = _drawn([("circle", (50, 64, 28), dark, 3.0), ("circle", (80, 64, 26), dark, 1.5)])
+    proposer = GraphProposer()
+    assert len(proposer.propose(image, None).masks) == 1  # colour alone: one blob
+    masks = proposer.propose(image, None, depth).masks
+    assert len(masks) == 2
+    near = depth == 1.5
+    ious = [(m & near).sum() / (m | near).sum() for m in masks]
+    assert max(ious) > 0.9
+
+
+def test_a_part_that_only_depth_jumps_outline_joins_the_object_it_sits_on():
+    image, depth = _drawn([("rect", (0, 101, 127, 127), (150, 150, 150), 2.0),  # the floor it stands on
+                           ("rect", (40, 60, 88, 100), (40, 40, 160), 2.0),  # a blue torso
+                           ("circle", (64, 48, 16), (190, 150, 60), 2.0)])  # an ochre head on it
+    proposer = GraphProposer()
+    assert len(proposer.propose(image, None).masks) == 2  # hues 100 degrees apart
+    masks = proposer.propose(image, None, depth).masks
+    assert len(masks) == 1 and masks[0][48, 64] and masks[0][80, 64]
+
+
+def test_depth_maps_round_trip_and_are_checked(tmp_path):
+    depth = np.random.default_rng(0).uniform(0, 4, (6, 8)).astype(np.float32)
+    write_depth(tmp_path / "a.npy", depth)
+    assert np.array_equal(read_depth(tmp_path / "a.npy", (8, 6)), depth)
+    with pytest.raises(InputError, match=r"a\.npy.*view is 6x8"):
+        read_depth(tmp_path / "a.npy", (6, 8))
+    with pytest.raises(InputError, match=r"b\.npy: depth map not found"):
+        read_depth(tmp_path / "b.npy", (8, 6))
+    (tmp_path / "c.npy").write_bytes(b"not numpy")
+    with pytest.raises(InputError, match=r"c\.npy: not a depth map"):
+        read_depth(tmp_path / "c.npy", (8, 6))
+    write_depth(tmp_path / "d.npy", -depth)
+    with pytest.raises(InputError, match="negative"):
+        read_depth(tmp_path / "d.npy", (8, 6))
+
+
+def _exact_depths(small_scene, folder):
+    """The generator's exact depth of every view of ``small_scene``, as ``render --what depth``
+    writes it (0 for the sky)."""
+    for view in load_scene(small_scene.root, masks=None).views:
+        _, _, depth, _ = render_view(small_scene.layout, view.camera, view.cam_from_world, 1)
+        write_depth(folder / f"{view.stem}.npy", np.where(np.isfinite(depth), depth, 0.0))
+    return folder
+
+
+def test_a_build_with_depth_keeps_the_objects_and_caches_apart(small_scene, scene_copy, tmp_path):
+    depth = _exact_depths(small_scene, tmp_path / "depth")
+    plain = build_masks(scene_copy, BuildConfig(out_masks="plain"), progress=False)
+    cut = build_masks(scene_copy, BuildConfig(out_masks="cut", depth=str(depth)), progress=False)
+    assert plain.n_objects >= 1 and cut.n_objects >= 1
+    cached = sorted(p.name for p in (scene_copy / CACHE).iterdir())
+    assert cached[0] == "graph" and cached[1].startswith("graph-depth-") and len(cached) == 2
+    plain_cover, cut_cover = _covered(small_scene, scene_copy, "plain"), _covered(small_scene, scene_copy, "cut")
+    assert cut_cover.mean() >= plain_cover.mean() - 0.01  # measured: 0.950 against 0.918
+    assert cut_cover.min() >= 0.6  # measured: 0.75 against 0.41
+
+
+def _covered(small_scene, scene_dir, masks) -> np.ndarray:
+    """For every object of over 100 px in every view, the share of it that its best mask ID covers."""
+    covered = []
+    for truth, built in zip(load_scene(small_scene.root).views, load_scene(scene_dir, masks=masks).views):
+        gt, ids = truth.load_mask(), built.load_mask()
+        for obj in np.unique(gt[gt > 0]):
+            if (gt == obj).sum() > 100:
+                inside = ids[gt == obj]
+                covered.append(np.bincount(inside[inside > 0], minlength=256).max() / len(inside))
+    return np.array(covered)
+
+
+def test_a_depth_map_of_the_wrong_size_is_refused_naming_it(small_scene, scene_copy, tmp_path):
+    depth = _exact_depths(small_scene, tmp_path / "depth")
+    first = sorted(depth.glob("*.npy"))[0]
+    write_depth(first, np.ones((5, 5), np.float32))
+    with pytest.raises(InputError, match=rf"{first.name}: a float32 map of shape \(5, 5\)"):
+        build_masks(scene_copy, BuildConfig(out_masks="cut", depth=str(depth)), progress=False)
+    assert not (scene_copy / "cut").exists()
+    with pytest.raises(InputError, match="only the graph proposer"):
+        build_masks(scene_copy, BuildConfig(out_masks="cut", proposer="existing", from_masks="object_mask",
+                                            depth=str(depth)), progress=False)
+    with pytest.raises(InputError, match="depth folder not found"):
+        build_masks(scene_copy, BuildConfig(out_masks="cut", depth=str(tmp_path / "none")), progress=False)
+
+
+def test_the_rendered_depth_of_a_run_is_the_scenes(trained, small_scene, tmp_path):
+    """``gsseg render --what depth`` of the 200-iteration test run against the generator's
+    exact depth: the median relative error where both see a surface."""
+    from gsseg.render_views import render_run
+
+    out = render_run(trained, small_scene.root, tmp_path / "r", split="all", what=("depth",), backend="cpu",
+                     progress=False)
+    errors = []
+    for view in load_scene(small_scene.root, masks=None).views:
+        rendered = read_depth(out / "depth" / f"{view.stem}.npy", (view.camera.width, view.camera.height))
+        _, _, exact, _ = render_view(small_scene.layout, view.camera, view.cam_from_world, 1)
+        both = (rendered > 0) & np.isfinite(exact)
+        assert both.mean() > 0.5
+        errors.append(np.median(np.abs(rendered[both] - exact[both]) / exact[both]))
+    assert np.median(errors) < 0.1  # measured: 0.059
+
+
+def test_voting_with_masks_the_run_was_not_trained_on_leaves_the_prior_out(segmented, small_scene, tmp_path):
+    import shutil
+
+    from gsseg.segment.segment_run import LabelOptions, segment_run
+
+    run = tmp_path / "run"
+    shutil.copytree(segmented, run)
+    scene = tmp_path / "scene"
+    shutil.copytree(small_scene.root, scene)
+    shutil.copytree(scene / "object_mask", scene / "rebuilt")
+    same = segment_run(run, scene, options=LabelOptions(gamma_p=0.2), backend="cpu", progress=False)
+    other = segment_run(run, scene, options=LabelOptions(gamma_p=0.2), masks="rebuilt", backend="cpu",
+                        progress=False)
+    assert same.gamma_p == 0.2 and other.gamma_p == 0.0
