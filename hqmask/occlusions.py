@@ -77,3 +77,14 @@ def cut_at_edges(segments: np.ndarray, edges: np.ndarray, min_size: int) -> np.n
         out[where][inside] = renumber[owner[inside]]
         next_label += len(large)
     return out
+
+
+def occluding_pixels(depth: np.ndarray, jump: float) -> np.ndarray:
+    """Pixels on the near side of a depth jump whose far side is a surface, not the sky: where
+    something stands in front of the scene. (H, W) bool; ``depth`` and ``jump`` as in
+    :func:`occlusion_edges`."""
+    z = cv2.medianBlur(log_depth(depth), 5)
+    kernel = np.ones((3, 3), np.uint8)
+    low, high = cv2.erode(z, kernel), cv2.dilate(z, kernel)
+    beside_sky = cv2.dilate((depth <= 0).astype(np.uint8), kernel) > 0
+    return (high - low > jump) & (z - low < jump / 2) & ~beside_sky

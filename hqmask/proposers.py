@@ -17,10 +17,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from scipy import ndimage
 
 from dataset_tools.errors import InputError
 from dataset_tools.scene import View
-from hqmask.occlusions import cut_at_edges, occlusion_edges
+from hqmask.occlusions import cut_at_edges, occluding_pixels, occlusion_edges
 from hqmask.proposals import Proposals, Proposer
 
 
@@ -42,6 +43,14 @@ class ExistingMasks:
         return _from_label_map(ids)
 
 
+def _in_front(seg: np.ndarray, occluding: np.ndarray, share: float) -> np.ndarray:
+    """(n,) bool: regions of ``seg`` (H, W) that hold pixels on the near side of a depth jump
+    (``occluding`` (H, W) bool) for at least ``share`` of their outline's length."""
+    n = int(seg.max()) + 1
+    outline = ndimage.grey_erosion(seg, size=3) != ndimage.grey_dilation(seg, size=3)
+    return np.bincount(seg[occluding], minlength=n) >= share * np.maximum(np.bincount(seg[outline], minlength=n), 1)
+
+
 def _touching(seg: np.ndarray, edges: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Unique pairs (a < b) of region labels that touch (4-neighbourhood), where neither
     pixel of the touching pair lies on ``edges`` (H, W) bool, when given. Returns the pairs
@@ -54,23 +63,36 @@ def _touching(seg: np.ndarray, edges: np.ndarray | None = None) -> tuple[np.ndar
     return np.unique(p, axis=0, return_counts=True)
 
 
-def _join_detached_parts(objects: np.ndarray, pairs: np.ndarray, touches: np.ndarray, min_touch: int) -> np.ndarray:
-    """Objects that touch exactly one other object and no background other than across a depth
-    jump are parts of it (a head that a bush behind it outlines, above its torso): they take
-    its label. ``objects`` (n,): each region's object, -1 for background; ``pairs`` (M, 2) of
-    regions touching off the jumps by ``touches`` (M,) pixel pairs, counted from ``min_touch``.
-    Returns (n,) the objects after joining."""
+def _join_detached_parts(objects: np.ndarray, areas: np.ndarray, pairs: np.ndarray, touches: np.ndarray,
+                         min_touch: int) -> np.ndarray:
+    """Objects that touch no background other than across a depth jump are parts of what they
+    stand on or grow from (a head that the bush behind it outlines, above its torso): each
+    joins the larger object it shares the longest boundary with, off the jumps.
+
+    Args:
+        objects: (n,) each region's object (a region index), -1 for background.
+        areas: (n,) each region's pixel count.
+        pairs: (M, 2) regions touching off the jumps, by ``touches`` (M,) pixel pairs; pairs
+            under ``min_touch`` do not count.
+    Returns:
+        (n,) the objects after joining.
+    """
     from hqmask.association.common import UnionFind
 
+    object_area = np.bincount(objects[objects >= 0], areas[objects >= 0], minlength=len(objects))
     a, b = objects[pairs[:, 0]], objects[pairs[:, 1]]
     keep = (a != b) & (touches >= min_touch)
-    neighbours: dict[int, set[int]] = {}
-    for x, y in zip(a[keep], b[keep]):
-        neighbours.setdefault(int(x), set()).add(int(y))
-        neighbours.setdefault(int(y), set()).add(int(x))
+    shared: dict[int, dict[int, int]] = {}
+    for x, y, t in zip(a[keep], b[keep], touches[keep]):
+        for one, other in ((int(x), int(y)), (int(y), int(x))):
+            shared.setdefault(one, {}).setdefault(other, 0)
+            shared[one][other] += int(t)
     uf = UnionFind(len(objects))
-    for label, around in neighbours.items():
-        if label >= 0 and len(around) == 1 and (other := next(iter(around))) >= 0:
+    for label, around in shared.items():
+        if label < 0 or -1 in around:
+            continue
+        other = max(around, key=around.get)
+        if object_area[other] > object_area[label]:
             uf.union(label, other)
     return np.where(objects >= 0, uf.roots()[np.maximum(objects, 0)], -1)
 
@@ -96,6 +118,7 @@ class GraphProposer:
     hue_degrees: float = 30.0
     min_fraction: float = 0.002
     depth_jump: float = 0.2
+    occluding_share: float = 0.25
     cache_name = "graph"
 
     def propose(self, image: np.ndarray, view: View, depth: np.ndarray | None = None) -> Proposals:
@@ -107,7 +130,8 @@ class GraphProposer:
         lab = color.rgb2lab(image)
         min_size = max(20, int(0.0005 * H * W))
         seg = segmentation.felzenszwalb(image, scale=self.scale, sigma=self.sigma, min_size=min_size)
-        seg = graph.cut_threshold(seg, graph.rag_mean_color(lab, seg), self.merge_threshold)
+        if seg.max() > 0:  # a RAG needs two regions
+            seg = graph.cut_threshold(seg, graph.rag_mean_color(lab, seg), self.merge_threshold)
         edges = None
         if depth is not None:
             edges = occlusion_edges(depth, self.depth_jump)
@@ -120,7 +144,10 @@ class GraphProposer:
         background = np.zeros(n, bool)
         background[border] = True
         if len(reference):
-            background |= np.linalg.norm(mean[:, None] - mean[None, reference], axis=2).min(1) < self.background_distance
+            alike = np.linalg.norm(mean[:, None] - mean[None, reference], axis=2).min(1) < self.background_distance
+            if depth is not None:  # what stands in front of the scene is no floor tile, whatever its colour
+                alike &= ~_in_front(seg, occluding_pixels(depth, self.depth_jump), self.occluding_share)
+            background |= alike
         hue = np.degrees(np.arctan2(mean[:, 2], mean[:, 1]))
         uf = UnionFind(n)
         pairs, touches = _touching(seg, edges)
@@ -130,7 +157,7 @@ class GraphProposer:
         obj = uf.roots()
         obj[background] = -1
         if edges is not None:
-            obj = _join_detached_parts(obj, pairs, touches, min_touch=max(3, int(0.01 * np.sqrt(H * W))))
+            obj = _join_detached_parts(obj, counts, pairs, touches, min_touch=max(3, int(0.01 * np.sqrt(H * W))))
         objects = obj[seg]
         labels, areas = np.unique(objects[objects >= 0], return_counts=True)
         labels = labels[areas >= self.min_fraction * H * W]

@@ -174,3 +174,12 @@ def test_voting_with_masks_the_run_was_not_trained_on_leaves_the_prior_out(segme
     other = segment_run(run, scene, options=LabelOptions(gamma_p=0.2), masks="rebuilt", backend="cpu",
                         progress=False)
     assert same.gamma_p == 0.2 and other.gamma_p == 0.0
+
+
+def test_what_stands_in_front_is_an_object_whatever_its_colour():
+    floor = (150, 150, 150)
+    image, depth = _drawn([("circle", (64, 64, 24), floor, 1.0)])  # the floor's colour, 5x nearer
+    proposer = GraphProposer()
+    assert len(proposer.propose(image, None).masks) == 0  # colour alone: one more floor tile
+    masks = proposer.propose(image, None, depth).masks
+    assert len(masks) == 1 and masks[0][64, 64] and not masks[0][5, 5]
