@@ -54,8 +54,13 @@ FAMILIES = ("blobs", "proposer")
 SEVERITIES = ("low", "medium", "high")
 METHODS = ("tracks", "flow")
 # where a cell passes: every family, every cell of 16 views or more
-TARGETS = {"exact": 0.995, ("medium", "tracks"): 0.95, ("medium", "flow"): 0.93, ("low", "tracks"): 0.97,
-           ("low", "flow"): 0.97}
+TARGETS = {
+    "exact": 0.995,
+    ("medium", "tracks"): 0.95,
+    ("medium", "flow"): 0.93,
+    ("low", "tracks"): 0.97,
+    ("low", "flow"): 0.97,
+}
 CEILING_GAP = 0.02  # at medium, within this of the ceiling
 
 
@@ -77,8 +82,11 @@ def _built(scene: Path, source: str, associate: str = "auto") -> float:
     """Consistency of ``hqmask build --proposer existing --from-masks source`` (always rebuilt;
     only scenes and corrupted masks come from the cache)."""
     out = f"grid_{source}_{associate}"
-    build_masks(scene, BuildConfig(proposer="existing", from_masks=source, associate=associate, out_masks=out,
-                                   force=True), progress=False)
+    build_masks(
+        scene,
+        BuildConfig(proposer="existing", from_masks=source, associate=associate, out_masks=out, force=True),
+        progress=False,
+    )
     score = mask_scores(scene, out)["consistency"]
     shutil.rmtree(scene / out)
     return score
@@ -151,8 +159,10 @@ def misses(results: dict) -> list[str]:
                     gap = c["ceiling"] - c[method] if severity == "medium" else 0.0
                     if c[method] < target or gap > CEILING_GAP:
                         bound = c["ceiling"] < target and c["ceiling"] - c[method] <= CEILING_GAP
-                        found.append(f"{key} {cell} seed {seed}: {method} {c[method]:.3f} (ceiling {c['ceiling']:.3f}"
-                                     + (", itself under the target)" if bound else ")"))
+                        found.append(
+                            f"{key} {cell} seed {seed}: {method} {c[method]:.3f} (ceiling {c['ceiling']:.3f}"
+                            + (", itself under the target)" if bound else ")")
+                        )
     return found
 
 
@@ -164,16 +174,28 @@ def main() -> None:
     parser.add_argument("--paths", default=",".join(PATHS))
     parser.add_argument("--all-cells", action="store_true", help="Also the large cells the default run leaves out.")
     parser.add_argument("--workers", type=int, default=2, help="Scenes measured at once (processes).")
-    parser.add_argument("--cache", default=str(Path.home() / ".cache" / "gsseg" / "association_grid"),
-                        help="Folder the scenes are generated into once and reused from.")
+    parser.add_argument(
+        "--cache",
+        default=str(Path.home() / ".cache" / "gsseg" / "association_grid"),
+        help="Folder the scenes are generated into once and reused from.",
+    )
     parser.add_argument("--out", default=None, help="JSON file (default: benchmarks/results/association_grid.json).")
     parser.add_argument("--tag", default="", help="Suffix of the default JSON file name.")
-    parser.add_argument("--reuse-any-commit", action="store_true",
-                        help="Reuse the cache's per-scene results whatever commit measured them (the JSON names it).")
+    parser.add_argument(
+        "--reuse-any-commit",
+        action="store_true",
+        help="Reuse the cache's per-scene results whatever commit measured them (the JSON names it).",
+    )
     args = parser.parse_args()
     seeds = [int(x) for x in args.seeds.split(",")]
-    jobs = [(v, r, p, s) for v in map(int, args.views.split(",")) for r in map(int, args.res.split(","))
-            for p in args.paths.split(",") for s in seeds if args.all_cells or included(v, r, p, s == seeds[0])]
+    jobs = [
+        (v, r, p, s)
+        for v in map(int, args.views.split(","))
+        for r in map(int, args.res.split(","))
+        for p in args.paths.split(",")
+        for s in seeds
+        if args.all_cells or included(v, r, p, s == seeds[0])
+    ]
     jobs.sort(key=lambda j: -j[0] * j[1] ** 2)  # largest first: the pool ends evenly
     start = time.perf_counter()
     results: dict = {"scenes": {}, "skipped": [], "setup": vars(args)}
@@ -186,9 +208,15 @@ def main() -> None:
                 print(results["skipped"][-1], flush=True)
                 continue
             results["scenes"].setdefault(f"{views}/{res}/{path}", {})[str(seed)] = result
-            print(views, res, path, seed, f"exact {result['exact']:.3f}",
-                  json.dumps({k: {m: round(v, 3) for m, v in c.items()} for k, c in result["cells"].items()}),
-                  flush=True)
+            print(
+                views,
+                res,
+                path,
+                seed,
+                f"exact {result['exact']:.3f}",
+                json.dumps({k: {m: round(v, 3) for m, v in c.items()} for k, c in result["cells"].items()}),
+                flush=True,
+            )
     results["wall_seconds"] = time.perf_counter() - start
     results["misses"] = misses(results)
     print(report(results)[1])
@@ -198,35 +226,51 @@ def main() -> None:
 def report(r: dict) -> tuple[str, str]:
     rows = []
     worst: dict[str, float] = {}
-    for key, by_seed in sorted(r["scenes"].items(), key=lambda kv: [int(x) if x.isdigit() else x
-                                                                   for x in kv[0].split("/")]):
+    for key, by_seed in sorted(
+        r["scenes"].items(), key=lambda kv: [int(x) if x.isdigit() else x for x in kv[0].split("/")]
+    ):
         for cell in next(iter(by_seed.values()))["cells"]:
-            values = {c: min(s["cells"][cell][c] for s in by_seed.values())
-                      for c in ("input", "ceiling", *METHODS)}
+            values = {c: min(s["cells"][cell][c] for s in by_seed.values()) for c in ("input", "ceiling", *METHODS)}
             exact = min(s["exact"] for s in by_seed.values())
-            rows.append([*key.split("/"), *cell.split("/"), str(len(by_seed)), f"{values['input']:.3f}",
-                         f"{exact:.3f}", f"{values['tracks']:.3f}", f"{values['flow']:.3f}",
-                         f"{values['ceiling']:.3f}"])
+            rows.append(
+                [
+                    *key.split("/"),
+                    *cell.split("/"),
+                    str(len(by_seed)),
+                    f"{values['input']:.3f}",
+                    f"{exact:.3f}",
+                    f"{values['tracks']:.3f}",
+                    f"{values['flow']:.3f}",
+                    f"{values['ceiling']:.3f}",
+                ]
+            )
             if int(key.split("/")[0]) >= 16:
                 sev = cell.split("/")[1]
                 for c in ("tracks", "flow"):
                     worst[f"{sev} {c}"] = min(worst.get(f"{sev} {c}", 1.0), values[c])
                 worst["exact"] = min(worst.get("exact", 1.0), exact)
     work = sum(s["seconds"] for by_seed in r["scenes"].values() for s in by_seed.values())  # reused ones too
-    headline = ("worst cell of >= 16 views: exact " + f"{worst.get('exact', float('nan')):.3f}; " + ", ".join(
-        f"{k} {v:.3f}" for k, v in sorted(worst.items()) if k != "exact") + f"; {len(r['misses'])} misses; "
+    headline = (
+        "worst cell of >= 16 views: exact "
+        + f"{worst.get('exact', float('nan')):.3f}; "
+        + ", ".join(f"{k} {v:.3f}" for k, v in sorted(worst.items()) if k != "exact")
+        + f"; {len(r['misses'])} misses; "
         f"{work / 60:.0f} min of scene work, {work / 60 / r['setup']['workers']:.0f} min on {r['setup']['workers']} "
-        "workers")
-    table = markdown_table(["views", "res", "path", "errors", "severity", "seeds", "input", "exact", "tracks", "flow",
-                            "ceiling"], rows)
+        "workers"
+    )
+    table = markdown_table(
+        ["views", "res", "path", "errors", "severity", "seeds", "input", "exact", "tracks", "flow", "ceiling"], rows
+    )
     listed = "\n".join(f"- {m}" for m in r["misses"]) or "none"
     skipped = "\n".join(f"- {m}" for m in r.get("skipped", [])) or "none"
     commits = sorted({s["commit"] for by_seed in r["scenes"].values() for s in by_seed.values() if "commit" in s})
-    return headline, ("The worst of the scene seeds of every cell (consistency: share of ground-truth object "
-                      f"pixels with their ID after one matching per scene).\n\n{table}\n\nCells of 16 views or "
-                      f"more that miss a target (the diagnosis of the others: docs/masks.md):\n\n{listed}\n\n"
-                      f"Scenes the generator could not lay out (not measured):\n\n{skipped}\n\n"
-                      f"Measured at: {', '.join(commits) or 'n/a'}.")
+    return headline, (
+        "The worst of the scene seeds of every cell (consistency: share of ground-truth object "
+        f"pixels with their ID after one matching per scene).\n\n{table}\n\nCells of 16 views or "
+        f"more that miss a target (the diagnosis of the others: docs/masks.md):\n\n{listed}\n\n"
+        f"Scenes the generator could not lay out (not measured):\n\n{skipped}\n\n"
+        f"Measured at: {', '.join(commits) or 'n/a'}."
+    )
 
 
 if __name__ == "__main__":

@@ -60,7 +60,9 @@ def run_path(root: Path, path: str, args: argparse.Namespace) -> dict:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--out", default=None, help="JSON file (default: benchmarks/results/association_quality[-seedN].json).")
+    parser.add_argument(
+        "--out", default=None, help="JSON file (default: benchmarks/results/association_quality[-seedN].json)."
+    )
     parser.add_argument("--res", type=int, default=512)
     parser.add_argument("--views", type=int, default=24)
     parser.add_argument("--severity", default="medium")
@@ -75,14 +77,26 @@ def main() -> None:
 
 def report(r: dict) -> tuple[str, str]:
     paths = [p for p in r if p != "setup"]
-    headline = ", ".join(f"{p}: tracks {r[p]['tracks']:.3f}, flow {r[p]['flow']:.3f} "
-                         f"(ceiling {r[p]['ceiling_on_cleaned_segments']:.3f})" for p in paths)
-    columns = ["input", "ceiling_on_cleaned_segments", "tracks", "tracks_without_consensus", "flow",
-               "flow_without_consensus", "tracks_on_permuted_exact", "flow_on_permuted_exact"]
+    headline = ", ".join(
+        f"{p}: tracks {r[p]['tracks']:.3f}, flow {r[p]['flow']:.3f} (ceiling {r[p]['ceiling_on_cleaned_segments']:.3f})"
+        for p in paths
+    )
+    columns = [
+        "input",
+        "ceiling_on_cleaned_segments",
+        "tracks",
+        "tracks_without_consensus",
+        "flow",
+        "flow_without_consensus",
+        "tracks_on_permuted_exact",
+        "flow_on_permuted_exact",
+    ]
     s = r["setup"]
     table = markdown_table(["path", *columns], [[p, *(f"{r[p][c]:.3f}" for c in columns)] for p in paths])
-    return headline, (f"{s['views']} views at {s['res']}², masks corrupted at `{s['severity']}`, scene seed "
-                      f"{s['seed']}; share of object pixels with their ID after one matching per scene.\n\n{table}")
+    return headline, (
+        f"{s['views']} views at {s['res']}², masks corrupted at `{s['severity']}`, scene seed "
+        f"{s['seed']}; share of object pixels with their ID after one matching per scene.\n\n{table}"
+    )
 
 
 if __name__ == "__main__":

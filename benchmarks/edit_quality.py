@@ -64,14 +64,19 @@ def score_run(run_dir: Path, scene: Path, masks: str) -> dict:
     out = {}
     for name, options in SETTINGS.items():
         segmentation = label_gaussians(run, contributions, options)
-        evaluation, _ = evaluate(run, segmentation, views, with_truth=True, scene=str(scene), split="test",
-                                 backend="cpu", progress=False)
+        evaluation, _ = evaluate(
+            run, segmentation, views, with_truth=True, scene=str(scene), split="test", backend="cpu", progress=False
+        )
         rows = edit_rows(run, segmentation, views, scene, evaluation.id_map)
-        out[name] = {**summarize_edits(rows), "miou": evaluation.summary()["visible"]["miou"],
-                     "worst_removal_psnr_seen": min((r["removal"]["psnr_seen"] for r in rows
-                                                     if r["removal"]["psnr_seen"] is not None), default=None),
-                     "worst_extraction_iou": min((r["extraction"]["iou"] for r in rows), default=None),
-                     "worst_leak": max((r["extraction"]["leak"] for r in rows), default=None)}
+        out[name] = {
+            **summarize_edits(rows),
+            "miou": evaluation.summary()["visible"]["miou"],
+            "worst_removal_psnr_seen": min(
+                (r["removal"]["psnr_seen"] for r in rows if r["removal"]["psnr_seen"] is not None), default=None
+            ),
+            "worst_extraction_iou": min((r["extraction"]["iou"] for r in rows), default=None),
+            "worst_leak": max((r["extraction"]["leak"] for r in rows), default=None),
+        }
     return out
 
 
@@ -100,12 +105,29 @@ def main() -> None:
                     for seed in seeds:
                         name = f"{path}/{kind}{'+' + tag if tag else ''}/{seed}"
                         run = work / name.replace("/", "_")
-                        train_run(scene, run, TrainConfig(iters=args.iters, images=TRAIN_IMAGES, masks=masks,
-                                                          backend="cpu", seed=seed, knn_reg=knn))
+                        train_run(
+                            scene,
+                            run,
+                            TrainConfig(
+                                iters=args.iters,
+                                images=TRAIN_IMAGES,
+                                masks=masks,
+                                backend="cpu",
+                                seed=seed,
+                                knn_reg=knn,
+                            ),
+                        )
                         results["runs"][name] = score_run(run, scene, masks)
-                        print(name, json.dumps({k: {m: round(v, 4) if isinstance(v, float) else v
-                                                    for m, v in s.items()} for k, s in results["runs"][name].items()}),
-                              flush=True)
+                        print(
+                            name,
+                            json.dumps(
+                                {
+                                    k: {m: round(v, 4) if isinstance(v, float) else v for m, v in s.items()}
+                                    for k, s in results["runs"][name].items()
+                                }
+                            ),
+                            flush=True,
+                        )
                         record.save("edit_quality", results, out=args.out)  # each finished run, as it finishes
     print(report(results)[1])
     record.save("edit_quality", results, out=args.out)
@@ -132,22 +154,50 @@ def report(r: dict) -> tuple[str, str]:
     for (path, kind), runs in groups.items():
         for setting in runs[0]:
             cells = [run[setting] for run in runs]
-            rows.append([path, kind, setting, _spread([c["removal_psnr_seen"] for c in cells]),
-                         _spread([c["removal_psnr_region"] for c in cells]), _spread([c["extraction_iou"] for c in cells]),
-                         _spread([c["extraction_iou_seen"] for c in cells]), _spread([c["leak"] for c in cells]), _spread([c["extraction_psnr_inside"] for c in cells]),
-                         _spread([c["miou"] for c in cells])])
+            rows.append(
+                [
+                    path,
+                    kind,
+                    setting,
+                    _spread([c["removal_psnr_seen"] for c in cells]),
+                    _spread([c["removal_psnr_region"] for c in cells]),
+                    _spread([c["extraction_iou"] for c in cells]),
+                    _spread([c["extraction_iou_seen"] for c in cells]),
+                    _spread([c["leak"] for c in cells]),
+                    _spread([c["extraction_psnr_inside"] for c in cells]),
+                    _spread([c["miou"] for c in cells]),
+                ]
+            )
     headline = "; ".join(
         f"{path}, {kind} masks, {setting}: removal {_mean([run[setting]['removal_psnr_seen'] for run in runs]):.1f} dB "
         f"where the background was seen, extraction IoU {_mean([run[setting]['extraction_iou'] for run in runs]):.3f} "
         f"({_mean([run[setting]['extraction_iou_seen'] for run in runs]):.3f} over the seen part), "
         f"leak {100 * _mean([run[setting]['leak'] for run in runs]):.1f}%"
-        for (path, kind), runs in groups.items() for setting in ("prior", "prior + smooth") if setting in runs[0])
-    table = markdown_table(["path", "masks", "labels", "removal PSNR, seen (dB)", "removal PSNR, region (dB)",
-                            "extraction IoU", "extraction IoU, seen part", "leak", "extraction PSNR inside (dB)", "mIoU"], rows)
-    return headline, ("Means over the ground-truth objects and test views; the mean over training seeds with their "
-                      "range in brackets. The seen part of a silhouette is what some training view saw of the object "
-                      "(a forward capture never sees what other objects hide from every view); the IoU over it leaves "
-                      f"the rest out.\n\n{table}")
+        for (path, kind), runs in groups.items()
+        for setting in ("prior", "prior + smooth")
+        if setting in runs[0]
+    )
+    table = markdown_table(
+        [
+            "path",
+            "masks",
+            "labels",
+            "removal PSNR, seen (dB)",
+            "removal PSNR, region (dB)",
+            "extraction IoU",
+            "extraction IoU, seen part",
+            "leak",
+            "extraction PSNR inside (dB)",
+            "mIoU",
+        ],
+        rows,
+    )
+    return headline, (
+        "Means over the ground-truth objects and test views; the mean over training seeds with their "
+        "range in brackets. The seen part of a silhouette is what some training view saw of the object "
+        "(a forward capture never sees what other objects hide from every view); the IoU over it leaves "
+        f"the rest out.\n\n{table}"
+    )
 
 
 if __name__ == "__main__":

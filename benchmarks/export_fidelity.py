@@ -38,12 +38,33 @@ def fidelity(run_dir: Path, split: str = "test") -> dict:
         for environment in (True, False):
             splats = read_splats(export_run(run_dir, Path(tmp) / f"{environment}.ply", environment=environment))
             start = time.perf_counter()
-            scores = [psnr(mine, np.clip(render_reference(splats, v.camera.fx, v.camera.fy, v.camera.cx, v.camera.cy,
-                                                          v.camera.width, v.camera.height, v.cam_from_world), 0, 1))
-                      for v, mine in zip(views, ours)]
+            scores = [
+                psnr(
+                    mine,
+                    np.clip(
+                        render_reference(
+                            splats,
+                            v.camera.fx,
+                            v.camera.fy,
+                            v.camera.cx,
+                            v.camera.cy,
+                            v.camera.width,
+                            v.camera.height,
+                            v.cam_from_world,
+                        ),
+                        0,
+                        1,
+                    ),
+                )
+                for v, mine in zip(views, ours)
+            ]
             key = "with_environment" if environment else "without_environment"
-            result[key] = {"psnr": scores, "mean_psnr": float(np.mean(scores)), "exported": len(splats["means"]),
-                           "seconds_per_view": (time.perf_counter() - start) / len(views)}
+            result[key] = {
+                "psnr": scores,
+                "mean_psnr": float(np.mean(scores)),
+                "exported": len(splats["means"]),
+                "seconds_per_view": (time.perf_counter() - start) / len(views),
+            }
     return result
 
 
@@ -61,18 +82,33 @@ def main() -> None:
 
 
 def report(r: dict) -> tuple[str, str]:
-    headline = "; ".join(f"{Path(x['run']).parent.name}/{Path(x['run']).name} "
-                         f"{x['with_environment']['mean_psnr']:.1f} dB with the shell "
-                         f"({x['without_environment']['mean_psnr']:.1f} without)" for x in r["runs"])
-    rows = [[x["run"], str(len(x["views"])), f"{x['gaussians']:,}", f"{x['with_environment']['exported']:,}",
-             f"{x['with_environment']['mean_psnr']:.2f} (min {min(x['with_environment']['psnr']):.2f})",
-             f"{x['without_environment']['mean_psnr']:.2f}"] for x in r["runs"]]
-    table = markdown_table(["run", "test views", "Gaussians", "exported with the shell",
-                            "PSNR with the shell (dB)", "PSNR without (dB)"], rows)
-    return headline, ("The exported PLY rendered by `eval.standard_render` (the 3D-GS rasterizer's conventions, "
-                      "on black) against `gsseg render` over the learned environment, mean over the test views. "
-                      "The runs are those of `gsseg demo` and of `gsseg demo --scene ../shared/data/beer --images "
-                      "images_4 --out /tmp/beerdemo`.\n\n" + table)
+    headline = "; ".join(
+        f"{Path(x['run']).parent.name}/{Path(x['run']).name} "
+        f"{x['with_environment']['mean_psnr']:.1f} dB with the shell "
+        f"({x['without_environment']['mean_psnr']:.1f} without)"
+        for x in r["runs"]
+    )
+    rows = [
+        [
+            x["run"],
+            str(len(x["views"])),
+            f"{x['gaussians']:,}",
+            f"{x['with_environment']['exported']:,}",
+            f"{x['with_environment']['mean_psnr']:.2f} (min {min(x['with_environment']['psnr']):.2f})",
+            f"{x['without_environment']['mean_psnr']:.2f}",
+        ]
+        for x in r["runs"]
+    ]
+    table = markdown_table(
+        ["run", "test views", "Gaussians", "exported with the shell", "PSNR with the shell (dB)", "PSNR without (dB)"],
+        rows,
+    )
+    return headline, (
+        "The exported PLY rendered by `eval.standard_render` (the 3D-GS rasterizer's conventions, "
+        "on black) against `gsseg render` over the learned environment, mean over the test views. "
+        "The runs are those of `gsseg demo` and of `gsseg demo --scene ../shared/data/beer --images "
+        "images_4 --out /tmp/beerdemo`.\n\n" + table
+    )
 
 
 if __name__ == "__main__":

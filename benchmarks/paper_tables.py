@@ -22,9 +22,13 @@ from pipeline.paper_tables import SETUPS, paper_tables
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true")
-    parser.add_argument("--work", type=Path, default=None, help="Folder for scenes and runs (default: a temporary one).")
+    parser.add_argument(
+        "--work", type=Path, default=None, help="Folder for scenes and runs (default: a temporary one)."
+    )
     parser.add_argument("--backend", default="auto")
-    parser.add_argument("--out", default=None, help="JSON file (default: benchmarks/results/paper_tables[-quick].json).")
+    parser.add_argument(
+        "--out", default=None, help="JSON file (default: benchmarks/results/paper_tables[-quick].json)."
+    )
     args = parser.parse_args()
     start = time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp:
@@ -39,10 +43,13 @@ def main() -> None:
 
 def report(r: dict) -> tuple[str, str]:
     names = list(r["scenes"])
-    mean = {kind: sum(r["scenes"][n]["training"][kind]["miou"] for n in names) / len(names)
-            for kind in ("exact", "hqmask")}
-    headline = (f"mIoU trained on exact masks {mean['exact']:.3f}, on noisy masks after hqmask {mean['hqmask']:.3f} "
-                f"({len(names)} scenes, {r['wall_seconds'] / 60:.0f} min)")
+    mean = {
+        kind: sum(r["scenes"][n]["training"][kind]["miou"] for n in names) / len(names) for kind in ("exact", "hqmask")
+    }
+    headline = (
+        f"mIoU trained on exact masks {mean['exact']:.3f}, on noisy masks after hqmask {mean['hqmask']:.3f} "
+        f"({len(names)} scenes, {r['wall_seconds'] / 60:.0f} min)"
+    )
     body = re.sub(r"^### (.+)$", r"**\1**", r["markdown"].replace("## Paper tables\n\n", ""), flags=re.M)
     return headline, body
 

@@ -36,9 +36,13 @@ def curve_summary(history: list[dict]) -> dict:
     values = np.array([h["psnr"] for h in history])
     width = max(1, int(round(SMOOTH_STEPS / max(np.diff(steps).min(initial=SMOOTH_STEPS), 1))))
     smooth = np.convolve(values, np.ones(width) / width, mode="valid")
-    at = steps[width - 1:]
-    return {"peak_psnr": float(smooth.max()), "peak_step": int(at[smooth.argmax()]), "final_psnr": float(smooth[-1]),
-            "kept": float(smooth[-1] - smooth.max())}
+    at = steps[width - 1 :]
+    return {
+        "peak_psnr": float(smooth.max()),
+        "peak_step": int(at[smooth.argmax()]),
+        "final_psnr": float(smooth[-1]),
+        "kept": float(smooth[-1] - smooth.max()),
+    }
 
 
 def run_scene(name: str, real: Path, work: Path, iters: int | None, max_gaussians: int | None) -> dict:
@@ -57,11 +61,20 @@ def run_scene(name: str, real: Path, work: Path, iters: int | None, max_gaussian
     renders = [run.render_rgb(v) for v in views]
     truth = [v.load_image() for v in views]
     history = json.loads(run.folder.metrics.read_text())["train"]["history"]
-    return {"scene": name, "images": images, "size": [views[0].camera.width, views[0].camera.height],
-            "views": len(run.scene().views), "test_views": len(views), "iters": run.config.timing.iters,
-            "gaussians": len(run.gaussians), "test_psnr": float(np.mean([psnr(a, b) for a, b in zip(renders, truth)])),
-            "test_ssim": float(np.mean([ssim(a, b) for a, b in zip(renders, truth)])),
-            **curve_summary(history), "sfm_s": sfm_s, "train_s": train_s}
+    return {
+        "scene": name,
+        "images": images,
+        "size": [views[0].camera.width, views[0].camera.height],
+        "views": len(run.scene().views),
+        "test_views": len(views),
+        "iters": run.config.timing.iters,
+        "gaussians": len(run.gaussians),
+        "test_psnr": float(np.mean([psnr(a, b) for a, b in zip(renders, truth)])),
+        "test_ssim": float(np.mean([ssim(a, b) for a, b in zip(renders, truth)])),
+        **curve_summary(history),
+        "sfm_s": sfm_s,
+        "train_s": train_s,
+    }
 
 
 def main() -> None:
@@ -82,17 +95,41 @@ def main() -> None:
 
 
 def report(r: dict) -> tuple[str, str]:
-    headline = "; ".join(f"{x['scene']}: test {x['test_psnr']:.2f} dB, curve ends {x['kept']:+.2f} dB from its peak"
-                         for x in r["scenes"])
-    rows = [[x["scene"], f"{x['size'][0]}x{x['size'][1]}", str(x["views"]), str(x["iters"]), f"{x['gaussians']:,}",
-             f"{x['test_psnr']:.2f}", f"{x['test_ssim']:.3f}",
-             f"{x['peak_psnr']:.2f} at {x['peak_step']} / {x['final_psnr']:.2f}",
-             f"{x['sfm_s']:.0f} / {x['train_s']:.0f}"]
-            for x in r["scenes"]]
-    table = markdown_table(["scene", "size", "views", "iterations", "Gaussians", "test PSNR", "test SSIM",
-                            "training PSNR: peak / end", "seconds: sfm / train"], rows)
-    return headline, ("Colour alone, held-out views every 8th; the training PSNR averaged over 100 steps. A stage "
-                      "reused from an earlier run shows about 0 s.\n\n" + table)
+    headline = "; ".join(
+        f"{x['scene']}: test {x['test_psnr']:.2f} dB, curve ends {x['kept']:+.2f} dB from its peak" for x in r["scenes"]
+    )
+    rows = [
+        [
+            x["scene"],
+            f"{x['size'][0]}x{x['size'][1]}",
+            str(x["views"]),
+            str(x["iters"]),
+            f"{x['gaussians']:,}",
+            f"{x['test_psnr']:.2f}",
+            f"{x['test_ssim']:.3f}",
+            f"{x['peak_psnr']:.2f} at {x['peak_step']} / {x['final_psnr']:.2f}",
+            f"{x['sfm_s']:.0f} / {x['train_s']:.0f}",
+        ]
+        for x in r["scenes"]
+    ]
+    table = markdown_table(
+        [
+            "scene",
+            "size",
+            "views",
+            "iterations",
+            "Gaussians",
+            "test PSNR",
+            "test SSIM",
+            "training PSNR: peak / end",
+            "seconds: sfm / train",
+        ],
+        rows,
+    )
+    return headline, (
+        "Colour alone, held-out views every 8th; the training PSNR averaged over 100 steps. A stage "
+        "reused from an earlier run shows about 0 s.\n\n" + table
+    )
 
 
 if __name__ == "__main__":

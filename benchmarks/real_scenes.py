@@ -110,20 +110,21 @@ class Clicker:
         """Add a click at pixel (u, v) of the first view; a click on nothing opaque, or a
         positive one on the background, is spent without changing the selection."""
         try:
-            point = point_from_click(self.run.gaussians, self.first.camera, self.first.cam_from_world, u, v,
-                                     backend="cpu")
+            point = point_from_click(
+                self.run.gaussians, self.first.camera, self.first.cam_from_world, u, v, backend="cpu"
+            )
             positives = self.positives + [point] if positive else self.positives
             negatives = self.negatives if positive else self.negatives + [point]
-            self.selected = select_by_points(self.means, self.features, self.labels, np.stack(positives),
-                                             np.stack(negatives) if negatives else None)
+            self.selected = select_by_points(
+                self.means, self.features, self.labels, np.stack(positives), np.stack(negatives) if negatives else None
+            )
             self.positives, self.negatives = positives, negatives
         except InputError:
             pass
 
     def scores(self) -> tuple[float, float]:
         """mIoU and mAcc of the selection over the other views."""
-        pairs = [binary_scores(rendered_selection(self.run, self.selected, v), self.truth[v.name])
-                 for v in self.others]
+        pairs = [binary_scores(rendered_selection(self.run, self.selected, v), self.truth[v.name]) for v in self.others]
         return float(np.mean([p[0] for p in pairs])), float(np.mean([p[1] for p in pairs]))
 
     def next_click(self, tried: list[tuple[float, float]]) -> tuple[float, float, bool] | None:
@@ -157,8 +158,13 @@ def interactive(run: Run, views: list[View], truth: dict[str, np.ndarray], max_c
         tried.append(nxt[:2])
         curve.append(clicker.scores()[0])
     reached = [k + 1 for k, m in enumerate(curve) if m >= TARGET]
-    return {"single_click_miou": miou, "single_click_macc": macc, "noc90": reached[0] if reached else None,
-            "miou_by_clicks": curve, "clicks": [[float(a), float(b)] for a, b in tried]}
+    return {
+        "single_click_miou": miou,
+        "single_click_macc": macc,
+        "noc90": reached[0] if reached else None,
+        "miou_by_clicks": curve,
+        "clicks": [[float(a), float(b)] for a, b in tried],
+    }
 
 
 def mask_scores(scene_dir: Path, images: str, masks: str, truth: dict[str, np.ndarray]) -> dict:
@@ -179,8 +185,12 @@ def mask_scores(scene_dir: Path, images: str, masks: str, truth: dict[str, np.nd
         inside = [i for i in present if (person[ids == i]).mean() > 0.5]
         union.append(binary_scores(np.isin(ids, inside), person)[0])
     common = max(set(winners), key=winners.count) if winners else 0
-    return {"best_id_iou": float(np.mean(best)), "union_iou": float(np.mean(union)),
-            "consistency": winners.count(common) / max(len(winners), 1), "ids_that_win": len(set(winners))}
+    return {
+        "best_id_iou": float(np.mean(best)),
+        "union_iou": float(np.mean(union)),
+        "consistency": winners.count(common) / max(len(winners), 1),
+        "ids_that_win": len(set(winners)),
+    }
 
 
 def run_scene(name: str, real: Path, work: Path, iters: int | None, max_gaussians: int | None) -> dict:
@@ -215,11 +225,20 @@ def run_scene(name: str, real: Path, work: Path, iters: int | None, max_gaussian
     start = time.perf_counter()
     clicks = interactive(load_run(run_dir), views, truth)
     times["clicks_s"] = time.perf_counter() - start
-    return {"scene": name, "images": images, "views": len(views), "registered": len(run.scene().views),
-            "photos": len(list((real / name / "photos").iterdir())), "gaussians": len(run.gaussians),
-            "iters": run.config.timing.iters, **clicks, "single_click_miou_default_options": default_options,
-            "masks": mask_scores(scene_dir, images, MASKS, truth),
-            "depth_masks": mask_scores(scene_dir, images, DEPTH_MASKS, truth), **times}
+    return {
+        "scene": name,
+        "images": images,
+        "views": len(views),
+        "registered": len(run.scene().views),
+        "photos": len(list((real / name / "photos").iterdir())),
+        "gaussians": len(run.gaussians),
+        "iters": run.config.timing.iters,
+        **clicks,
+        "single_click_miou_default_options": default_options,
+        "masks": mask_scores(scene_dir, images, MASKS, truth),
+        "depth_masks": mask_scores(scene_dir, images, DEPTH_MASKS, truth),
+        **times,
+    }
 
 
 def main() -> None:
@@ -242,25 +261,56 @@ def report(r: dict) -> tuple[str, str]:
     def noc(x: dict) -> str:
         return str(x["noc90"]) if x["noc90"] is not None else f">{MAX_CLICKS}"
 
-    headline = "; ".join(f"{x['scene']}: one click mIoU {x['single_click_miou']:.3f}, NoC@90 {noc(x)}"
-                         for x in r["scenes"])
+    headline = "; ".join(
+        f"{x['scene']}: one click mIoU {x['single_click_miou']:.3f}, NoC@90 {noc(x)}" for x in r["scenes"]
+    )
+
     def masks(m: dict) -> str:
         return f"{m['best_id_iou']:.2f} / {m['union_iou']:.2f} / {m['consistency']:.2f}"
 
     stages = ("sfm_s", "masks_s", "train_s", "depth_masks_s", "segment_s", "clicks_s")
-    rows = [[x["scene"], f"{x['registered']}/{x['photos']}", x["images"], str(x["iters"]), f"{x['gaussians']:,}",
-             f"{x['single_click_miou']:.3f}", f"{x['single_click_macc']:.3f}",
-             f"{x['single_click_miou_default_options']:.3f}", noc(x), " ".join(f"{m:.2f}" for m in x["miou_by_clicks"]),
-             masks(x["masks"]), masks(x["depth_masks"]), " / ".join(f"{x[k]:.0f}" for k in stages)]
-            for x in r["scenes"]]
-    table = markdown_table(["scene", "registered", "images", "iterations", "Gaussians", "mIoU, 1 click",
-                            "mAcc, 1 click", "mIoU, 1 click, segment defaults", "NoC@90", "mIoU after each click",
-                            "masks of colour: best ID / union / consistency", "masks at depth jumps: the same",
-                            "seconds: sfm / masks / train / depth masks / segment / clicks"], rows)
-    return headline, ("People's masks of the real captures (docs/evaluation.md has the protocols); the first view "
-                      "is clicked, the others scored, with `--smooth 16 --fill-interiors` on the masks cut at the "
-                      "run's depth jumps (the demo's path) and with `gsseg segment`'s defaults. A stage reused from "
-                      "an earlier run shows about 0 s.\n\n" + table)
+    rows = [
+        [
+            x["scene"],
+            f"{x['registered']}/{x['photos']}",
+            x["images"],
+            str(x["iters"]),
+            f"{x['gaussians']:,}",
+            f"{x['single_click_miou']:.3f}",
+            f"{x['single_click_macc']:.3f}",
+            f"{x['single_click_miou_default_options']:.3f}",
+            noc(x),
+            " ".join(f"{m:.2f}" for m in x["miou_by_clicks"]),
+            masks(x["masks"]),
+            masks(x["depth_masks"]),
+            " / ".join(f"{x[k]:.0f}" for k in stages),
+        ]
+        for x in r["scenes"]
+    ]
+    table = markdown_table(
+        [
+            "scene",
+            "registered",
+            "images",
+            "iterations",
+            "Gaussians",
+            "mIoU, 1 click",
+            "mAcc, 1 click",
+            "mIoU, 1 click, segment defaults",
+            "NoC@90",
+            "mIoU after each click",
+            "masks of colour: best ID / union / consistency",
+            "masks at depth jumps: the same",
+            "seconds: sfm / masks / train / depth masks / segment / clicks",
+        ],
+        rows,
+    )
+    return headline, (
+        "People's masks of the real captures (docs/evaluation.md has the protocols); the first view "
+        "is clicked, the others scored, with `--smooth 16 --fill-interiors` on the masks cut at the "
+        "run's depth jumps (the demo's path) and with `gsseg segment`'s defaults. A stage reused from "
+        "an earlier run shows about 0 s.\n\n" + table
+    )
 
 
 if __name__ == "__main__":

@@ -26,11 +26,24 @@ def commit() -> str:
     outputs, not code: a benchmark that saves after each finished run must not mark itself."""
     root = Path(__file__).resolve().parents[1]
     try:
-        head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=root, capture_output=True, text=True,
-                              check=True).stdout.strip()
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no", "--", ".",
-                                f":(exclude){RESULTS.relative_to(root)}"], cwd=root,
-                               capture_output=True, text=True, check=True).stdout.strip()
+        head = subprocess.run(
+            ["git", "rev-parse", "--short", "HEAD"], cwd=root, capture_output=True, text=True, check=True
+        ).stdout.strip()
+        dirty = subprocess.run(
+            [
+                "git",
+                "status",
+                "--porcelain",
+                "--untracked-files=no",
+                "--",
+                ".",
+                f":(exclude){RESULTS.relative_to(root)}",
+            ],
+            cwd=root,
+            capture_output=True,
+            text=True,
+            check=True,
+        ).stdout.strip()
     except (OSError, subprocess.CalledProcessError):
         return "unknown"
     return head + ("+changes" if dirty else "")
@@ -55,8 +68,12 @@ def provenance() -> dict:
     """The command line, date (UTC), machine and commit of this benchmark run."""
     module = Path(sys.argv[0]).with_suffix("").name
     command = " ".join(["python -m benchmarks." + module, *map(shlex.quote, sys.argv[1:])])
-    return {"command": command, "date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d"),
-            "machine": machine(), "commit": commit()}
+    return {
+        "command": command,
+        "date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d"),
+        "machine": machine(),
+        "commit": commit(),
+    }
 
 
 def save(benchmark: str, results: dict, *, tag: str = "", out: str | Path | None = None) -> Path:

@@ -17,10 +17,10 @@ import time
 import numba
 import torch
 
-from dataset_tools.cameras import PinholeCamera
-from gsseg.gaussians import Gaussians
 from benchmarks import record
+from dataset_tools.cameras import PinholeCamera
 from eval.report import markdown_table
+from gsseg.gaussians import Gaussians
 from gsseg.render import BACKENDS, get_backend, render
 
 
@@ -29,17 +29,29 @@ def scene(n: int, seed: int = 0) -> tuple[Gaussians, PinholeCamera, torch.Tensor
     (60 degree field of view), standard deviations 1-4 % of the box, opacities ~ sigmoid(N(0, 1))."""
     gen = torch.Generator().manual_seed(seed)
     means = (torch.rand(n, 3, generator=gen) - 0.5) * torch.tensor([2.4, 1.8, 2.0])
-    g = Gaussians(means=means, log_scales=torch.log(0.01 + 0.03 * torch.rand(n, 3, generator=gen)),
-                  quats=torch.randn(n, 4, generator=gen), opacity_logits=torch.randn(n, generator=gen),
-                  sh_dc=torch.randn(n, 3, generator=gen), sh_rest=0.1 * torch.randn(n, 15, 3, generator=gen),
-                  obj_feat=torch.randn(n, 16, generator=gen))
+    g = Gaussians(
+        means=means,
+        log_scales=torch.log(0.01 + 0.03 * torch.rand(n, 3, generator=gen)),
+        quats=torch.randn(n, 4, generator=gen),
+        opacity_logits=torch.randn(n, generator=gen),
+        sh_dc=torch.randn(n, 3, generator=gen),
+        sh_rest=0.1 * torch.randn(n, 15, 3, generator=gen),
+        obj_feat=torch.randn(n, 16, generator=gen),
+    )
     f = 128 / math.tan(math.radians(30))
     pose = torch.tensor([[1.0, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 3.5]])
     return g, PinholeCamera(256, 256, f, f, 128, 128), pose
 
 
-def time_step(g: Gaussians, cam: PinholeCamera, pose: torch.Tensor, backend: str, features: bool,
-              repeats: int, feature_geometry_grad: bool = True) -> float:
+def time_step(
+    g: Gaussians,
+    cam: PinholeCamera,
+    pose: torch.Tensor,
+    backend: str,
+    features: bool,
+    repeats: int,
+    feature_geometry_grad: bool = True,
+) -> float:
     """Median seconds of render + backward of a loss on every output."""
     device = get_backend(backend).device
     times = []
@@ -48,8 +60,14 @@ def time_step(g: Gaussians, cam: PinholeCamera, pose: torch.Tensor, backend: str
         if device == "cuda":
             torch.cuda.synchronize()
         start = time.perf_counter()
-        out = render(params, cam, pose.to(device), with_features=features,
-                     feature_geometry_grad=feature_geometry_grad, backend=backend)
+        out = render(
+            params,
+            cam,
+            pose.to(device),
+            with_features=features,
+            feature_geometry_grad=feature_geometry_grad,
+            backend=backend,
+        )
         (out.rgb.sum() + out.features.sum() + out.alpha.sum() + out.depth.sum()).backward()
         if device == "cuda":
             torch.cuda.synchronize()
@@ -69,8 +87,12 @@ def main() -> None:
     args = parser.parse_args()
 
     g, cam, pose = scene(args.gaussians)
-    result = {"gaussians": args.gaussians, "size": [cam.width, cam.height], "threads": numba.get_num_threads(),
-              "channels": "3 colour + 16 object features (+ depth)"}
+    result = {
+        "gaussians": args.gaussians,
+        "size": [cam.width, cam.height],
+        "threads": numba.get_num_threads(),
+        "channels": "3 colour + 16 object features (+ depth)",
+    }
     result["cpu_s"] = time_step(g, cam, pose, "cpu", True, args.repeats)
     result["cpu_rgb_only_s"] = time_step(g, cam, pose, "cpu", False, args.repeats)
     result["cpu_two_pass_s"] = time_step(g, cam, pose, "cpu", True, args.repeats, feature_geometry_grad=False)
@@ -88,17 +110,23 @@ def main() -> None:
 
 def report(r: dict) -> tuple[str, str]:
     headline = f"cpu {r['cpu_s']:.3f} s, torch {r['torch_s']:.2f} s ({r['torch_over_cpu']:.1f}x)"
-    rows = [("cpu, colour + object features", f"{r['cpu_s']:.3f} s"),
-            ("cpu, colour only", f"{r['cpu_rgb_only_s']:.3f} s (features cost {r['features_over_rgb_only']:.2f}x)"),
-            ("cpu, features in a second pass over detached geometry (training's default)",
-             f"{r['cpu_two_pass_s']:.3f} s ({r['cpu_two_pass_s'] / r['cpu_s']:.2f}x fused)"),
-            ("torch reference", f"{r['torch_s']:.2f} s ({r['torch_over_cpu']:.1f}x cpu)"),
-            ("peak RSS", f"cpu {r['cpu_peak_rss_mb'] / 1024:.2f} GB, torch {r['torch_peak_rss_mb'] / 1024:.2f} GB")]
+    rows = [
+        ("cpu, colour + object features", f"{r['cpu_s']:.3f} s"),
+        ("cpu, colour only", f"{r['cpu_rgb_only_s']:.3f} s (features cost {r['features_over_rgb_only']:.2f}x)"),
+        (
+            "cpu, features in a second pass over detached geometry (training's default)",
+            f"{r['cpu_two_pass_s']:.3f} s ({r['cpu_two_pass_s'] / r['cpu_s']:.2f}x fused)",
+        ),
+        ("torch reference", f"{r['torch_s']:.2f} s ({r['torch_over_cpu']:.1f}x cpu)"),
+        ("peak RSS", f"cpu {r['cpu_peak_rss_mb'] / 1024:.2f} GB, torch {r['torch_peak_rss_mb'] / 1024:.2f} GB"),
+    ]
     if "gsplat_s" in r:
         rows.append(("gsplat", f"{r['gsplat_s']:.4f} s, {r['gpu_peak_mb']:.0f} MB GPU"))
     table = markdown_table(["forward + backward", "seconds"], [list(row) for row in rows])
-    return headline, (f"{r['gaussians']} Gaussians at {r['size'][0]}x{r['size'][1]}, {r['channels']}, "
-                      f"{r['threads']} threads, median of repeats.\n\n{table}")
+    return headline, (
+        f"{r['gaussians']} Gaussians at {r['size'][0]}x{r['size'][1]}, {r['channels']}, "
+        f"{r['threads']} threads, median of repeats.\n\n{table}"
+    )
 
 
 if __name__ == "__main__":

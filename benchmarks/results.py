@@ -37,13 +37,25 @@ def render_page(files: list[Path]) -> str:
         module = importlib.import_module(f"benchmarks.{data['benchmark']}")
         headline, details = module.report(data["results"])
         entries.append((path.stem, data, headline, details))
-    lines = [HEADER, "| result | headline | command | date | machine | commit |", "| --- | --- | --- | --- | --- | --- |"]
+    lines = [
+        HEADER,
+        "| result | headline | command | date | machine | commit |",
+        "| --- | --- | --- | --- | --- | --- |",
+    ]
     for name, data, headline, _ in entries:
-        lines.append(f"| [{name}](#{name}) | {_cell(headline)} | `{_cell(data['command'])}` | {data['date']} | "
-                     f"{_cell(data['machine'])} | {data['commit']} |")
+        lines.append(
+            f"| [{name}](#{name}) | {_cell(headline)} | `{_cell(data['command'])}` | {data['date']} | "
+            f"{_cell(data['machine'])} | {data['commit']} |"
+        )
     for name, data, _, details in entries:
-        lines += ["", f"## {name}", "", f"`{data['command']}` ({data['date']}, {data['machine']}, commit "
-                  f"{data['commit']})", "", details.strip()]
+        lines += [
+            "",
+            f"## {name}",
+            "",
+            f"`{data['command']}` ({data['date']}, {data['machine']}, commit {data['commit']})",
+            "",
+            details.strip(),
+        ]
     return "\n".join(lines) + "\n"
 
 

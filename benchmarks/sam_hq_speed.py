@@ -20,9 +20,9 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks import record
-from eval.report import markdown_table
 from dataset_tools.scene import load_scene
 from dataset_tools.synth import SynthConfig, generate_scene
+from eval.report import markdown_table
 from hqmask.sam_hq import AutomaticMaskGenerator, GeneratorConfig, SamHQ
 from hqmask.sam_hq.standin import export_standin_model
 
@@ -58,7 +58,9 @@ def main() -> None:
     ap.add_argument("--out", default=None, help="JSON file (default: benchmarks/results/sam_hq_speed.json).")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
-        scene = generate_scene(SynthConfig(views=2, res=args.res, objects=6, seed=0), Path(tmp) / "scene", progress=False)
+        scene = generate_scene(
+            SynthConfig(views=2, res=args.res, objects=6, seed=0), Path(tmp) / "scene", progress=False
+        )
         image = load_scene(scene.root).views[0].load_image()
         model = SamHQ(export_standin_model(Path(tmp) / "model"), device="cpu")
         model.encoder, model.decoder = RunTimer(model.encoder), RunTimer(model.decoder)
@@ -70,7 +72,10 @@ def main() -> None:
         coords = np.concatenate([points, np.zeros_like(points)], axis=1)
         labels = np.tile(np.array([[1, -1]], np.float32), (64, 1))
         batched = mean_seconds(lambda: model.decode(embedding, coords, labels), 5) / 64
-        single = mean_seconds(lambda: [model.decode(embedding, coords[i : i + 1], labels[i : i + 1]) for i in range(16)], 2) / 16
+        single = (
+            mean_seconds(lambda: [model.decode(embedding, coords[i : i + 1], labels[i : i + 1]) for i in range(16)], 2)
+            / 16
+        )
 
         generator = AutomaticMaskGenerator(model, GeneratorConfig())
         generator.generate(image)  # warm-up
@@ -97,13 +102,17 @@ def main() -> None:
 
 
 def report(r: dict) -> tuple[str, str]:
-    headline = (f"generator {r['generator_s']:.1f} s for {r['generator_points']} points, "
-                f"{100 * r['generator_share_outside_runtime']:.1f}% outside ONNX Runtime")
-    rows = [("encoder", f"{r['encoder_ms']} ms"),
-            ("decoder, 64 prompts a call", f"{r['decoder_prompts_per_s_batched']} prompts/s"),
-            ("decoder, one prompt a call", f"{r['decoder_prompts_per_s_single']} prompts/s"),
-            (f"automatic generator, {r['generator_points']} points", f"{r['generator_s']} s, {r['generator_masks']} masks"),
-            ("share of the generator's time outside ONNX Runtime", f"{100 * r['generator_share_outside_runtime']:.1f}%")]
+    headline = (
+        f"generator {r['generator_s']:.1f} s for {r['generator_points']} points, "
+        f"{100 * r['generator_share_outside_runtime']:.1f}% outside ONNX Runtime"
+    )
+    rows = [
+        ("encoder", f"{r['encoder_ms']} ms"),
+        ("decoder, 64 prompts a call", f"{r['decoder_prompts_per_s_batched']} prompts/s"),
+        ("decoder, one prompt a call", f"{r['decoder_prompts_per_s_single']} prompts/s"),
+        (f"automatic generator, {r['generator_points']} points", f"{r['generator_s']} s, {r['generator_masks']} masks"),
+        ("share of the generator's time outside ONNX Runtime", f"{100 * r['generator_share_outside_runtime']:.1f}%"),
+    ]
     table = markdown_table(["what", "result"], [list(row) for row in rows])
     return headline, f"{r['model']}; {r['image']}; {r['cpu_count']} CPUs.\n\n{table}"
 

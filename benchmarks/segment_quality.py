@@ -27,7 +27,14 @@ from pathlib import Path
 from benchmarks import record
 from eval.report import markdown_table
 from gsseg.train import TrainConfig
-from pipeline.experiment import SceneSpec, associate_masks, corrupt_masks, segmentation_scores, synthetic_scene, train_run
+from pipeline.experiment import (
+    SceneSpec,
+    associate_masks,
+    corrupt_masks,
+    segmentation_scores,
+    synthetic_scene,
+    train_run,
+)
 
 SETTINGS = [("prior", -1.0), ("prior", 0.0), ("prior", 0.2), ("prior", 1.0), ("flashsplat", 0.0), ("classifier", 0.0)]
 EXACT = "flashsplat, exact masks"
@@ -46,8 +53,11 @@ def run_scene(work: Path, path: str, args: argparse.Namespace, train_seeds: list
     runs = {}
     for train_seed in train_seeds:
         run = work / f"run_{path}_{train_seed}"
-        train_run(scene, run, TrainConfig(iters=args.iters, images=TRAIN_IMAGES, masks="assoc", backend="cpu",
-                                          seed=train_seed))
+        train_run(
+            scene,
+            run,
+            TrainConfig(iters=args.iters, images=TRAIN_IMAGES, masks="assoc", backend="cpu", seed=train_seed),
+        )
         summaries = segmentation_scores(run, scene, "assoc", SETTINGS)
         row = {_column(m, g): s["visible"]["miou"] for (m, g), s in zip(SETTINGS, summaries)}
         row[EXACT] = segmentation_scores(run, scene, "object_mask", [("flashsplat", 0.0)])[0]["visible"]["miou"]
@@ -58,10 +68,16 @@ def run_scene(work: Path, path: str, args: argparse.Namespace, train_seeds: list
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--out", default=None, help="JSON file (default: benchmarks/results/segment_quality[-SEVERITY].json).")
+    parser.add_argument(
+        "--out", default=None, help="JSON file (default: benchmarks/results/segment_quality[-SEVERITY].json)."
+    )
     parser.add_argument("--iters", type=int, default=None, help="Training iterations (default: the CPU schedule).")
-    parser.add_argument("--res", type=int, default=512,
-                        help="Size the masks are made, corrupted and associated at; training uses half of it.")
+    parser.add_argument(
+        "--res",
+        type=int,
+        default=512,
+        help="Size the masks are made, corrupted and associated at; training uses half of it.",
+    )
     parser.add_argument("--severity", default="medium")
     parser.add_argument("--seed", type=int, default=0, help="Seed of the scenes and their corruption.")
     parser.add_argument("--train-seeds", default="0", help="Comma-separated training seeds; the table is their mean.")
@@ -69,8 +85,10 @@ def main() -> None:
     train_seeds = [int(x) for x in args.train_seeds.split(",")]
     with tempfile.TemporaryDirectory() as tmp:
         runs = {path: run_scene(Path(tmp), path, args, train_seeds) for path in ("orbit", "forward")}
-    means = {path: {c: sum(r[c] for r in by_seed.values()) / len(by_seed) for c in next(iter(by_seed.values()))}
-             for path, by_seed in runs.items()}
+    means = {
+        path: {c: sum(r[c] for r in by_seed.values()) / len(by_seed) for c in next(iter(by_seed.values()))}
+        for path, by_seed in runs.items()
+    }
     results = {"mIoU": means, "per_training_seed": runs, "setup": vars(args)}
     print(report(results)[1])
     record.save("segment_quality", results, tag="" if args.severity == "medium" else args.severity, out=args.out)
@@ -79,18 +97,33 @@ def main() -> None:
 def report(r: dict) -> tuple[str, str]:
     means, setup = r["mIoU"], r["setup"]
     columns = list(next(iter(means.values())))
-    headline = ", ".join(f"{path}: prior 0.2 {row['prior 0.2']:.3f} / flashsplat {row['flashsplat']:.3f} / "
-                         f"exact-mask vote {row[EXACT]:.3f}" for path, row in means.items())
+    headline = ", ".join(
+        f"{path}: prior 0.2 {row['prior 0.2']:.3f} / flashsplat {row['flashsplat']:.3f} / "
+        f"exact-mask vote {row[EXACT]:.3f}"
+        for path, row in means.items()
+    )
     n = len(next(iter(r["per_training_seed"].values())))
-    details = [f"Severity `{setup['severity']}`, masks at {setup['res']}², training on the half-size copies "
-               f"({setup['iters'] or 'CPU schedule'} iterations); test-view mIoU (visible protocol), mean of {n} "
-               "training seed(s):", "",
-               markdown_table(["scene", *columns], [[p, *(f"{row[c]:.4f}" for c in columns)] for p, row in means.items()])]
+    details = [
+        f"Severity `{setup['severity']}`, masks at {setup['res']}², training on the half-size copies "
+        f"({setup['iters'] or 'CPU schedule'} iterations); test-view mIoU (visible protocol), mean of {n} "
+        "training seed(s):",
+        "",
+        markdown_table(["scene", *columns], [[p, *(f"{row[c]:.4f}" for c in columns)] for p, row in means.items()]),
+    ]
     if n > 1:
-        details += ["", "Per training seed:", "", markdown_table(
-            ["scene", "training seed", *columns],
-            [[p, str(seed), *(f"{row[c]:.4f}" for c in columns)]
-             for p, by_seed in r["per_training_seed"].items() for seed, row in by_seed.items()])]
+        details += [
+            "",
+            "Per training seed:",
+            "",
+            markdown_table(
+                ["scene", "training seed", *columns],
+                [
+                    [p, str(seed), *(f"{row[c]:.4f}" for c in columns)]
+                    for p, by_seed in r["per_training_seed"].items()
+                    for seed, row in by_seed.items()
+                ],
+            ),
+        ]
     return headline, "\n".join(details)
 
 

@@ -17,15 +17,16 @@ import numpy as np
 import torch
 
 from benchmarks import record
-from eval.report import markdown_table
 from benchmarks.render_speed import scene
+from eval.report import markdown_table
 from gsseg.render import BACKENDS, get_backend, render
 from gsseg.render.contributions import Contributions, MaskedView, contribution_matrix
 from gsseg.segment import reassign
 
 
-def seed_style_binary(weights: torch.Tensor, labels: np.ndarray, prior_labels: torch.Tensor,
-                      prior_probs: torch.Tensor, gamma_p: float) -> dict[int, torch.Tensor]:
+def seed_style_binary(
+    weights: torch.Tensor, labels: np.ndarray, prior_labels: torch.Tensor, prior_probs: torch.Tensor, gamma_p: float
+) -> dict[int, torch.Tensor]:
     """One object at a time, as the seed authors' code does it: normalise, stack [rest, object],
     add the prior to the side the classifier picks, argmax."""
     selections = {}
@@ -64,11 +65,18 @@ def contribution_vs_rgb(backend: str) -> dict:
     device = get_backend(backend).device
     on_device, pose_on_device = g.to(device), pose.to(device)
     with torch.no_grad():
-        t_rgb, _ = timed(lambda: [render(on_device, cam, pose_on_device, with_features=False, backend=backend)
-                                  for _ in views])
+        t_rgb, _ = timed(
+            lambda: [render(on_device, cam, pose_on_device, with_features=False, backend=backend) for _ in views]
+        )
     t_contrib, _ = timed(lambda: contribution_matrix(g, views, backend=backend, progress=False))
-    return {"gaussians": len(g), "views": len(views), "size": [cam.width, cam.height], "rgb_forward_s": t_rgb,
-            "contribution_s": t_contrib, "ratio": t_contrib / t_rgb}
+    return {
+        "gaussians": len(g),
+        "views": len(views),
+        "size": [cam.width, cam.height],
+        "rgb_forward_s": t_rgb,
+        "contribution_s": t_contrib,
+        "ratio": t_contrib / t_rgb,
+    }
 
 
 def main() -> None:
@@ -95,28 +103,49 @@ def main() -> None:
     t_binary, seg = timed(lambda: reassign(contrib, prior, probs, mode="binary"))
     t_loop, ref = timed(lambda: seed_style_binary(weights, labels, prior, probs, 0.2), repeats=1)
     agree = all(np.array_equal(seg.selection(obj), sel.numpy()) for obj, sel in ref.items())
-    out["reassignment"] = {"gaussians": n, "labels": k, "multi_s": t_multi, "binary_s": t_binary,
-                           "seed_style_loop_s": t_loop, "loop_over_binary": t_loop / t_binary,
-                           "binary_equals_loop": agree}
+    out["reassignment"] = {
+        "gaussians": n,
+        "labels": k,
+        "multi_s": t_multi,
+        "binary_s": t_binary,
+        "seed_style_loop_s": t_loop,
+        "loop_over_binary": t_loop / t_binary,
+        "binary_equals_loop": agree,
+    }
     print(json.dumps(out, indent=2))
     record.save("segment_speed", out, out=args.out)
 
 
 def report(r: dict) -> tuple[str, str]:
     c, a = r["contribution"], r["reassignment"]
-    headline = (f"contribution pass {c['ratio']:.2f}x an RGB render; binary reassignment of {a['gaussians']:,} "
-                f"Gaussians {a['binary_s']:.2f} s ({a['loop_over_binary']:.1f}x the per-label loop)")
-    rows = [(f"contribution pass / RGB forward, {c['gaussians']} Gaussians, {c['views']} views at "
-             f"{c['size'][0]}x{c['size'][1]}", f"{c['contribution_s']:.3f} s / {c['rgb_forward_s']:.3f} s = "
-             f"{c['ratio']:.2f}x")]
+    headline = (
+        f"contribution pass {c['ratio']:.2f}x an RGB render; binary reassignment of {a['gaussians']:,} "
+        f"Gaussians {a['binary_s']:.2f} s ({a['loop_over_binary']:.1f}x the per-label loop)"
+    )
+    rows = [
+        (
+            f"contribution pass / RGB forward, {c['gaussians']} Gaussians, {c['views']} views at "
+            f"{c['size'][0]}x{c['size'][1]}",
+            f"{c['contribution_s']:.3f} s / {c['rgb_forward_s']:.3f} s = {c['ratio']:.2f}x",
+        )
+    ]
     if "contribution_gsplat" in r:
         g = r["contribution_gsplat"]
-        rows.append(("the same on gsplat", f"{g['contribution_s'] * 1000:.1f} ms / {g['rgb_forward_s'] * 1000:.1f} ms "
-                                           f"= {g['ratio']:.2f}x"))
-    rows += [(f"reassignment, {a['gaussians']:,} Gaussians x {a['labels']} labels, multi", f"{a['multi_s']:.2f} s"),
-             ("binary", f"{a['binary_s']:.2f} s"),
-             ("binary, a per-label Python loop", f"{a['seed_style_loop_s']:.1f} s ({a['loop_over_binary']:.1f}x); "
-                                                  f"same selections: {a['binary_equals_loop']}")]
+        rows.append(
+            (
+                "the same on gsplat",
+                f"{g['contribution_s'] * 1000:.1f} ms / {g['rgb_forward_s'] * 1000:.1f} ms = {g['ratio']:.2f}x",
+            )
+        )
+    rows += [
+        (f"reassignment, {a['gaussians']:,} Gaussians x {a['labels']} labels, multi", f"{a['multi_s']:.2f} s"),
+        ("binary", f"{a['binary_s']:.2f} s"),
+        (
+            "binary, a per-label Python loop",
+            f"{a['seed_style_loop_s']:.1f} s ({a['loop_over_binary']:.1f}x); "
+            f"same selections: {a['binary_equals_loop']}",
+        ),
+    ]
     return headline, markdown_table(["what", "result"], [list(row) for row in rows])
 
 

@@ -35,8 +35,14 @@ def demos(work: Path, count: int, iters: int, env: dict[str, str]) -> dict:
         out = work / f"demo_{i}"
         shutil.rmtree(out, ignore_errors=True)
         with open(work / f"demo_{i}.log", "wb") as log:  # a file, not a pipe: a full pipe would stall the demo
-            procs.append(subprocess.Popen([gsseg, "demo", "--out", str(out), "--iters", str(iters)],
-                                          stdout=log, stderr=subprocess.STDOUT, env={**os.environ, **env}))
+            procs.append(
+                subprocess.Popen(
+                    [gsseg, "demo", "--out", str(out), "--iters", str(iters)],
+                    stdout=log,
+                    stderr=subprocess.STDOUT,
+                    env={**os.environ, **env},
+                )
+            )
     cpu = 0.0
     walls = []
     for i, proc in enumerate(procs):
@@ -59,8 +65,12 @@ def main() -> None:
     for name, env in POLICIES.items():
         alone = demos(args.work, 1, args.iters, env)
         pair = demos(args.work, 2, args.iters, env)
-        out["policies"][name] = {"alone": alone, "two_at_once": pair, "wall_ratio": pair["wall_s"] / alone["wall_s"],
-                                 "cpu_ratio": pair["cpu_s"] / (2 * alone["cpu_s"])}
+        out["policies"][name] = {
+            "alone": alone,
+            "two_at_once": pair,
+            "wall_ratio": pair["wall_s"] / alone["wall_s"],
+            "cpu_ratio": pair["cpu_s"] / (2 * alone["cpu_s"]),
+        }
         print(json.dumps({name: out["policies"][name]}))
     print(json.dumps(out, indent=2))
     record.save("shared_machine", out, out=args.out)
@@ -68,13 +78,23 @@ def main() -> None:
 
 def report(r: dict) -> tuple[str, str]:
     first, p = next(iter(r["policies"].items()))
-    headline = (f"two demos at once: {p['wall_ratio']:.2f}x the wall time of one (bound 2.3x), CPU seconds "
-                f"{p['cpu_ratio']:.2f}x twice one's (bound 1.3x)")
+    headline = (
+        f"two demos at once: {p['wall_ratio']:.2f}x the wall time of one (bound 2.3x), CPU seconds "
+        f"{p['cpu_ratio']:.2f}x twice one's (bound 1.3x)"
+    )
     table = markdown_table(
         ["idle OpenMP workers", "one demo: wall / CPU", "two at once: wall / CPU", "wall ratio", "CPU ratio"],
-        [[name, f"{x['alone']['wall_s']:.0f} s / {x['alone']['cpu_s']:.0f} s",
-          f"{x['two_at_once']['wall_s']:.0f} s / {x['two_at_once']['cpu_s']:.0f} s", f"{x['wall_ratio']:.2f}x",
-          f"{x['cpu_ratio']:.2f}x"] for name, x in r["policies"].items()])
+        [
+            [
+                name,
+                f"{x['alone']['wall_s']:.0f} s / {x['alone']['cpu_s']:.0f} s",
+                f"{x['two_at_once']['wall_s']:.0f} s / {x['two_at_once']['cpu_s']:.0f} s",
+                f"{x['wall_ratio']:.2f}x",
+                f"{x['cpu_ratio']:.2f}x",
+            ]
+            for name, x in r["policies"].items()
+        ],
+    )
     return headline, f"`gsseg demo --iters {r['iters']}`, alone and two at once, per wait policy.\n\n{table}"
 
 

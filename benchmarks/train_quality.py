@@ -35,8 +35,12 @@ def train_and_score(scene: Path, run: Path, cfg: TrainConfig) -> dict:
     """Train ``cfg`` on ``scene`` and score its test views."""
     seconds = train_run(scene, run, cfg, progress=True)
     metrics = json.loads(RunFolder(run).metrics.read_text())["train"]
-    out = {"train_seconds": seconds, "iterations": metrics["steps"], "gaussians": metrics["gaussians"],
-           **test_view_scores(run, scene, backend=cfg.backend)}
+    out = {
+        "train_seconds": seconds,
+        "iterations": metrics["steps"],
+        "gaussians": metrics["gaussians"],
+        **test_view_scores(run, scene, backend=cfg.backend),
+    }
     print(run.name, json.dumps(out))
     return out
 
@@ -46,19 +50,32 @@ def main() -> None:
     parser.add_argument("--out", default=None, help="JSON file (default: benchmarks/results/train_quality.json).")
     parser.add_argument("--iters", type=int, default=None, help="Override the schedule's length.")
     parser.add_argument("--beer", type=Path, default=None, help="Also train the beer capture found here.")
-    parser.add_argument("--backends", default=None,
-                        help="Comma-separated backends to train with (default: cpu, and gsplat where it can run).")
-    parser.add_argument("--gpu-schedule", action="store_true",
-                        help="Also train the orbit scene with gsplat on the paper's 30k-iteration schedule.")
+    parser.add_argument(
+        "--backends",
+        default=None,
+        help="Comma-separated backends to train with (default: cpu, and gsplat where it can run).",
+    )
+    parser.add_argument(
+        "--gpu-schedule",
+        action="store_true",
+        help="Also train the orbit scene with gsplat on the paper's 30k-iteration schedule.",
+    )
     parser.add_argument("--train-seeds", default="0", help="Comma-separated training seeds for the orbit scene.")
-    parser.add_argument("--no-environment-profile", dest="profile", action="store_false",
-                        help="Train without the environment's elevation profile (SH only).")
-    parser.add_argument("--coupled", action="store_true",
-                        help="Also train each orbit run with the object loss shaping the geometry.")
+    parser.add_argument(
+        "--no-environment-profile",
+        dest="profile",
+        action="store_false",
+        help="Train without the environment's elevation profile (SH only).",
+    )
+    parser.add_argument(
+        "--coupled", action="store_true", help="Also train each orbit run with the object loss shaping the geometry."
+    )
     parser.add_argument("--tag", default="", help="Suffix of the default JSON file name.")
     args = parser.parse_args()
     train_seeds = [int(x) for x in args.train_seeds.split(",")]
-    backends = args.backends.split(",") if args.backends else ["cpu"] + (["gsplat"] if BACKENDS["gsplat"].available() else [])
+    backends = (
+        args.backends.split(",") if args.backends else ["cpu"] + (["gsplat"] if BACKENDS["gsplat"].available() else [])
+    )
 
     results = {}
     with tempfile.TemporaryDirectory() as tmp:
@@ -75,15 +92,18 @@ def main() -> None:
                     results[f"{name}_coupled"] = train_and_score(synth, work / f"{name}_coupled", coupled)
             if len(runs) > 1:
                 results[f"orbit_{backend}_over_seeds"] = {
-                    f"{key}_{stat}": fn([r[key] for r in runs]) for key in ("test_psnr", "test_miou", "train_seconds")
-                    for stat, fn in (("mean", lambda xs: sum(xs) / len(xs)), ("min", min), ("max", max))}
+                    f"{key}_{stat}": fn([r[key] for r in runs])
+                    for key in ("test_psnr", "test_miou", "train_seconds")
+                    for stat, fn in (("mean", lambda xs: sum(xs) / len(xs)), ("min", min), ("max", max))
+                }
         if args.gpu_schedule:
             cfg = TrainConfig(schedule="gpu", backend="gsplat", environment_profile=args.profile)
             results["orbit_gsplat_gpu_schedule"] = train_and_score(synth, work / "orbit_gpu", cfg)
         if args.beer:
             for backend in backends:
-                cfg = TrainConfig(iters=args.iters, backend=backend, images="images_4", masks=None,
-                                  environment_profile=args.profile)
+                cfg = TrainConfig(
+                    iters=args.iters, backend=backend, images="images_4", masks=None, environment_profile=args.profile
+                )
                 results[f"beer_{backend}"] = train_and_score(args.beer, work / f"beer_{backend}", cfg)
     results = {"runs": results, "setup": {k: str(v) if isinstance(v, Path) else v for k, v in vars(args).items()}}
     print(report(results)[1])
@@ -94,21 +114,38 @@ def report(r: dict) -> tuple[str, str]:
     runs = {k: v for k, v in r["runs"].items() if not k.endswith("_over_seeds")}
     seeds = [k for k in runs if k.startswith("orbit_cpu") and not k.endswith("_coupled")]
     orbit = [runs[k] for k in seeds]
-    headline = ", ".join(f"{k}: {v['test_psnr']:.2f} dB" + (f", mIoU {v['test_miou']:.3f}" if "test_miou" in v else "")
-                         + (f", {v['train_seconds']:.0f} s" if v["train_seconds"] else "")
-                         for k, v in runs.items())
+    headline = ", ".join(
+        f"{k}: {v['test_psnr']:.2f} dB"
+        + (f", mIoU {v['test_miou']:.3f}" if "test_miou" in v else "")
+        + (f", {v['train_seconds']:.0f} s" if v["train_seconds"] else "")
+        for k, v in runs.items()
+    )
     if len(orbit) > 1:
-        headline = (f"orbit cpu over {len(orbit)} seeds: {min(v['test_psnr'] for v in orbit):.2f}-"
-                    f"{max(v['test_psnr'] for v in orbit):.2f} dB; " + ", ".join(
-                        f"{k}: {v['test_psnr']:.2f} dB" for k, v in runs.items() if k not in seeds))
-    rows = [[k, str(v["iterations"]), str(v["gaussians"]), f"{v['test_psnr']:.2f}", f"{v['test_ssim']:.3f}",
-             f"{v['test_miou']:.3f}" if "test_miou" in v else "n/a",
-             f"{v['train_seconds']:.0f}" if v["train_seconds"] else "reused"] for k, v in runs.items()]
-    table = markdown_table(["run", "iterations", "Gaussians", "test PSNR (dB)", "test SSIM", "test mIoU", "seconds"],
-                           rows)
+        headline = (
+            f"orbit cpu over {len(orbit)} seeds: {min(v['test_psnr'] for v in orbit):.2f}-"
+            f"{max(v['test_psnr'] for v in orbit):.2f} dB; "
+            + ", ".join(f"{k}: {v['test_psnr']:.2f} dB" for k, v in runs.items() if k not in seeds)
+        )
+    rows = [
+        [
+            k,
+            str(v["iterations"]),
+            str(v["gaussians"]),
+            f"{v['test_psnr']:.2f}",
+            f"{v['test_ssim']:.3f}",
+            f"{v['test_miou']:.3f}" if "test_miou" in v else "n/a",
+            f"{v['train_seconds']:.0f}" if v["train_seconds"] else "reused",
+        ]
+        for k, v in runs.items()
+    ]
+    table = markdown_table(
+        ["run", "iterations", "Gaussians", "test PSNR (dB)", "test SSIM", "test mIoU", "seconds"], rows
+    )
     profile = "with" if r["setup"]["profile"] else "without"
-    return headline, (f"Orbit: 24 views at 256², 3 LLFF test views, {profile} the environment's elevation profile; "
-                      f"beer: 71 views at 1/4 size, 9 test views, no masks.\n\n{table}")
+    return headline, (
+        f"Orbit: 24 views at 256², 3 LLFF test views, {profile} the environment's elevation profile; "
+        f"beer: 71 views at 1/4 size, 9 test views, no masks.\n\n{table}"
+    )
 
 
 if __name__ == "__main__":

@@ -25,8 +25,8 @@ from scipy import ndimage
 from scipy.spatial.transform import Rotation
 
 from benchmarks import record
-from eval.report import markdown_table
 from dataset_tools.errors import InputError
+from eval.report import markdown_table
 from gsseg.render_views import segment_pixels
 from gsseg.run import load_run
 from gsseg.viewer.session import ViewCamera, ViewerSession, browser_camera
@@ -64,21 +64,36 @@ def measure(run_dir: Path, max_size: int) -> dict:
         cached = time.perf_counter() - start
         assert np.array_equal(fresh.segmentation.labels, session.segmentation.labels)
         agree, clicks = clicks_agree(run, fresh, view)
-        return {"clicks_agree": agree, "clicks": clicks,"run": str(run_dir), "gaussians": len(session.run.gaussians), "size": [camera.width, camera.height],
-                "backend": session.backend.name, "frame_s": frame, "segments_frame_s": segments, "select_s": select,
-                "relabel_s": relabel, "relabel_new_viewer_s": cached, "contributions_uncached_s": uncached,
-                "train_views": len(session.scene.split("train"))}
+        return {
+            "clicks_agree": agree,
+            "clicks": clicks,
+            "run": str(run_dir),
+            "gaussians": len(session.run.gaussians),
+            "size": [camera.width, camera.height],
+            "backend": session.backend.name,
+            "frame_s": frame,
+            "segments_frame_s": segments,
+            "select_s": select,
+            "relabel_s": relabel,
+            "relabel_new_viewer_s": cached,
+            "contributions_uncached_s": uncached,
+            "train_views": len(session.scene.split("train")),
+        }
 
 
 def clicks_agree(run: Path, session: ViewerSession, view) -> tuple[int, int]:
     """For the pixel deepest inside each object of ``view``'s own labels (rendered segments):
     (clicks where the viewer and `gsseg edit --click` pick the same object, clicks)."""
     world_from_cam = view.cam_from_world[:3, :3].T
-    browser = browser_camera(Rotation.from_matrix(world_from_cam).as_quat(scalar_first=True),
-                             -world_from_cam @ view.cam_from_world[:3, 3],
-                             2 * math.atan(view.camera.height / 2 / view.camera.fy), view.camera.width,
-                             view.camera.height, max_size=max(view.camera.width, view.camera.height),
-                             near=view.camera.near)
+    browser = browser_camera(
+        Rotation.from_matrix(world_from_cam).as_quat(scalar_first=True),
+        -world_from_cam @ view.cam_from_world[:3, 3],
+        2 * math.atan(view.camera.height / 2 / view.camera.fy),
+        view.camera.width,
+        view.camera.height,
+        max_size=max(view.camera.width, view.camera.height),
+        near=view.camera.near,
+    )
     session.show_segments = False
     labels = _rendered_labels(session, view)
     agree = clicks = 0
@@ -93,10 +108,26 @@ def clicks_agree(run: Path, session: ViewerSession, view) -> tuple[int, int]:
         except InputError:
             mine = None
         name = f"click_{label}"
-        done = subprocess.run([str(Path(sys.executable).parent / "gsseg"), "edit", str(run), "--click", view.stem, str(u), str(v),
-                               "--op", "extract", "--name", name], capture_output=True, text=True)
-        theirs = json.loads((run / "edits" / name / "edit.json").read_text())["object_id"] if done.returncode == 0 \
-            else None
+        done = subprocess.run(
+            [
+                str(Path(sys.executable).parent / "gsseg"),
+                "edit",
+                str(run),
+                "--click",
+                view.stem,
+                str(u),
+                str(v),
+                "--op",
+                "extract",
+                "--name",
+                name,
+            ],
+            capture_output=True,
+            text=True,
+        )
+        theirs = (
+            json.loads((run / "edits" / name / "edit.json").read_text())["object_id"] if done.returncode == 0 else None
+        )
         agree += mine == theirs
         clicks += 1
     return agree, clicks
@@ -105,8 +136,9 @@ def clicks_agree(run: Path, session: ViewerSession, view) -> tuple[int, int]:
 def _rendered_labels(session: ViewerSession, view) -> np.ndarray:
     """(H, W) the label whose Gaussians weigh most at each pixel."""
     pose = torch.as_tensor(view.cam_from_world, dtype=torch.float32)
-    return segment_pixels(session.run.gaussians, session.segmentation.labels, view.camera, pose,
-                          backend=session.backend)
+    return segment_pixels(
+        session.run.gaussians, session.segmentation.labels, view.camera, pose, backend=session.backend
+    )
 
 
 def main() -> None:
@@ -121,18 +153,26 @@ def main() -> None:
 
 
 def report(r: dict) -> tuple[str, str]:
-    headline = (f"clicks agree with gsseg edit --click {r['clicks_agree']}/{r['clicks']}; relabel from the cache {r['relabel_s']:.2f} s ({r['relabel_new_viewer_s']:.2f} s in a new viewer), "
-                f"frame {r['frame_s']:.2f} s at {r['size'][0]}x{r['size'][1]}, click {r['select_s']:.2f} s")
-    rows = [["frame for a training camera", f"{r['frame_s']:.3f} s"],
-            ["frame, segments coloured", f"{r['segments_frame_s']:.3f} s"],
-            ["click selection (depth render + 20-nearest mode)", f"{r['select_s']:.3f} s"],
-            ["re-run reassignment, matrix in memory", f"{r['relabel_s']:.3f} s"],
-            ["re-run reassignment in a new viewer (matrix read from contributions.npz)",
-             f"{r['relabel_new_viewer_s']:.3f} s"],
-            [f"contribution matrix without a cache ({r['train_views']} views)",
-             f"{r['contributions_uncached_s']:.2f} s"]]
-    intro = (f"`{r['run']}`: {r['gaussians']:,} Gaussians, frames at {r['size'][0]}x{r['size'][1]} on the "
-             f"`{r['backend']}` backend, best of 3.\n\n")
+    headline = (
+        f"clicks agree with gsseg edit --click {r['clicks_agree']}/{r['clicks']}; relabel from the cache "
+        f"{r['relabel_s']:.2f} s ({r['relabel_new_viewer_s']:.2f} s in a new viewer), "
+        f"frame {r['frame_s']:.2f} s at {r['size'][0]}x{r['size'][1]}, click {r['select_s']:.2f} s"
+    )
+    rows = [
+        ["frame for a training camera", f"{r['frame_s']:.3f} s"],
+        ["frame, segments coloured", f"{r['segments_frame_s']:.3f} s"],
+        ["click selection (depth render + 20-nearest mode)", f"{r['select_s']:.3f} s"],
+        ["re-run reassignment, matrix in memory", f"{r['relabel_s']:.3f} s"],
+        [
+            "re-run reassignment in a new viewer (matrix read from contributions.npz)",
+            f"{r['relabel_new_viewer_s']:.3f} s",
+        ],
+        [f"contribution matrix without a cache ({r['train_views']} views)", f"{r['contributions_uncached_s']:.2f} s"],
+    ]
+    intro = (
+        f"`{r['run']}`: {r['gaussians']:,} Gaussians, frames at {r['size'][0]}x{r['size'][1]} on the "
+        f"`{r['backend']}` backend, best of 3.\n\n"
+    )
     return headline, intro + markdown_table(["what", "seconds"], rows)
 
 

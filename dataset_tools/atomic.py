@@ -7,8 +7,8 @@ holds is what a killed process left: the next write of the same output removes i
 from __future__ import annotations
 
 import contextlib
-import os
 import glob
+import os
 import shutil
 import tempfile
 import time

@@ -75,9 +75,13 @@ def _failure(e: BaseException, prog_name: str) -> tuple[str, int]:
 def other_scene_option(command: Callable) -> Callable:
     """``--allow-other-scene``, handed to ``command`` as ``other_scene``: use a run with a scene
     other than the one it was trained on (refused by default)."""
-    return click.option("--allow-other-scene", "other_scene", is_flag=True,
-                        help="Use the run with another scene than the one it was trained on (its views, cameras, "
-                             "poses or images differ).")(command)
+    return click.option(
+        "--allow-other-scene",
+        "other_scene",
+        is_flag=True,
+        help="Use the run with another scene than the one it was trained on (its views, cameras, "
+        "poses or images differ).",
+    )(command)
 
 
 def engine_options(command: Callable) -> Callable:
@@ -90,11 +94,17 @@ def engine_options(command: Callable) -> Callable:
 
         return command(*args, engine=Engine(engine_name, address), **kwargs)
 
-    with_engine = click.option("--address", default=None,
-                               help="A Ray cluster's address (default: start a local one); with --engine ray.")(with_engine)
-    return click.option("--engine", "engine_name", type=click.Choice(["local", "ray"]), default="local",
-                        show_default=True, help="Run the independent tasks here one by one, or as tasks on Ray "
-                                                "(pip install -e .[ray]).")(with_engine)
+    with_engine = click.option(
+        "--address", default=None, help="A Ray cluster's address (default: start a local one); with --engine ray."
+    )(with_engine)
+    return click.option(
+        "--engine",
+        "engine_name",
+        type=click.Choice(["local", "ray"]),
+        default="local",
+        show_default=True,
+        help="Run the independent tasks here one by one, or as tasks on Ray (pip install -e .[ray]).",
+    )(with_engine)
 
 
 def run_cli(group: click.Group, prog_name: str) -> Callable[[], None]:
@@ -108,8 +118,7 @@ def run_cli(group: click.Group, prog_name: str) -> Callable[[], None]:
         configure_threads()
         try:
             group.main(prog_name=prog_name, standalone_mode=False)
-        except (InputError, OSError, Interrupted, click.exceptions.Abort, KeyboardInterrupt,
-                click.ClickException) as e:
+        except (InputError, OSError, Interrupted, click.exceptions.Abort, KeyboardInterrupt, click.ClickException) as e:
             _close_progress_bars()
             message, code = _failure(e, prog_name)
             click.echo(message, err=True)

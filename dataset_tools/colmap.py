@@ -54,8 +54,10 @@ def _check_cameras_bin(path: Path) -> None:
     except (struct.error, ValueError, TypeError):
         pass
     if expected != len(data):
-        raise InputError(f"{path}: {len(data)} bytes, not the length its camera records declare; the model is "
-                         "damaged, export it from COLMAP again.")
+        raise InputError(
+            f"{path}: {len(data)} bytes, not the length its camera records declare; the model is "
+            "damaged, export it from COLMAP again."
+        )
 
 
 def read_model(sparse_dir: Path) -> ColmapModel:
@@ -80,10 +82,17 @@ def read_model(sparse_dir: Path) -> ColmapModel:
         params = np.asarray(cam.params, float)
         focal = params[cam.focal_length_idxs()] if len(params) else params
         cx, cy = params[cam.principal_point_idxs()] if len(params) else (-1.0, -1.0)
-        if (cam.width <= 0 or cam.height <= 0 or not np.isfinite(params).all() or (focal <= 0).any()
-                or not (0 <= cx <= cam.width and 0 <= cy <= cam.height)):
-            raise InputError(f"{sparse_dir}: camera {camera_id} is {cam.width}x{cam.height} with parameters "
-                             f"{params.round(3).tolist()}; the model is damaged, export it from COLMAP again.")
+        if (
+            cam.width <= 0
+            or cam.height <= 0
+            or not np.isfinite(params).all()
+            or (focal <= 0).any()
+            or not (0 <= cx <= cam.width and 0 <= cy <= cam.height)
+        ):
+            raise InputError(
+                f"{sparse_dir}: camera {camera_id} is {cam.width}x{cam.height} with parameters "
+                f"{params.round(3).tolist()}; the model is damaged, export it from COLMAP again."
+            )
     point_ids = sorted(rec.points3D.keys())
     row_of = {pid: row for row, pid in enumerate(point_ids)}
     xyz = np.array([rec.points3D[p].xyz for p in point_ids], dtype=np.float64).reshape(-1, 3)

@@ -37,8 +37,10 @@ def read_depth(path: Path, size: tuple[int, int]) -> np.ndarray:
     except (OSError, ValueError) as e:
         raise InputError(f"{path}: not a depth map ({e}); {fix}.") from None
     if depth.shape != (size[1], size[0]) or not np.issubdtype(depth.dtype, np.floating):
-        raise InputError(f"{path}: a {depth.dtype} map of shape {depth.shape}, but the view is {size[0]}x{size[1]}; "
-                         f"{fix} (the image folder the masks are built on).")
+        raise InputError(
+            f"{path}: a {depth.dtype} map of shape {depth.shape}, but the view is {size[0]}x{size[1]}; "
+            f"{fix} (the image folder the masks are built on)."
+        )
     depth = depth.astype(np.float32)
     if not np.isfinite(depth).all() or (depth < 0).any():
         raise InputError(f"{path}: holds negative or non-finite depths; {fix}.")

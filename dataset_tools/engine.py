@@ -45,8 +45,9 @@ class Engine:
         if self.address is not None and self.name != "ray":
             raise InputError("--address names a Ray cluster; pass it with --engine ray.")
 
-    def map(self, fn: Callable[[Any], Any], items: Sequence[Any], *, desc: str = "tasks",
-            progress: bool = True) -> list[Any]:
+    def map(
+        self, fn: Callable[[Any], Any], items: Sequence[Any], *, desc: str = "tasks", progress: bool = True
+    ) -> list[Any]:
         """``[fn(x) for x in items]``, in order; for ``ray``, ``fn`` must be importable by the
         workers (a module function, or a partial of one). The first task that fails raises its
         error here."""
@@ -56,8 +57,16 @@ class Engine:
         remote = ray.remote(**self._resources())(_call)
         return _gather(ray, [remote.remote(fn, x) for x in items], desc, progress)
 
-    def map_stateful(self, setup: Callable[[], Any], fn: Callable[[Any, Any], Any], items: Sequence[Any], *,
-                     local_state: Any = None, desc: str = "items", progress: bool = True) -> list[Any]:
+    def map_stateful(
+        self,
+        setup: Callable[[], Any],
+        fn: Callable[[Any, Any], Any],
+        items: Sequence[Any],
+        *,
+        local_state: Any = None,
+        desc: str = "items",
+        progress: bool = True,
+    ) -> list[Any]:
         """``[fn(state, x) for x in items]``, in order, where each worker makes ``state = setup()``
         once: here one state (``local_state`` when given: one already made); on Ray one actor
         per task slot of the cluster (its CPUs over the CPUs of a task, at most one per item),
@@ -71,8 +80,9 @@ class Engine:
         slots = int(ray.cluster_resources().get("CPU", 1)) // resources["num_cpus"]
         actors = [ray.remote(**resources)(_Worker).remote(setup) for _ in range(max(1, min(slots, len(items))))]
         try:
-            return _gather(ray, [actors[k % len(actors)].run.remote(fn, x) for k, x in enumerate(items)], desc,
-                           progress)
+            return _gather(
+                ray, [actors[k % len(actors)].run.remote(fn, x) for k, x in enumerate(items)], desc, progress
+            )
         finally:
             for actor in actors:
                 ray.kill(actor)
@@ -80,8 +90,12 @@ class Engine:
     def _resources(self) -> dict:
         """Ray options of one task or actor: the CPUs of a local piece of work, the same thread counts."""
         cpus = self.cpus or task_cpus()
-        env = {"OMP_NUM_THREADS": str(cpus), "MKL_NUM_THREADS": str(cpus), "NUMBA_NUM_THREADS": str(cpus),
-               "OMP_WAIT_POLICY": os.environ.get("OMP_WAIT_POLICY", "PASSIVE")}
+        env = {
+            "OMP_NUM_THREADS": str(cpus),
+            "MKL_NUM_THREADS": str(cpus),
+            "NUMBA_NUM_THREADS": str(cpus),
+            "OMP_WAIT_POLICY": os.environ.get("OMP_WAIT_POLICY", "PASSIVE"),
+        }
         return {"num_cpus": cpus, "runtime_env": {"env_vars": env}}
 
 
@@ -129,8 +143,10 @@ def _require_reachable(address: str, timeout: float = CONNECT_TIMEOUT_S) -> None
         socket.create_connection((host.strip("[]"), int(port)), timeout=timeout).close()
     except (OSError, ValueError) as e:
         why = e.strerror if isinstance(e, OSError) and e.strerror else str(e) or type(e).__name__
-        raise InputError(f"--address {address}: no Ray cluster answers there ({why}); start one with "
-                         "`ray start --head` or leave --address out for a local one.") from None
+        raise InputError(
+            f"--address {address}: no Ray cluster answers there ({why}); start one with "
+            "`ray start --head` or leave --address out for a local one."
+        ) from None
 
 
 def _init_ray(address: str | None):
@@ -144,6 +160,8 @@ def _init_ray(address: str | None):
         try:
             ray.init(address=address, include_dashboard=False, log_to_driver=False, configure_logging=False)
         except ConnectionError as e:
-            raise InputError(f"--address {address}: no Ray cluster answers there ({e}); start one with "
-                             "`ray start --head` or leave --address out for a local one.") from None
+            raise InputError(
+                f"--address {address}: no Ray cluster answers there ({e}); start one with "
+                "`ray start --head` or leave --address out for a local one."
+            ) from None
     return ray

@@ -29,8 +29,12 @@ def view_fingerprint(view: View) -> dict:
     """``size`` [W, H], ``camera`` [fx, fy, cx, cy], ``pose`` (12 floats of cam_from_world) and
     ``image`` (the file's digest) of one view."""
     c = view.camera
-    return {"size": [c.width, c.height], "camera": [c.fx, c.fy, c.cx, c.cy],
-            "pose": np.asarray(view.cam_from_world, float).ravel().tolist(), "image": file_digest(view.image_path)}
+    return {
+        "size": [c.width, c.height],
+        "camera": [c.fx, c.fy, c.cx, c.cy],
+        "pose": np.asarray(view.cam_from_world, float).ravel().tolist(),
+        "image": file_digest(view.image_path),
+    }
 
 
 def scene_fingerprint(scene: Scene) -> dict:
@@ -47,8 +51,10 @@ def _view_difference(name: str, recorded: dict, now: dict) -> str | None:
     if recorded["size"] != now["size"]:
         return f"view {name} is {now['size'][0]}x{now['size'][1]}, not {recorded['size'][0]}x{recorded['size'][1]}"
     if not _close(recorded["camera"], now["camera"]):
-        return (f"the camera of view {name} differs (fx, fy, cx, cy {np.round(now['camera'], 2).tolist()} against "
-                f"{np.round(recorded['camera'], 2).tolist()})")
+        return (
+            f"the camera of view {name} differs (fx, fy, cx, cy {np.round(now['camera'], 2).tolist()} against "
+            f"{np.round(recorded['camera'], 2).tolist()})"
+        )
     if not _close(recorded["pose"], now["pose"]):
         return f"the pose of view {name} differs"
     if recorded["image"] != now["image"]:

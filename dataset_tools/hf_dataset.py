@@ -76,8 +76,9 @@ def export_dataset(scene: Scene, out: Path, *, overwrite: bool = False, shard_vi
     return out
 
 
-def write_scenes_from_rows(rows, out: Path, *, scenes: list[str] | None = None, masks: str = "object_mask",
-                           overwrite: bool = False) -> list[Path]:
+def write_scenes_from_rows(
+    rows, out: Path, *, scenes: list[str] | None = None, masks: str = "object_mask", overwrite: bool = False
+) -> list[Path]:
     """Write the scenes of a ``datasets.Dataset`` of view rows (:data:`COLUMNS`) as scene
     folders ``out/<scene>/`` (PNG images, ``<masks>/`` ID maps, a pinhole COLMAP model without
     points, the split in scene.json). ``scenes`` keeps only those names. Each folder appears
@@ -109,8 +110,15 @@ def write_scenes_from_rows(rows, out: Path, *, scenes: list[str] | None = None, 
                 if row["split"] == "test":
                     test.append(image_name)
             empty = (np.zeros(0, np.int64), np.zeros((0, 2)))
-            colmap.write_model(tmp / "sparse" / "0", names, cameras, poses, [empty] * len(names),
-                               np.zeros((0, 3)), np.zeros((0, 3), np.uint8))
+            colmap.write_model(
+                tmp / "sparse" / "0",
+                names,
+                cameras,
+                poses,
+                [empty] * len(names),
+                np.zeros((0, 3)),
+                np.zeros((0, 3), np.uint8),
+            )
             write_bytes_atomic(tmp / "scene.json", json.dumps({"split": {"test": sorted(test)}}, indent=2).encode())
         written.append(dst)
     return written

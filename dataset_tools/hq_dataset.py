@@ -20,15 +20,17 @@ from pathlib import Path
 from tqdm import tqdm
 
 from dataset_tools.atomic import atomic_directory
-from dataset_tools.overlap import refuse_overlap
 from dataset_tools.errors import InputError
 from dataset_tools.hf_dataset import write_scenes_from_rows
+from dataset_tools.overlap import refuse_overlap
 from dataset_tools.scene import load_scene
 
 HQ_REPO = "joshir/3D-Scene-Segmentation-HQ"
 ARCHIVE_SUFFIXES = (".zip", ".tar", ".tar.gz", ".tgz")
-OFFLINE_HINT = (f"download it where the Hub is reachable (`huggingface-cli download {HQ_REPO} --repo-type dataset "
-                "--local-dir DIR`) and pass --local DIR")
+OFFLINE_HINT = (
+    f"download it where the Hub is reachable (`huggingface-cli download {HQ_REPO} --repo-type dataset "
+    "--local-dir DIR`) and pass --local DIR"
+)
 
 
 def download_hq(*, repo_id: str = HQ_REPO, revision: str | None = None, cache_dir: Path | None = None) -> Path:
@@ -40,8 +42,9 @@ def download_hq(*, repo_id: str = HQ_REPO, revision: str | None = None, cache_di
         return Path(snapshot_download(repo_id, repo_type="dataset", revision=revision, cache_dir=cache_dir))
     except (LocalEntryNotFoundError, HfHubHTTPError, OSError) as e:
         reason = type(e).__name__
-        raise InputError(f"cannot download {repo_id} from the Hugging Face Hub ({reason}: offline or not "
-                         f"reachable); {OFFLINE_HINT}.") from None
+        raise InputError(
+            f"cannot download {repo_id} from the Hugging Face Hub ({reason}: offline or not reachable); {OFFLINE_HINT}."
+        ) from None
 
 
 def _is_archive(path: Path) -> bool:
@@ -81,8 +84,15 @@ def _load_rows(sources: list[Path]):
     return parts[0] if len(parts) == 1 else datasets.concatenate_datasets(parts)
 
 
-def convert_hq(source: Path | str, out: Path | str, *, scenes: list[str] | None = None, masks: str = "object_mask",
-               overwrite: bool = False, progress: bool = True) -> list[Path]:
+def convert_hq(
+    source: Path | str,
+    out: Path | str,
+    *,
+    scenes: list[str] | None = None,
+    masks: str = "object_mask",
+    overwrite: bool = False,
+    progress: bool = True,
+) -> list[Path]:
     """Convert a copy of the dataset at ``source`` into scene folders ``out/<scene>/``.
 
     Args:
@@ -104,10 +114,12 @@ def convert_hq(source: Path | str, out: Path | str, *, scenes: list[str] | None 
         else:
             roots, archives = [], [source] if _is_archive(source) else []
         if not roots and not archives:
-            raise InputError(f"{source}: not a folder or an archive ({', '.join(ARCHIVE_SUFFIXES)}); "
-                             f"pass a copy of {HQ_REPO}.")
-        for k, archive in enumerate(tqdm(archives, desc="unpacking", unit="archive",
-                                               disable=not progress or not archives)):
+            raise InputError(
+                f"{source}: not a folder or an archive ({', '.join(ARCHIVE_SUFFIXES)}); pass a copy of {HQ_REPO}."
+            )
+        for k, archive in enumerate(
+            tqdm(archives, desc="unpacking", unit="archive", disable=not progress or not archives)
+        ):
             target = Path(unpacked) / f"{k:03d}"
             try:
                 _unpack(archive, target)
@@ -119,10 +131,11 @@ def convert_hq(source: Path | str, out: Path | str, *, scenes: list[str] | None 
         names = [f.name for f in folders]
         duplicated = sorted({n for n in names if names.count(n) > 1})
         if duplicated:
-            raise InputError(f"{source}: several scene folders are named {duplicated[0]!r}; pass one copy of the dataset.")
+            raise InputError(
+                f"{source}: several scene folders are named {duplicated[0]!r}; pass one copy of the dataset."
+            )
         written = []
-        for folder in tqdm(folders, desc="copying scenes", unit="scene",
-                           disable=not progress or not folders):
+        for folder in tqdm(folders, desc="copying scenes", unit="scene", disable=not progress or not folders):
             load_scene(folder, masks=masks)  # refuses broken scenes with a message naming the file
             dst = out / folder.name
             if dst.exists() and not overwrite:
@@ -136,14 +149,23 @@ def convert_hq(source: Path | str, out: Path | str, *, scenes: list[str] | None 
             written += write_scenes_from_rows(_load_rows(rows), out, scenes=scenes, masks=masks, overwrite=overwrite)
     if not written:
         wanted = f" named {', '.join(scenes)}" if scenes else ""
-        raise InputError(f"{source}: found no scenes{wanted} (folders with sparse/0, archives of them, or dataset "
-                         f"rows); pass a copy of {HQ_REPO}.")
+        raise InputError(
+            f"{source}: found no scenes{wanted} (folders with sparse/0, archives of them, or dataset "
+            f"rows); pass a copy of {HQ_REPO}."
+        )
     return sorted(written)
 
 
-def fetch_hq(out: Path | str, *, local: Path | str | None = None, scenes: list[str] | None = None,
-             masks: str = "object_mask", revision: str | None = None, overwrite: bool = False,
-             progress: bool = True) -> list[Path]:
+def fetch_hq(
+    out: Path | str,
+    *,
+    local: Path | str | None = None,
+    scenes: list[str] | None = None,
+    masks: str = "object_mask",
+    revision: str | None = None,
+    overwrite: bool = False,
+    progress: bool = True,
+) -> list[Path]:
     """Scene folders of the HQ dataset in ``out``: from the local copy ``local``, or downloaded
     from the Hub when it is None."""
     if local is not None:

@@ -20,7 +20,9 @@ def image_size(path: Path) -> tuple[int, int]:
         with Image.open(path) as im:
             return im.size
     except FileNotFoundError:
-        raise InputError(f"{path}: image file not found; restore it or remove the view from the COLMAP model.") from None
+        raise InputError(
+            f"{path}: image file not found; restore it or remove the view from the COLMAP model."
+        ) from None
     except OSError as e:
         raise InputError(f"{path}: not a readable image ({e}); replace it with a JPEG or PNG.") from None
 
@@ -34,7 +36,9 @@ def read_image(path: Path) -> np.ndarray:
             im.load()
             return np.array(im.convert("RGB"))
     except FileNotFoundError:
-        raise InputError(f"{path}: image file not found; restore it or remove the view from the COLMAP model.") from None
+        raise InputError(
+            f"{path}: image file not found; restore it or remove the view from the COLMAP model."
+        ) from None
     except (OSError, SyntaxError, ValueError) as e:
         raise InputError(f"{path}: cannot read this image ({e}); replace it with a whole JPEG or PNG.") from None
 
@@ -42,8 +46,9 @@ def read_image(path: Path) -> np.ndarray:
 def encode_image(rgb: np.ndarray, suffix: str) -> bytes:
     """The bytes of an (H, W, 3) uint8 RGB image as a ``.jpg``/``.jpeg`` (quality 95) or ``.png`` file."""
     jpeg = suffix.lower() in (".jpg", ".jpeg")
-    ok, data = cv2.imencode(suffix.lower(), cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR),
-                            [cv2.IMWRITE_JPEG_QUALITY, 95] if jpeg else [])
+    ok, data = cv2.imencode(
+        suffix.lower(), cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, 95] if jpeg else []
+    )
     if not ok:
         raise InputError(f"OpenCV cannot encode {suffix} images; use JPEG or PNG.")
     return data.tobytes()
@@ -59,7 +64,9 @@ def read_mask(path: Path) -> np.ndarray:
     except FileNotFoundError:
         raise InputError(f"{path}: mask file not found; rebuild the masks with `hqmask build`.") from None
     except (OSError, SyntaxError, ValueError) as e:
-        raise InputError(f"{path}: cannot read this mask ({e}); object masks must be 8-bit single-channel PNGs.") from None
+        raise InputError(
+            f"{path}: cannot read this mask ({e}); object masks must be 8-bit single-channel PNGs."
+        ) from None
     if mode in ("L", "P"):
         return np.ascontiguousarray(ids, dtype=np.uint8)
     if mode == "1":

@@ -36,7 +36,8 @@ class SceneSummary:
             [
                 f"scene        {self.root}",
                 f"views        {self.views} ({self.train} train, {self.test} test) from {self.image_dir}/",
-                f"resolution   {res}" + (f"  ({self.undistorted} views undistorted to pinhole)" if self.undistorted else ""),
+                f"resolution   {res}"
+                + (f"  ({self.undistorted} views undistorted to pinhole)" if self.undistorted else ""),
                 f"points3D     {self.points} (mean track length {self.mean_track_length:.2f})",
                 f"masks        {self.mask_dir or 'none'}: {self.masked_views} of {self.views} views",
                 f"object IDs   {id_text}",

@@ -31,8 +31,10 @@ def exclusive(lock_file: Path, owner: Path, what: str) -> Iterator[None]:
     try:
         if not try_lock(fd):
             holder = os.pread(fd, 32, 0).decode(errors="replace").strip() or "another process"
-            raise InputError(f"{owner}: another command ({holder}) is writing {what}; wait for it to finish or "
-                             "choose another folder.")
+            raise InputError(
+                f"{owner}: another command ({holder}) is writing {what}; wait for it to finish or "
+                "choose another folder."
+            )
         os.ftruncate(fd, 0)
         os.pwrite(fd, f"pid {os.getpid()}".encode(), 0)
         yield

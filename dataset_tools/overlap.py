@@ -44,8 +44,10 @@ def refuse_overlap(out: Path | str, protected: Iterable[Protected]) -> None:
         if relation is not None:
             where = "would replace" if relation == "is" else relation
             shown = "" if relation == "is" else f" ({path})"
-            raise InputError(f"{out}: the output {where} {what}{shown}, which this command reads; --force never "
-                             "replaces an input, so write the output elsewhere.")
+            raise InputError(
+                f"{out}: the output {where} {what}{shown}, which this command reads; --force never "
+                "replaces an input, so write the output elsewhere."
+            )
 
 
 def scene_inputs(root: Path | str, masks: Iterable[str | None] = ()) -> list[Protected]:
@@ -54,9 +56,12 @@ def scene_inputs(root: Path | str, masks: Iterable[str | None] = ()) -> list[Pro
     mask folders ``masks`` it reads. Other mask folders may be rebuilt (with ``--force``)."""
     root = Path(root)
     image_folders = {root / "images", *(p for p in root.glob("images_*") if p.is_dir())}
-    return [*(("the scene's images", p) for p in sorted(image_folders)),
-            ("the scene's COLMAP model", root / "sparse"), ("the scene's scene.json", root / "scene.json"),
-            *((f"the mask folder {m}", root / m) for m in masks if m)]
+    return [
+        *(("the scene's images", p) for p in sorted(image_folders)),
+        ("the scene's COLMAP model", root / "sparse"),
+        ("the scene's scene.json", root / "scene.json"),
+        *((f"the mask folder {m}", root / m) for m in masks if m),
+    ]
 
 
 def scene_entries(root: Path | str) -> list[Protected]:
@@ -65,8 +70,9 @@ def scene_entries(root: Path | str) -> list[Protected]:
     folder inside it may be written."""
     root = Path(root)
     entries = {e for e in root.iterdir() if not e.name.startswith(".")} if root.is_dir() else set()
-    return scene_inputs(root) + [(f"the scene's {e.name}", e) for e in sorted(entries - {p for _, p in
-                                                                                       scene_inputs(root)})]
+    return scene_inputs(root) + [
+        (f"the scene's {e.name}", e) for e in sorted(entries - {p for _, p in scene_inputs(root)})
+    ]
 
 
 def run_inputs(root: Path | str) -> list[Protected]:

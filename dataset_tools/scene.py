@@ -1,10 +1,10 @@
 """The scene folder of DESIGN.md: loading, saving, splits and lazy image access.
 
-    scene/
-      images/ images_2/ ...   RGB images (jpg or png), optional downsampled copies
-      sparse/0/               COLMAP model, binary or text
-      object_mask/            one 8-bit PNG of object IDs a view, same stem as the image
-      scene.json              optional: object names, split, provenance
+scene/
+  images/ images_2/ ...   RGB images (jpg or png), optional downsampled copies
+  sparse/0/               COLMAP model, binary or text
+  object_mask/            one 8-bit PNG of object IDs a view, same stem as the image
+  scene.json              optional: object names, split, provenance
 """
 
 from __future__ import annotations
@@ -232,7 +232,9 @@ def load_scene(
         raise InputError(f"{root}: scene folder not found; check the path.")
     image_root = root / images
     if not image_root.is_dir():
-        raise InputError(f"{image_root}: image folder not found; put the views in {images}/ or pick another with --images.")
+        raise InputError(
+            f"{image_root}: image folder not found; put the views in {images}/ or pick another with --images."
+        )
     model = colmap.read_model(root / "sparse" / "0")
     mask_root = root / masks if masks else None
     near = scene_near_plane(model.images, model.xyz)
@@ -277,7 +279,9 @@ def load_scene(
     test_names = frozenset(listed) if listed is not None else llff_test_names(names, test_every)
     unknown = test_names - set(names)
     if unknown:
-        raise InputError(f"{root / 'scene.json'}: split.test names views that do not exist ({sorted(unknown)[:3]}); fix the list.")
+        raise InputError(
+            f"{root / 'scene.json'}: split.test names views that do not exist ({sorted(unknown)[:3]}); fix the list."
+        )
     return Scene(
         root=root,
         views=views,

@@ -18,27 +18,67 @@ def cli() -> None:
 @click.argument("run", type=click.Path(path_type=Path))
 @click.option("--scene", required=True, type=click.Path(path_type=Path), help="The scene the run was trained on.")
 @click.option("--out", required=True, type=click.Path(path_type=Path), help="Report folder to write.")
-@click.option("--gt-masks", default="object_mask", show_default=True, callback=none_means_off,
-              help="Ground-truth mask folder of SCENE; none: image metrics only.")
+@click.option(
+    "--gt-masks",
+    default="object_mask",
+    show_default=True,
+    callback=none_means_off,
+    help="Ground-truth mask folder of SCENE; none: image metrics only.",
+)
 @click.option("--split", default="test", show_default=True, help="Views to evaluate: test, train or all.")
 @click.option("--object-id", type=int, default=None, help="Label to edit in the image rows (default: the largest).")
-@click.option("--color", nargs=3, type=click.IntRange(0, 255), default=(255, 40, 200), show_default=True,
-              help="Recolour target, 0..255.")
+@click.option(
+    "--color",
+    nargs=3,
+    type=click.IntRange(0, 255),
+    default=(255, 40, 200),
+    show_default=True,
+    help="Recolour target, 0..255.",
+)
 @click.option("--backend", default="auto", show_default=True, help="auto, cpu, torch or gsplat.")
-@click.option("--lpips", type=click.Path(path_type=Path), default=None,
-              help="LPIPS network (ONNX, from `gseval export-lpips`); without it LPIPS is n/a.")
+@click.option(
+    "--lpips",
+    type=click.Path(path_type=Path),
+    default=None,
+    help="LPIPS network (ONNX, from `gseval export-lpips`); without it LPIPS is n/a.",
+)
 @click.option("--force", is_flag=True, help="Replace --out if it exists.")
 @other_scene_option
-def report(run: Path, scene: Path, out: Path, gt_masks: str, split: str, object_id: int | None,
-           color: tuple[int, int, int], backend: str, lpips: Path | None, force: bool, other_scene: bool) -> None:
+def report(
+    run: Path,
+    scene: Path,
+    out: Path,
+    gt_masks: str,
+    split: str,
+    object_id: int | None,
+    color: tuple[int, int, int],
+    backend: str,
+    lpips: Path | None,
+    force: bool,
+    other_scene: bool,
+) -> None:
     """Metrics (visible and extracted mIoU/mAcc, PSNR, SSIM) and a markdown/HTML report of RUN."""
     from eval.report import report_run
 
-    ev = report_run(run, scene, out, gt_masks=gt_masks, split=split, object_id=object_id, color=color,
-                    backend=backend, lpips=lpips, overwrite=force, other_scene=other_scene)
+    ev = report_run(
+        run,
+        scene,
+        out,
+        gt_masks=gt_masks,
+        split=split,
+        object_id=object_id,
+        color=color,
+        backend=backend,
+        lpips=lpips,
+        overwrite=force,
+        other_scene=other_scene,
+    )
     s = ev.summary()
-    scores = (f"mIoU visible {s['visible']['miou']:.3f}, extracted {s['extracted']['miou']:.3f}; "
-              if s["visible"]["miou"] is not None else "")
+    scores = (
+        f"mIoU visible {s['visible']['miou']:.3f}, extracted {s['extracted']['miou']:.3f}; "
+        if s["visible"]["miou"] is not None
+        else ""
+    )
     click.echo(f"{scores}PSNR {s['psnr']:.2f} dB over {s['views']} views")
     click.echo(f"wrote {out / 'report.html'}")
 

@@ -10,8 +10,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from dataset_tools.scene import View
 from dataset_tools.errors import InputError
+from dataset_tools.scene import View
 from dataset_tools.synth.edit_truth import EDIT_TRUTH, read_edit_truth
 from eval.metrics import extraction_scores, removal_scores
 from gsseg.edits import apply_edit
@@ -20,8 +20,16 @@ from gsseg.run import Run
 from gsseg.segment.reassign import Segmentation
 
 
-def edit_rows(run: Run, segmentation: Segmentation, views: list[View], scene_dir: Path, id_map: dict[int, int], *,
-              objects: list[int] | None = None, backend: str | Backend = "cpu") -> list[dict]:
+def edit_rows(
+    run: Run,
+    segmentation: Segmentation,
+    views: list[View],
+    scene_dir: Path,
+    id_map: dict[int, int],
+    *,
+    objects: list[int] | None = None,
+    backend: str | Backend = "cpu",
+) -> list[dict]:
     """One row per (view, ground-truth object) that has edit truth and a predicted label:
     {view, object, label, removal: {...}, extraction: {...}}. ``id_map`` maps predicted
     labels to ground-truth IDs; ``objects`` limits the ground-truth objects scored."""
@@ -43,29 +51,44 @@ def edit_rows(run: Run, segmentation: Segmentation, views: list[View], scene_dir
                     raise InputError(
                         f"{Path(scene_dir) / EDIT_TRUTH}: made at {truth.without.shape[1]}x{truth.without.shape[0]} "
                         f"but {view.name} renders at {view.camera.width}x{view.camera.height}; write it again for "
-                        "the run's image folder (dataset_tools.synth.write_edit_truth(scene, images=...)).")
+                        "the run's image folder (dataset_tools.synth.write_edit_truth(scene, images=...))."
+                    )
                 region = view.load_mask() == obj if view.mask_path is not None else truth.silhouette
                 extracted = run.render(view, gaussians=alone, background="white", backend=backend)
-                rows.append({
-                    "view": view.stem, "object": obj, "label": label_of[obj],
-                    "removal": removal_scores(run.render_rgb(view, gaussians=removed, backend=backend), truth.without,
-                                              region, truth.seen),
-                    "extraction": extraction_scores(extracted.alpha.cpu().numpy(), to_uint8(extracted.rgb),
-                                                    truth.alone, truth.silhouette, truth.silhouette_seen)})
+                rows.append(
+                    {
+                        "view": view.stem,
+                        "object": obj,
+                        "label": label_of[obj],
+                        "removal": removal_scores(
+                            run.render_rgb(view, gaussians=removed, backend=backend), truth.without, region, truth.seen
+                        ),
+                        "extraction": extraction_scores(
+                            extracted.alpha.cpu().numpy(),
+                            to_uint8(extracted.rgb),
+                            truth.alone,
+                            truth.silhouette,
+                            truth.silhouette_seen,
+                        ),
+                    }
+                )
     return rows
 
 
 def summarize_edits(rows: list[dict]) -> dict:
     """Means over the rows (PSNRs over the rows where they are finite and defined)."""
+
     def mean(values: list) -> float | None:
         kept = [v for v in values if v is not None and np.isfinite(v)]
         return float(np.mean(kept)) if kept else None
 
-    return {"pairs": len(rows),
-            "removal_psnr": mean([r["removal"]["psnr"] for r in rows]),
-            "removal_psnr_region": mean([r["removal"]["psnr_region"] for r in rows]),
-            "removal_psnr_seen": mean([r["removal"]["psnr_seen"] for r in rows]),
-            "extraction_iou": mean([r["extraction"]["iou"] for r in rows]),
-            "extraction_iou_seen": mean([r["extraction"]["iou_seen"] for r in rows]),
-            "extraction_psnr_inside": mean([r["extraction"]["psnr_inside"] for r in rows]),
-            "leak": mean([r["extraction"]["leak"] for r in rows])}
+    return {
+        "pairs": len(rows),
+        "removal_psnr": mean([r["removal"]["psnr"] for r in rows]),
+        "removal_psnr_region": mean([r["removal"]["psnr_region"] for r in rows]),
+        "removal_psnr_seen": mean([r["removal"]["psnr_seen"] for r in rows]),
+        "extraction_iou": mean([r["extraction"]["iou"] for r in rows]),
+        "extraction_iou_seen": mean([r["extraction"]["iou_seen"] for r in rows]),
+        "extraction_psnr_inside": mean([r["extraction"]["psnr_inside"] for r in rows]),
+        "leak": mean([r["extraction"]["leak"] for r in rows]),
+    }

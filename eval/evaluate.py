@@ -13,8 +13,8 @@ binary IoU and pixel accuracy; mIoU and mAcc average them. PSNR and SSIM per tes
 
 from __future__ import annotations
 
-import json
 import dataclasses
+import json
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -25,8 +25,8 @@ from dataset_tools.atomic import write_bytes_atomic
 from dataset_tools.errors import InputError
 from dataset_tools.label_maps import match_ids, overlap
 from dataset_tools.scene import View
-from eval.lpips import LPIPS
 from eval.edit_scores import summarize_edits
+from eval.lpips import LPIPS
 from eval.metrics import binary_scores, psnr, ssim
 from eval.renders import ViewRenders, render_view
 from gsseg.render import Backend, get_backend
@@ -57,13 +57,19 @@ class Evaluation:
 
     def summary(self) -> dict:
         lpips = [v["lpips"] for v in self.views if "lpips" in v]
-        out: dict = {"views": len(self.views), "psnr": _mean([v["psnr"] for v in self.views]),
-                     "ssim": _mean([v["ssim"] for v in self.views]),
-                     "lpips": _mean(lpips) if lpips and len(lpips) == len(self.views) else LPIPS_NA}
+        out: dict = {
+            "views": len(self.views),
+            "psnr": _mean([v["psnr"] for v in self.views]),
+            "ssim": _mean([v["ssim"] for v in self.views]),
+            "lpips": _mean(lpips) if lpips and len(lpips) == len(self.views) else LPIPS_NA,
+        }
         for protocol in PROTOCOLS:
             rows = [r for r in self.objects if r["protocol"] == protocol]
-            out[protocol] = {"miou": _mean([r["iou"] for r in rows]), "macc": _mean([r["acc"] for r in rows]),
-                             "pairs": len(rows)}
+            out[protocol] = {
+                "miou": _mean([r["iou"] for r in rows]),
+                "macc": _mean([r["acc"] for r in rows]),
+                "pairs": len(rows),
+            }
         if self.edits:
             out["edits"] = summarize_edits(self.edits)
         return out
@@ -106,8 +112,9 @@ def _mean(values: list[float]) -> float | None:
     return float(np.mean(values)) if values else None
 
 
-def score_views(renders: list[ViewRenders], *, run: str, scene: str, split: str,
-                lpips: LPIPS | None = None) -> Evaluation:
+def score_views(
+    renders: list[ViewRenders], *, run: str, scene: str, split: str, lpips: LPIPS | None = None
+) -> Evaluation:
     """Match predicted labels to ground-truth IDs and score every view in both protocols
     (and by ``lpips`` when given)."""
     with_truth = [r for r in renders if r.truth is not None]
@@ -116,8 +123,14 @@ def score_views(renders: list[ViewRenders], *, run: str, scene: str, split: str,
     label_of = {g: p for p, g in id_map.items()}
     result = Evaluation(run=run, scene=scene, split=split, id_map=id_map)
     for r in renders:
-        result.views.append({"view": r.stem, "psnr": psnr(r.rgb, r.image), "ssim": ssim(r.rgb, r.image),
-                             **({"lpips": lpips(r.rgb, r.image)} if lpips is not None else {})})
+        result.views.append(
+            {
+                "view": r.stem,
+                "psnr": psnr(r.rgb, r.image),
+                "ssim": ssim(r.rgb, r.image),
+                **({"lpips": lpips(r.rgb, r.image)} if lpips is not None else {}),
+            }
+        )
         if r.truth is None:
             continue
         renamed = mapping[r.visible]
@@ -131,38 +144,67 @@ def score_views(renders: list[ViewRenders], *, run: str, scene: str, split: str,
     return result
 
 
-def load_inputs(run_dir: Path, scene_dir: Path, gt_masks: str | None, split: str,
-                other_scene: bool = False) -> tuple[Run, Segmentation, list[View]]:
+def load_inputs(
+    run_dir: Path, scene_dir: Path, gt_masks: str | None, split: str, other_scene: bool = False
+) -> tuple[Run, Segmentation, list[View]]:
     """The run, its labels and the scene's ``split`` views, refusing what cannot be evaluated
     (a scene other than the run's unless ``other_scene``)."""
     run = load_run(run_dir, other_scene=other_scene)
     segmentation = run.labels()
     if gt_masks is not None and not (scene_dir / gt_masks).is_dir():
-        raise InputError(f"{scene_dir / gt_masks}: no ground-truth masks for the metrics; "
-                         "pass --gt-masks NAME, the scene's ground-truth mask folder.")
+        raise InputError(
+            f"{scene_dir / gt_masks}: no ground-truth masks for the metrics; "
+            "pass --gt-masks NAME, the scene's ground-truth mask folder."
+        )
     views = run.scene(scene_dir, masks=gt_masks).split(split)
     if not views:
         raise InputError(f"{scene_dir}: the scene has no {split} views to evaluate.")
     return run, segmentation, views
 
 
-def evaluate(run: Run, segmentation: Segmentation, views: list[View], *, with_truth: bool, scene: str, split: str,
-             backend: str | Backend, lpips: LPIPS | None = None,
-             progress: bool = True) -> tuple[Evaluation, list[ViewRenders]]:
+def evaluate(
+    run: Run,
+    segmentation: Segmentation,
+    views: list[View],
+    *,
+    with_truth: bool,
+    scene: str,
+    split: str,
+    backend: str | Backend,
+    lpips: LPIPS | None = None,
+    progress: bool = True,
+) -> tuple[Evaluation, list[ViewRenders]]:
     """Render ``views`` with the segmented run and score them (against their masks when
     ``with_truth``; by ``lpips`` when given). Returns the scores and the renders."""
-    renders = [render_view(run, segmentation, v, backend=backend, truth=v.load_mask() if with_truth else None)
-               for v in tqdm(views, desc="evaluating", unit="view", disable=not progress)]
+    renders = [
+        render_view(run, segmentation, v, backend=backend, truth=v.load_mask() if with_truth else None)
+        for v in tqdm(views, desc="evaluating", unit="view", disable=not progress)
+    ]
     return score_views(renders, run=str(run.root), scene=scene, split=split, lpips=lpips), renders
 
 
-def evaluate_run(run_dir: Path | str, scene_dir: Path | str, *, gt_masks: str | None = "object_mask",
-                 split: str = "test", backend: str = "auto", lpips: Path | str | None = None,
-                 progress: bool = True) -> tuple[Evaluation, list[ViewRenders]]:
+def evaluate_run(
+    run_dir: Path | str,
+    scene_dir: Path | str,
+    *,
+    gt_masks: str | None = "object_mask",
+    split: str = "test",
+    backend: str = "auto",
+    lpips: Path | str | None = None,
+    progress: bool = True,
+) -> tuple[Evaluation, list[ViewRenders]]:
     """Render the ``split`` views of a segmented run and score them against ``gt_masks``
     (``None``: image metrics only) and with the LPIPS network file ``lpips`` (``None``: LPIPS
     is reported as not available). Returns the scores and the renders."""
     run, segmentation, views = load_inputs(Path(run_dir), Path(scene_dir), gt_masks, split)
-    return evaluate(run, segmentation, views, with_truth=gt_masks is not None, scene=str(scene_dir), split=split,
-                    backend=get_backend(backend), lpips=LPIPS(lpips) if lpips is not None else None,
-                    progress=progress)
+    return evaluate(
+        run,
+        segmentation,
+        views,
+        with_truth=gt_masks is not None,
+        scene=str(scene_dir),
+        split=split,
+        backend=get_backend(backend),
+        lpips=LPIPS(lpips) if lpips is not None else None,
+        progress=progress,
+    )

@@ -37,12 +37,15 @@ class LPIPS:
         try:
             self.session = ort.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
         except Exception as e:  # onnxruntime raises its own exception types for unreadable graphs
-            raise InputError(f"{path}: ONNX Runtime cannot load it ({type(e).__name__}); "
-                             "write it again with `gseval export-lpips`.") from None
+            raise InputError(
+                f"{path}: ONNX Runtime cannot load it ({type(e).__name__}); write it again with `gseval export-lpips`."
+            ) from None
         names = tuple(i.name for i in self.session.get_inputs())
         if sorted(names) != sorted(INPUTS) or len(self.session.get_outputs()) != 1:
-            raise InputError(f"{path}: an LPIPS graph takes inputs {', '.join(INPUTS)} and returns one distance "
-                             f"(this one takes {', '.join(names)}); write it with `gseval export-lpips`.")
+            raise InputError(
+                f"{path}: an LPIPS graph takes inputs {', '.join(INPUTS)} and returns one distance "
+                f"(this one takes {', '.join(names)}); write it with `gseval export-lpips`."
+            )
         self.path = path
 
     @staticmethod
@@ -70,13 +73,23 @@ def export_lpips(out: Path | str, net: str = "alex", *, overwrite: bool = False)
     try:
         import lpips
     except ImportError:
-        raise InputError("exporting LPIPS needs the lpips package and torchvision: "
-                         "`pip install lpips` where torchvision is available.") from None
+        raise InputError(
+            "exporting LPIPS needs the lpips package and torchvision: "
+            "`pip install lpips` where torchvision is available."
+        ) from None
     model = lpips.LPIPS(net=net, verbose=False).eval()
     x = torch.zeros(1, 3, 64, 64)
     buf = io.BytesIO()
     dynamic = {"image0": {2: "height", 3: "width"}, "image1": {2: "height", 3: "width"}}
-    torch.onnx.export(model, (x, x), buf, input_names=list(INPUTS), output_names=["distance"],
-                      dynamic_axes=dynamic, opset_version=17, dynamo=False)
+    torch.onnx.export(
+        model,
+        (x, x),
+        buf,
+        input_names=list(INPUTS),
+        output_names=["distance"],
+        dynamic_axes=dynamic,
+        opset_version=17,
+        dynamo=False,
+    )
     write_bytes_atomic(out, buf.getvalue())
     return out

@@ -79,8 +79,9 @@ def similarity_alignment(source: np.ndarray, target: np.ndarray) -> tuple[float,
     return s, R, mu_t - s * R @ mu_s
 
 
-def camera_errors(estimated: list[np.ndarray], truth: list[np.ndarray], *,
-                  inlier_degrees: float = 5.0) -> tuple[np.ndarray, np.ndarray]:
+def camera_errors(
+    estimated: list[np.ndarray], truth: list[np.ndarray], *, inlier_degrees: float = 5.0
+) -> tuple[np.ndarray, np.ndarray]:
     """Per camera, the rotation error in degrees and the centre error as a share of the true
     cameras' extent (their largest distance from their mean), after a robust alignment of the
     estimated world to the true one.
@@ -128,15 +129,26 @@ def removal_scores(removed: np.ndarray, truth: np.ndarray, region: np.ndarray, s
     Args:
         removed, truth: (H, W, 3) uint8.
     """
+
     def masked_psnr(mask: np.ndarray) -> float | None:
         return psnr(removed[mask], truth[mask]) if mask.any() else None
 
-    return {"psnr": psnr(removed, truth), "ssim": ssim(removed, truth), "psnr_region": masked_psnr(region),
-            "psnr_seen": masked_psnr(region & seen)}
+    return {
+        "psnr": psnr(removed, truth),
+        "ssim": ssim(removed, truth),
+        "psnr_region": masked_psnr(region),
+        "psnr_seen": masked_psnr(region & seen),
+    }
 
 
-def extraction_scores(alpha: np.ndarray, rgb: np.ndarray, truth: np.ndarray, silhouette: np.ndarray,
-                      seen: np.ndarray | None = None, margin: int = 2) -> dict[str, float]:
+def extraction_scores(
+    alpha: np.ndarray,
+    rgb: np.ndarray,
+    truth: np.ndarray,
+    silhouette: np.ndarray,
+    seen: np.ndarray | None = None,
+    margin: int = 2,
+) -> dict[str, float]:
     """An extraction against the object rendered alone: IoU of its alpha >= 0.5 silhouette
     with the true silhouette, PSNR inside the true silhouette of the render on white, and the
     leak: the share of the extraction's opacity outside the true silhouette dilated by
@@ -153,8 +165,11 @@ def extraction_scores(alpha: np.ndarray, rgb: np.ndarray, truth: np.ndarray, sil
     iou, _ = binary_scores(alpha >= 0.5, silhouette)
     grown = cv2.dilate(silhouette.astype(np.uint8), np.ones((2 * margin + 1, 2 * margin + 1), np.uint8)) > 0
     total = float(alpha.sum())
-    out = {"iou": iou, "psnr_inside": psnr(rgb[silhouette], truth[silhouette]) if silhouette.any() else None,
-           "leak": float(alpha[~grown].sum() / total) if total > 0 else 0.0}
+    out = {
+        "iou": iou,
+        "psnr_inside": psnr(rgb[silhouette], truth[silhouette]) if silhouette.any() else None,
+        "leak": float(alpha[~grown].sum() / total) if total > 0 else 0.0,
+    }
     if seen is not None:
         scored = ~(silhouette & ~seen)
         out["iou_seen"] = binary_scores((alpha >= 0.5) & scored, silhouette & scored)[0]

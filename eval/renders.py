@@ -35,8 +35,9 @@ class ViewRenders:
 
 
 @torch.no_grad()
-def render_view(run: Run, segmentation: Segmentation, view: View, *, backend: str | Backend,
-                truth: np.ndarray | None) -> ViewRenders:
+def render_view(
+    run: Run, segmentation: Segmentation, view: View, *, backend: str | Backend, truth: np.ndarray | None
+) -> ViewRenders:
     """The renders of one view by a segmented run."""
     backend = get_backend(backend)
     gaussians = run.gaussians_on(backend.device)

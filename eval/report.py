@@ -33,8 +33,17 @@ from gsseg.segment.reassign import Segmentation
 
 PANELS = ("photo", "ground truth", "predicted (visible)", "removal", "extraction", "recolour")
 TRUTH_PANELS = ("removal", "the view without the object", "extraction", "the object alone")
-EDIT_HEAD = ["object", "ground-truth match", "removal PSNR (dB)", "removal PSNR, object's region", "removal PSNR, region seen",
-             "extraction IoU", "extraction IoU, seen part", "extraction PSNR inside", "leak"]
+EDIT_HEAD = [
+    "object",
+    "ground-truth match",
+    "removal PSNR (dB)",
+    "removal PSNR, object's region",
+    "removal PSNR, region seen",
+    "extraction IoU",
+    "extraction IoU, seen part",
+    "extraction PSNR inside",
+    "leak",
+]
 
 
 def _fmt(x: float | None, digits: int = 3) -> str:
@@ -48,8 +57,14 @@ def default_object(segmentation: Segmentation) -> int:
     return int(segmentation.objects[np.argmax(segmentation.selections.sum(axis=1))])
 
 
-def edit_panels(run: Run, segmentation: Segmentation, views: list[View], label: int, color: tuple[int, int, int],
-                backend: str | Backend) -> dict[str, list[np.ndarray]]:
+def edit_panels(
+    run: Run,
+    segmentation: Segmentation,
+    views: list[View],
+    label: int,
+    color: tuple[int, int, int],
+    backend: str | Backend,
+) -> dict[str, list[np.ndarray]]:
     """Renders of ``views`` after removing, extracting (on white) and recolouring ``label``."""
     selected = segmentation.selection(label)
     backend = get_backend(backend)
@@ -69,13 +84,16 @@ def image_row(r: ViewRenders, id_map: dict[int, int], edits: dict[str, list[np.n
     for label, gt in id_map.items():
         mapping[label] = gt
     truth = [colorize_labels(r.truth)] if r.truth is not None else []
-    panels = [r.image, *truth, colorize_labels(mapping[r.visible])] + [edits[op][index] for op in ("remove", "extract", "recolor")]
+    panels = [r.image, *truth, colorize_labels(mapping[r.visible])] + [
+        edits[op][index] for op in ("remove", "extract", "recolor")
+    ]
     gap = np.full((r.image.shape[0], 4, 3), 255, np.uint8)
     return np.concatenate([x for p in panels for x in (p, gap)][:-1], axis=1)
 
 
-def truth_rows(scene_dir: Path, views: list[View], gt: int | None, edits: dict[str, list[np.ndarray]]
-               ) -> dict[str, np.ndarray]:
+def truth_rows(
+    scene_dir: Path, views: list[View], gt: int | None, edits: dict[str, list[np.ndarray]]
+) -> dict[str, np.ndarray]:
     """Per view with edit truth for ground-truth object ``gt``: removal | the view without the
     object | extraction | the object alone, 4 px apart."""
     out = {}
@@ -83,7 +101,9 @@ def truth_rows(scene_dir: Path, views: list[View], gt: int | None, edits: dict[s
         truth = read_edit_truth(scene_dir, gt, view.stem) if gt is not None else None
         if truth is not None:
             gap = np.full((removed.shape[0], 4, 3), 255, np.uint8)
-            out[f"{view.stem}_truth"] = np.concatenate([removed, gap, truth.without, gap, extracted, gap, truth.alone], 1)
+            out[f"{view.stem}_truth"] = np.concatenate(
+                [removed, gap, truth.without, gap, extracted, gap, truth.alone], 1
+            )
     return out
 
 
@@ -119,30 +139,65 @@ def _sections(ev: Evaluation) -> list[tuple[str, list[str], list[list[str]]]]:
     s = ev.summary()
     truth = bool(ev.objects)
     lpips = s["lpips"] if isinstance(s["lpips"], str) else _fmt(s["lpips"])
-    summary_head = ["views", *(["mIoU visible", "mAcc visible", "mIoU extracted", "mAcc extracted"] if truth else []),
-                    "PSNR", "SSIM", "LPIPS"]
+    summary_head = [
+        "views",
+        *(["mIoU visible", "mAcc visible", "mIoU extracted", "mAcc extracted"] if truth else []),
+        "PSNR",
+        "SSIM",
+        "LPIPS",
+    ]
     scores = [_fmt(s[p][m]) for p in PROTOCOLS for m in ("miou", "macc")] if truth else []
     sections = [("", summary_head, [[str(s["views"]), *scores, _fmt(s["psnr"], 2), _fmt(s["ssim"]), lpips]])]
     if truth:
         label_of = {g: p for p, g in ev.id_map.items()}
-        sections.append(("Objects", ["object", "ground-truth match", "IoU visible", "acc visible", "IoU extracted",
-                                     "acc extracted"],
-                         [[str(label_of.get(o, "none")), str(o), *(_fmt(v[f"{p}_{m}"]) for p in PROTOCOLS
-                                                                   for m in ("iou", "acc"))]
-                          for o, v in ev.per_object().items()]))
+        sections.append(
+            (
+                "Objects",
+                ["object", "ground-truth match", "IoU visible", "acc visible", "IoU extracted", "acc extracted"],
+                [
+                    [
+                        str(label_of.get(o, "none")),
+                        str(o),
+                        *(_fmt(v[f"{p}_{m}"]) for p in PROTOCOLS for m in ("iou", "acc")),
+                    ]
+                    for o, v in ev.per_object().items()
+                ],
+            )
+        )
     views = []
     for v in ev.views:
         rows = {p: [r["iou"] for r in ev.objects if r["view"] == v["view"] and r["protocol"] == p] for p in PROTOCOLS}
-        views.append([v["view"], _fmt(v["psnr"], 2), _fmt(v["ssim"]), _fmt(v.get("lpips")),
-                      *((_fmt(float(np.mean(rows[p])) if rows[p] else None) for p in PROTOCOLS) if truth else ())])
-    sections.append(("Views", ["view", "PSNR", "SSIM", "LPIPS", *(["mIoU visible", "mIoU extracted"] if truth else [])],
-                     views))
+        views.append(
+            [
+                v["view"],
+                _fmt(v["psnr"], 2),
+                _fmt(v["ssim"]),
+                _fmt(v.get("lpips")),
+                *((_fmt(float(np.mean(rows[p])) if rows[p] else None) for p in PROTOCOLS) if truth else ()),
+            ]
+        )
+    sections.append(
+        ("Views", ["view", "PSNR", "SSIM", "LPIPS", *(["mIoU visible", "mIoU extracted"] if truth else [])], views)
+    )
     if ev.edits:
-        sections.append(("Edits against ground truth", EDIT_HEAD, [
-            [str(label), str(obj), *(_fmt(v, 3 if "iou" in k or k == "leak" else 2) for k, v in
-                                     summarize_edits([r for r in ev.edits if r["object"] == obj]).items()
-                                     if k != "pairs")]
-            for obj, label in sorted({(r["object"], r["label"]) for r in ev.edits})]))
+        sections.append(
+            (
+                "Edits against ground truth",
+                EDIT_HEAD,
+                [
+                    [
+                        str(label),
+                        str(obj),
+                        *(
+                            _fmt(v, 3 if "iou" in k or k == "leak" else 2)
+                            for k, v in summarize_edits([r for r in ev.edits if r["object"] == obj]).items()
+                            if k != "pairs"
+                        ),
+                    ]
+                    for obj, label in sorted({(r["object"], r["label"]) for r in ev.edits})
+                ],
+            )
+        )
     return sections
 
 
@@ -161,9 +216,18 @@ def _data_uri(png: bytes) -> str:
     return "data:image/png;base64," + base64.b64encode(png).decode()
 
 
-def write_report(ev: Evaluation, renders: list[ViewRenders], edits: dict[str, list[np.ndarray]], history: list[dict],
-                 out_dir: Path, *, selected: int, title: str, truth: dict[str, np.ndarray] | None = None,
-                 overwrite: bool = False) -> Path:
+def write_report(
+    ev: Evaluation,
+    renders: list[ViewRenders],
+    edits: dict[str, list[np.ndarray]],
+    history: list[dict],
+    out_dir: Path,
+    *,
+    selected: int,
+    title: str,
+    truth: dict[str, np.ndarray] | None = None,
+    overwrite: bool = False,
+) -> Path:
     """Write ``out_dir`` (atomically) with metrics.json, report.md, report.html and images/;
     ``truth``: image rows of the edits beside their ground truth (:func:`truth_rows`)."""
     sections = _sections(ev)
@@ -190,22 +254,31 @@ def write_report(ev: Evaluation, renders: list[ViewRenders], edits: dict[str, li
         if curve is not None:
             md += ["", "## Training", "", "![training](images/training.png)"]
         write_bytes_atomic(tmp / "report.md", ("\n".join(md) + "\n").encode())
+
         def figures(pngs: dict[str, bytes]) -> str:
-            return "".join(f"<figure><img src='{_data_uri(png)}' alt='{html.escape(stem)}'><figcaption>"
-                           f"{html.escape(stem)}</figcaption></figure>" for stem, png in pngs.items())
+            return "".join(
+                f"<figure><img src='{_data_uri(png)}' alt='{html.escape(stem)}'><figcaption>"
+                f"{html.escape(stem)}</figcaption></figure>"
+                for stem, png in pngs.items()
+            )
 
         images = figures(rows)
         if truth_pngs:
-            images += f"<h2>Edits beside their truth</h2><p>{html.escape(' | '.join(TRUTH_PANELS))}.</p>" + figures(truth_pngs)
+            images += f"<h2>Edits beside their truth</h2><p>{html.escape(' | '.join(TRUTH_PANELS))}.</p>" + figures(
+                truth_pngs
+            )
         training = f"<h2>Training</h2><img src='{_data_uri(curve)}' alt='training curves'>" if curve is not None else ""
-        tables = "".join((f"<h2>{html.escape(name)}</h2>" if name else "") + _html_table(head, table)
-                         for name, head, table in sections)
+        tables = "".join(
+            (f"<h2>{html.escape(name)}</h2>" if name else "") + _html_table(head, table)
+            for name, head, table in sections
+        )
         page = f"""<!doctype html><html><head><meta charset="utf-8"><title>{html.escape(title)}</title><style>
 body{{font-family:sans-serif;margin:24px;color:#222}} table{{border-collapse:collapse;margin:8px 0 20px}}
 td,th{{border:1px solid #ccc;padding:4px 10px;text-align:right}} th{{background:#f0f0f0}}
 figure{{margin:0 0 12px}} img{{max-width:100%;image-rendering:pixelated}} figcaption{{font-size:12px;color:#666}}
 </style></head><body><h1>{html.escape(title)}</h1>
-<p>Run <code>{html.escape(ev.run)}</code> on scene <code>{html.escape(ev.scene)}</code>, {html.escape(ev.split)} views.</p>
+<p>Run <code>{html.escape(ev.run)}</code> on scene <code>{html.escape(ev.scene)}</code>,
+{html.escape(ev.split)} views.</p>
 {tables}<h2>Images</h2><p>{html.escape(panels)}; {html.escape(edit_note)}.</p>
 {images}{training}</body></html>
 """
@@ -213,22 +286,45 @@ figure{{margin:0 0 12px}} img{{max-width:100%;image-rendering:pixelated}} figcap
     return out_dir
 
 
-def report_run(run_dir: Path | str, scene_dir: Path | str, out_dir: Path | str, *, gt_masks: str | None = "object_mask",
-               split: str = "test", object_id: int | None = None, color: tuple[int, int, int] = (255, 40, 200),
-               backend: str = "auto", lpips: Path | str | None = None, overwrite: bool = False,
-               other_scene: bool = False, progress: bool = True) -> Evaluation:
+def report_run(
+    run_dir: Path | str,
+    scene_dir: Path | str,
+    out_dir: Path | str,
+    *,
+    gt_masks: str | None = "object_mask",
+    split: str = "test",
+    object_id: int | None = None,
+    color: tuple[int, int, int] = (255, 40, 200),
+    backend: str = "auto",
+    lpips: Path | str | None = None,
+    overwrite: bool = False,
+    other_scene: bool = False,
+    progress: bool = True,
+) -> Evaluation:
     """Evaluate a segmented run and write its report to ``out_dir`` and ``RUN/evaluation.json``
     (LPIPS with the network file ``lpips``, else reported as not available)."""
     run_dir, scene_dir, out_dir = Path(run_dir), Path(scene_dir), Path(out_dir)
-    refuse_overlap(out_dir, [*run_inputs(run_dir), *scene_entries(scene_dir)]
-                   + ([("the LPIPS network", Path(lpips))] if lpips is not None else []))
+    refuse_overlap(
+        out_dir,
+        [*run_inputs(run_dir), *scene_entries(scene_dir)]
+        + ([("the LPIPS network", Path(lpips))] if lpips is not None else []),
+    )
     if out_dir.exists() and not overwrite:
         raise InputError(f"{out_dir}: already exists; pass --force to replace it.")
     backend = get_backend(backend)
     lpips_net = LPIPS(lpips) if lpips is not None else None  # a bad file fails before any rendering
     run, segmentation, views = load_inputs(run_dir, scene_dir, gt_masks, split, other_scene)
-    ev, renders = evaluate(run, segmentation, views, with_truth=gt_masks is not None, scene=str(scene_dir), split=split,
-                           backend=backend, lpips=lpips_net, progress=progress)
+    ev, renders = evaluate(
+        run,
+        segmentation,
+        views,
+        with_truth=gt_masks is not None,
+        scene=str(scene_dir),
+        split=split,
+        backend=backend,
+        lpips=lpips_net,
+        progress=progress,
+    )
     selected = default_object(segmentation) if object_id is None else int(object_id)
     if gt_masks is not None:
         ev.edits = edit_rows(run, segmentation, views, scene_dir, ev.id_map, backend=backend)
@@ -236,8 +332,17 @@ def report_run(run_dir: Path | str, scene_dir: Path | str, out_dir: Path | str, 
     truth = truth_rows(scene_dir, views, ev.id_map.get(selected), edits) if ev.edits else None
     metrics = run.folder.metrics
     history = json.loads(metrics.read_text()).get("train", {}).get("history", []) if metrics.is_file() else []
-    write_report(ev, renders, edits, history, out_dir, selected=selected, title=f"gsseg report: {run_dir.name}",
-                 truth=truth, overwrite=overwrite)
+    write_report(
+        ev,
+        renders,
+        edits,
+        history,
+        out_dir,
+        selected=selected,
+        title=f"gsseg report: {run_dir.name}",
+        truth=truth,
+        overwrite=overwrite,
+    )
     with run.folder.lock():
         ev.save(run.folder.evaluation)
     return ev
@@ -250,7 +355,16 @@ def compare_runs(run_dirs: list[Path]) -> str:
     for run in run_dirs:
         ev = Evaluation.load(RunFolder(run).evaluation)
         s = ev.summary()
-        rows.append([str(run), Path(ev.scene).name, _fmt(s["visible"]["miou"]),
-                     _fmt(s["visible"]["macc"]), _fmt(s["extracted"]["miou"]), _fmt(s["extracted"]["macc"]),
-                     _fmt(s["psnr"], 2), _fmt(s["ssim"])])
+        rows.append(
+            [
+                str(run),
+                Path(ev.scene).name,
+                _fmt(s["visible"]["miou"]),
+                _fmt(s["visible"]["macc"]),
+                _fmt(s["extracted"]["miou"]),
+                _fmt(s["extracted"]["macc"]),
+                _fmt(s["psnr"], 2),
+                _fmt(s["ssim"]),
+            ]
+        )
     return markdown_table(head, rows)

@@ -16,8 +16,15 @@ from plyfile import PlyData
 SH_C0 = 0.28209479177387814
 SH_C1 = 0.4886025119029199
 SH_C2 = (1.0925484305920792, -1.0925484305920792, 0.31539156525252005, -1.0925484305920792, 0.5462742152960396)
-SH_C3 = (-0.5900435899266435, 2.890611442640554, -0.4570457994644658, 0.3731763325901154, -0.4570457994644658,
-         1.445305721320277, -0.5900435899266435)
+SH_C3 = (
+    -0.5900435899266435,
+    2.890611442640554,
+    -0.4570457994644658,
+    0.3731763325901154,
+    -0.4570457994644658,
+    1.445305721320277,
+    -0.5900435899266435,
+)
 NEAR = 0.2
 
 
@@ -28,16 +35,28 @@ def read_splats(path: Path) -> dict[str, np.ndarray]:
     scales = np.exp(np.stack([v[f"scale_{i}"] for i in range(3)], 1).astype(np.float64))
     q = np.stack([v[f"rot_{i}"] for i in range(4)], 1).astype(np.float64)
     w, x, y, z = (q / np.linalg.norm(q, axis=1, keepdims=True)).T
-    rotations = np.stack([
-        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], 1),
-        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], 1),
-        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], 1)], 1)
+    rotations = np.stack(
+        [
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], 1),
+            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], 1),
+            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], 1),
+        ],
+        1,
+    )
     rest = sorted((n for n in v.dtype.names if n.startswith("f_rest_")), key=lambda n: int(n.split("_")[-1]))
     dc = np.stack([v[f"f_dc_{i}"] for i in range(3)], 1)[:, None]
-    sh = dc if not rest else np.concatenate(
-        [dc, np.stack([v[n] for n in rest], 1).reshape(len(v), 3, -1).transpose(0, 2, 1)], 1)
-    return {"means": means, "scales": scales, "rotations": rotations,
-            "opacities": 1 / (1 + np.exp(-v["opacity"].astype(np.float64))), "sh": sh.astype(np.float64)}
+    sh = (
+        dc
+        if not rest
+        else np.concatenate([dc, np.stack([v[n] for n in rest], 1).reshape(len(v), 3, -1).transpose(0, 2, 1)], 1)
+    )
+    return {
+        "means": means,
+        "scales": scales,
+        "rotations": rotations,
+        "opacities": 1 / (1 + np.exp(-v["opacity"].astype(np.float64))),
+        "sh": sh.astype(np.float64),
+    }
 
 
 def _sh_colour(sh: np.ndarray, d: np.ndarray) -> np.ndarray:
@@ -47,17 +66,36 @@ def _sh_colour(sh: np.ndarray, d: np.ndarray) -> np.ndarray:
     if k > 1:
         basis += [-SH_C1 * y, SH_C1 * z, -SH_C1 * x]
     if k > 4:
-        basis += [SH_C2[0] * x * y, SH_C2[1] * y * z, SH_C2[2] * (2 * z * z - x * x - y * y), SH_C2[3] * x * z,
-                  SH_C2[4] * (x * x - y * y)]
+        basis += [
+            SH_C2[0] * x * y,
+            SH_C2[1] * y * z,
+            SH_C2[2] * (2 * z * z - x * x - y * y),
+            SH_C2[3] * x * z,
+            SH_C2[4] * (x * x - y * y),
+        ]
     if k > 9:
-        basis += [SH_C3[0] * y * (3 * x * x - y * y), SH_C3[1] * x * y * z, SH_C3[2] * y * (4 * z * z - x * x - y * y),
-                  SH_C3[3] * z * (2 * z * z - 3 * x * x - 3 * y * y), SH_C3[4] * x * (4 * z * z - x * x - y * y),
-                  SH_C3[5] * z * (x * x - y * y), SH_C3[6] * x * (x * x - 3 * y * y)]
+        basis += [
+            SH_C3[0] * y * (3 * x * x - y * y),
+            SH_C3[1] * x * y * z,
+            SH_C3[2] * y * (4 * z * z - x * x - y * y),
+            SH_C3[3] * z * (2 * z * z - 3 * x * x - 3 * y * y),
+            SH_C3[4] * x * (4 * z * z - x * x - y * y),
+            SH_C3[5] * z * (x * x - y * y),
+            SH_C3[6] * x * (x * x - 3 * y * y),
+        ]
     return np.maximum(np.einsum("nk,nkc->nc", np.stack(basis, 1), sh) + 0.5, 0.0)
 
 
-def render_reference(splats: dict[str, np.ndarray], fx: float, fy: float, cx: float, cy: float, width: int,
-                     height: int, cam_from_world: np.ndarray) -> np.ndarray:
+def render_reference(
+    splats: dict[str, np.ndarray],
+    fx: float,
+    fy: float,
+    cx: float,
+    cy: float,
+    width: int,
+    height: int,
+    cam_from_world: np.ndarray,
+) -> np.ndarray:
     """(H, W, 3) float image of ``splats`` on black, pixel (i, j) sampled at (i + 0.5, j + 0.5)."""
     Rw, t = cam_from_world[:, :3], cam_from_world[:, 3]
     p = splats["means"] @ Rw.T + t

@@ -12,10 +12,10 @@ import torch
 from tqdm import tqdm
 
 from dataset_tools.atomic import atomic_directory, remove_stale_temporaries
-from dataset_tools.overlap import refuse_overlap, scene_entries
 from dataset_tools.errors import InputError
 from dataset_tools.image_files import write_png
 from dataset_tools.names import plain_name
+from dataset_tools.overlap import refuse_overlap, scene_entries
 from dataset_tools.scene import Scene
 from gsseg.gaussians import Gaussians
 from gsseg.ply import write_ply
@@ -83,22 +83,35 @@ def check_prompts(point, clicks: list[Click] | tuple[Click, ...], object_id: int
     if (object_id is not None) + (point is not None or positive) != 1:
         raise InputError("give --object-id, or --point and/or --click (with --exclude-click to split).")
     if object_id is not None and clicks:
-        raise InputError("--exclude-click splits the selection of --click or --point; give those instead of "
-                         "--object-id.")
+        raise InputError(
+            "--exclude-click splits the selection of --click or --point; give those instead of --object-id."
+        )
     if point is not None and not np.isfinite(np.asarray(point, float)).all():
         raise InputError(f"--point {' '.join(map(str, point))}: give three finite coordinates.")
 
 
-def select(run: Run, segmentation: Segmentation, scene: Scene, *, point=None,
-           clicks: list[Click] | tuple[Click, ...] = (), object_id: int | None = None, k: int = 20,
-           backend: str | Backend = "auto") -> Selection:
+def select(
+    run: Run,
+    segmentation: Segmentation,
+    scene: Scene,
+    *,
+    point=None,
+    clicks: list[Click] | tuple[Click, ...] = (),
+    object_id: int | None = None,
+    k: int = 20,
+    backend: str | Backend = "auto",
+) -> Selection:
     """The Gaussians of an ``object_id``, of the object under a 3D ``point`` or one positive
     click, or (:func:`gsseg.segment.clicks.select_by_points`) of several joined and split by
     the negative ``clicks`` that land on them; clicks name views of ``scene``."""
     check_prompts(point, clicks, object_id)
     backend = get_backend(backend)
-    lifted = {c: point_from_click(run.gaussians, scene.view(c.view).camera, scene.view(c.view).cam_from_world,
-                                  c.u, c.v, backend=backend) for c in clicks}
+    lifted = {
+        c: point_from_click(
+            run.gaussians, scene.view(c.view).camera, scene.view(c.view).cam_from_world, c.u, c.v, backend=backend
+        )
+        for c in clicks
+    }
     positives = ([np.asarray(point, float)] if point is not None else []) + [lifted[c] for c in clicks if c.positive]
     negatives = [lifted[c] for c in clicks if not c.positive]
     means = run.gaussians.means.numpy()
@@ -107,20 +120,41 @@ def select(run: Run, segmentation: Segmentation, scene: Scene, *, point=None,
     if object_id is not None:
         mask = segmentation.selection(int(object_id))
         if not mask.any():
-            raise InputError(f"object {object_id} of {run.folder.labels} holds no Gaussian; pick another object or "
-                             "segment the run again.")
+            raise InputError(
+                f"object {object_id} of {run.folder.labels} holds no Gaussian; pick another object or "
+                "segment the run again."
+            )
         return Selection(mask, int(object_id), str(object_id))
-    mask = select_by_points(means, run.gaussians.obj_feat.detach().numpy(), segmentation.labels,
-                            np.stack(positives), np.stack(negatives) if negatives else None, k)
+    mask = select_by_points(
+        means,
+        run.gaussians.obj_feat.detach().numpy(),
+        segmentation.labels,
+        np.stack(positives),
+        np.stack(negatives) if negatives else None,
+        k,
+    )
     objects = sorted(set(np.unique(segmentation.labels[mask]).tolist()))
     return Selection(mask, None, "+".join(map(str, objects)) + ("_split" if negatives else ""))
 
 
-def edit_run(run_dir: Path | str, op: str, *, point=None, clicks: list[Click] | tuple[Click, ...] = (),
-             object_id: int | None = None, color: tuple[int, int, int] | None = None, name: str | None = None,
-             scene_dir: Path | str | None = None, split: str = "test", k: int = 20, fps: int = 8,
-             backend: str | Backend = "auto", overwrite: bool = False, other_scene: bool = False,
-             progress: bool = True) -> Path:
+def edit_run(
+    run_dir: Path | str,
+    op: str,
+    *,
+    point=None,
+    clicks: list[Click] | tuple[Click, ...] = (),
+    object_id: int | None = None,
+    color: tuple[int, int, int] | None = None,
+    name: str | None = None,
+    scene_dir: Path | str | None = None,
+    split: str = "test",
+    k: int = 20,
+    fps: int = 8,
+    backend: str | Backend = "auto",
+    overwrite: bool = False,
+    other_scene: bool = False,
+    progress: bool = True,
+) -> Path:
     """Select Gaussians (:func:`select`), apply ``op`` and write ``RUN/edits/NAME/``:
     ``gaussians.ply``, ``renders/<view>.png`` of the scene's ``split`` views, ``video.mp4`` of
     those renders, and ``edit.json``."""
@@ -137,15 +171,42 @@ def edit_run(run_dir: Path | str, op: str, *, point=None, clicks: list[Click] | 
     chosen = select(run, segmentation, scene, point=point, clicks=clicks, object_id=object_id, k=k, backend=backend)
     rgb = tuple(c / 255 for c in color) if color is not None else None
     edited = apply_edit(run.gaussians, chosen.mask, op, rgb)
-    record = {"op": op, "object_id": chosen.object_id, "point": None if point is None else np.asarray(point).tolist(),
-              "clicks": [{"view": c.view, "u": c.u, "v": c.v, "positive": c.positive} for c in clicks],
-              "color": color, "selected_gaussians": int(chosen.mask.sum()), "labels": segmentation.settings()}
-    return write_edit(run, edited, run.folder.edit(name or f"{op}_{chosen.name}"), record, scene=scene, split=split,
-                      fps=fps, backend=backend, overwrite=overwrite, progress=progress)
+    record = {
+        "op": op,
+        "object_id": chosen.object_id,
+        "point": None if point is None else np.asarray(point).tolist(),
+        "clicks": [{"view": c.view, "u": c.u, "v": c.v, "positive": c.positive} for c in clicks],
+        "color": color,
+        "selected_gaussians": int(chosen.mask.sum()),
+        "labels": segmentation.settings(),
+    }
+    return write_edit(
+        run,
+        edited,
+        run.folder.edit(name or f"{op}_{chosen.name}"),
+        record,
+        scene=scene,
+        split=split,
+        fps=fps,
+        backend=backend,
+        overwrite=overwrite,
+        progress=progress,
+    )
 
 
-def write_edit(run: Run, edited: Gaussians, out: Path, record: dict, *, scene: Scene, split: str = "test",
-               fps: int = 8, backend: str | Backend = "auto", overwrite: bool = False, progress: bool = True) -> Path:
+def write_edit(
+    run: Run,
+    edited: Gaussians,
+    out: Path,
+    record: dict,
+    *,
+    scene: Scene,
+    split: str = "test",
+    fps: int = 8,
+    backend: str | Backend = "auto",
+    overwrite: bool = False,
+    progress: bool = True,
+) -> Path:
     """Write the edit folder ``out`` (inside ``RUN/edits/``) of the ``edited`` model:
     ``gaussians.ply``, ``renders/<view>.png`` of ``scene``'s ``split`` views, ``video.mp4`` and
     ``edit.json`` (``record``); whole or not at all."""

@@ -31,8 +31,11 @@ from gsseg.sh import eval_sh, num_coeffs, rgb_to_sh_dc
 def ray_directions(camera: PinholeCamera, cam_from_world: torch.Tensor) -> torch.Tensor:
     """World-space unit directions of the rays through the pixel centres: (H, W, 3)."""
     R = torch.as_tensor(cam_from_world)[:3, :3].float()
-    v, u = torch.meshgrid(torch.arange(camera.height, device=R.device, dtype=R.dtype) + 0.5,
-                          torch.arange(camera.width, device=R.device, dtype=R.dtype) + 0.5, indexing="ij")
+    v, u = torch.meshgrid(
+        torch.arange(camera.height, device=R.device, dtype=R.dtype) + 0.5,
+        torch.arange(camera.width, device=R.device, dtype=R.dtype) + 0.5,
+        indexing="ij",
+    )
     d_cam = torch.stack([(u - camera.cx) / camera.fx, (v - camera.cy) / camera.fy, torch.ones_like(u)], -1)
     return torch.nn.functional.normalize(d_cam @ R, dim=-1)  # R.T @ d for every pixel
 
@@ -43,8 +46,9 @@ def mean_up(cam_from_world: list[np.ndarray]) -> np.ndarray:
     up = -np.mean([np.asarray(p)[1, :3] for p in cam_from_world], axis=0)
     norm = np.linalg.norm(up)
     if norm < 1e-6:
-        raise InputError("the cameras' up directions cancel out, so there is no common horizon; "
-                         "train with --no-environment-profile.")
+        raise InputError(
+            "the cameras' up directions cancel out, so there is no common horizon; train with --no-environment-profile."
+        )
     return up / norm
 
 
@@ -96,22 +100,26 @@ class Environment(torch.nn.Module):
     def from_state(cls, state: dict[str, torch.Tensor]) -> Environment:
         """The environment saved by ``state_dict`` (runs from before the profile have none)."""
         profile = state.get("profile")
-        env = cls(num_coeffs_to_degree(state["coeffs"].shape[1]), up=state.get("up"),
-                  bins=0 if profile is None else profile.shape[0])
+        env = cls(
+            num_coeffs_to_degree(state["coeffs"].shape[1]),
+            up=state.get("up"),
+            bins=0 if profile is None else profile.shape[0],
+        )
         env.load_state_dict(state)
         return env
 
 
 def num_coeffs_to_degree(k: int) -> int:
     """The SH degree with ``k`` coefficients per channel."""
-    degree = round(k ** 0.5) - 1
+    degree = round(k**0.5) - 1
     if num_coeffs(degree) != k:
         raise ValueError(f"{k} is not a number of SH coefficients")
     return degree
 
 
-def background_image(environment: Environment | None, camera: PinholeCamera,
-                     cam_from_world: torch.Tensor) -> torch.Tensor | None:
+def background_image(
+    environment: Environment | None, camera: PinholeCamera, cam_from_world: torch.Tensor
+) -> torch.Tensor | None:
     """The background of one camera for :func:`gsseg.render.render`: the environment's
     (H, W, 3) image on the pose's device, or None (black) without an environment."""
     if environment is None:

@@ -53,8 +53,7 @@ def read_splat(path: Path | str) -> np.ndarray:
     """The (N,) :data:`SPLAT_RECORD` records of a ``.splat`` file."""
     data = Path(path).read_bytes()
     if len(data) % SPLAT_RECORD.itemsize:
-        raise InputError(f"{path}: {len(data)} bytes is not a whole number of 32-byte splat records; "
-                         "export it again.")
+        raise InputError(f"{path}: {len(data)} bytes is not a whole number of 32-byte splat records; export it again.")
     return np.frombuffer(data, SPLAT_RECORD)
 
 
@@ -63,8 +62,10 @@ def shell_for(run: Run) -> Gaussians:
     about the cameras' mean centre, :func:`gsseg.environment.shell_radius` away."""
     recorded = run.record.scene_fingerprint
     if recorded is not None:
-        cameras = [CameraPose(PinholeCamera(*v["size"], *v["camera"]), np.asarray(v["pose"]).reshape(3, 4))
-                   for v in recorded["views"].values()]
+        cameras = [
+            CameraPose(PinholeCamera(*v["size"], *v["camera"]), np.asarray(v["pose"]).reshape(3, 4))
+            for v in recorded["views"].values()
+        ]
     else:  # runs from before the fingerprint: their scene
         cameras = run.scene().views
     center = np.mean([c.center for c in cameras], axis=0)
@@ -72,9 +73,18 @@ def shell_for(run: Run) -> Gaussians:
     return environment_shell(run.environment, center, shell_radius(run.record.extent), shell_spacing(focal))
 
 
-def export_run(run_dir: Path | str, out: Path | str, *, object_id: int | None = None, point=None,
-               clicks: list[Click] | tuple[Click, ...] = (), scene_dir: Path | str | None = None,
-               fmt: str | None = None, environment: bool | None = None, overwrite: bool = False) -> Path:
+def export_run(
+    run_dir: Path | str,
+    out: Path | str,
+    *,
+    object_id: int | None = None,
+    point=None,
+    clicks: list[Click] | tuple[Click, ...] = (),
+    scene_dir: Path | str | None = None,
+    fmt: str | None = None,
+    environment: bool | None = None,
+    overwrite: bool = False,
+) -> Path:
     """Write a run's model (or the Gaussians of ``object_id`` alone, or of the selection of a
     ``point`` and ``clicks`` in views of the run's scene or ``scene_dir``: :func:`gsseg.edits.select`)
     to ``out`` as ``fmt`` (default: from the suffix of ``out``, ``.ply`` or ``.splat``),
@@ -96,8 +106,9 @@ def export_run(run_dir: Path | str, out: Path | str, *, object_id: int | None = 
     if out.exists() and not overwrite:
         raise InputError(f"{out}: already exists; pass --force to replace it or choose another --out.")
     if environment and run.environment is None:
-        raise InputError(f"{run.root} was trained without an environment (black behind the Gaussians); export it "
-                         "without one.")
+        raise InputError(
+            f"{run.root} was trained without an environment (black behind the Gaussians); export it without one."
+        )
     g = run.gaussians
     prompted = point is not None or bool(clicks)
     if prompted:
@@ -107,8 +118,10 @@ def export_run(run_dir: Path | str, out: Path | str, *, object_id: int | None = 
     if object_id is not None:
         keep = labels == object_id
         if not keep.any():
-            raise InputError(f"object {object_id} holds no Gaussian in {run.folder.labels}; pick one of "
-                             f"{sorted(set(np.unique(labels).tolist()) - {0})}.")
+            raise InputError(
+                f"object {object_id} holds no Gaussian in {run.folder.labels}; pick one of "
+                f"{sorted(set(np.unique(labels).tolist()) - {0})}."
+            )
         g, labels = g.select(torch.from_numpy(keep)), labels[keep]
     elif prompted:
         keep = select(run, segmentation, run.scene(scene_dir), point=point, clicks=clicks).mask

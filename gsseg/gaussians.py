@@ -13,10 +13,10 @@ from gsseg.sh import MAX_DEGREE, num_coeffs, rgb_to_sh_dc
 OBJ_FEAT_DIM = 16
 
 
-
 def make_classifier(num_classes: int = 256) -> torch.nn.Linear:
     """The linear layer from object features to class logits."""
     return torch.nn.Linear(OBJ_FEAT_DIM, num_classes)
+
 
 @dataclass
 class Gaussians:
@@ -118,12 +118,9 @@ def gaussians_from_points(
     )
 
 
-def random_points(
-    center: np.ndarray, radius: float, count: int, seed: int = 0
-) -> tuple[np.ndarray, np.ndarray]:
+def random_points(center: np.ndarray, radius: float, count: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """``count`` random points (uniform in a cube of half-size ``radius`` around ``center``)
     with random colours, for scenes that have no SfM points: xyz (count, 3), rgb (count, 3) uint8."""
     rng = np.random.default_rng(seed)
     xyz = center + rng.uniform(-radius, radius, size=(count, 3))
     return xyz, rng.integers(0, 256, size=(count, 3), dtype=np.uint8)
-

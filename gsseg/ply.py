@@ -22,8 +22,22 @@ from dataset_tools.errors import InputError
 from gsseg.gaussians import OBJ_FEAT_DIM, Gaussians
 from gsseg.sh import MAX_DEGREE, num_coeffs
 
-REQUIRED = ("x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity",
-            "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3")
+REQUIRED = (
+    "x",
+    "y",
+    "z",
+    "f_dc_0",
+    "f_dc_1",
+    "f_dc_2",
+    "opacity",
+    "scale_0",
+    "scale_1",
+    "scale_2",
+    "rot_0",
+    "rot_1",
+    "rot_2",
+    "rot_3",
+)
 
 
 def _vertex_array(g: Gaussians, labels: np.ndarray | None = None) -> np.ndarray:
@@ -70,8 +84,10 @@ def read_ply(path: Path | str) -> Gaussians:
     names = set(vertex.dtype.names)
     missing = [name for name in REQUIRED if name not in names]
     if missing:
-        raise InputError(f"{path} lacks the 3D-GS vertex properties {', '.join(missing)}; "
-                         "it must hold x y z f_dc_* opacity scale_* rot_* as 3D-GS writes them.")
+        raise InputError(
+            f"{path} lacks the 3D-GS vertex properties {', '.join(missing)}; "
+            "it must hold x y z f_dc_* opacity scale_* rot_* as 3D-GS writes them."
+        )
 
     def stack(prefix: str, count: int) -> torch.Tensor:
         return torch.from_numpy(np.stack([vertex[f"{prefix}{i}"].astype(np.float32) for i in range(count)], 1))
@@ -90,8 +106,9 @@ def read_ply(path: Path | str) -> Gaussians:
         raise InputError(f"{path} has {n_feat} obj_feat_* properties; this version uses {OBJ_FEAT_DIM}.")
     for name in vertex.dtype.names:
         if not np.isfinite(np.asarray(vertex[name], np.float64)).all():
-            raise InputError(f"{path}: property {name} holds NaN or infinite values; the model is damaged, "
-                             "train it again.")
+            raise InputError(
+                f"{path}: property {name} holds NaN or infinite values; the model is damaged, train it again."
+            )
     return Gaussians(
         means=torch.from_numpy(np.stack([vertex[c].astype(np.float32) for c in "xyz"], 1)),
         log_scales=stack("scale_", 3),

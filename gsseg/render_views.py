@@ -9,8 +9,8 @@ import torch
 from tqdm import tqdm
 
 from dataset_tools.atomic import atomic_directory
-from dataset_tools.errors import InputError
 from dataset_tools.depth_maps import write_depth
+from dataset_tools.errors import InputError
 from dataset_tools.image_files import colorize_labels, write_png
 from dataset_tools.overlap import refuse_overlap
 from gsseg.gaussians import Gaussians
@@ -25,15 +25,23 @@ def classify_pixels(features: torch.Tensor, classifier: torch.nn.Linear) -> torc
     return classifier(features).argmax(dim=-1)
 
 
-def segment_pixels(gaussians: Gaussians, labels: np.ndarray, camera, cam_from_world: torch.Tensor, *,
-                   backend: str | Backend, min_alpha: float = 0.5) -> np.ndarray:
+def segment_pixels(
+    gaussians: Gaussians,
+    labels: np.ndarray,
+    camera,
+    cam_from_world: torch.Tensor,
+    *,
+    backend: str | Backend,
+    min_alpha: float = 0.5,
+) -> np.ndarray:
     """(H, W) uint8: each pixel takes the Gaussian label with the largest blended weight
     (labels (N,) uint8), 0 where the accumulated alpha is below ``min_alpha``."""
     present = np.unique(labels)
     index = np.searchsorted(present, labels)
     one_hot = torch.nn.functional.one_hot(torch.as_tensor(index), len(present)).to(gaussians.means)
-    out = render(Gaussians(**{**gaussians.tensors(), "obj_feat": one_hot}), camera, cam_from_world,
-                 sh_degree=0, backend=backend)
+    out = render(
+        Gaussians(**{**gaussians.tensors(), "obj_feat": one_hot}), camera, cam_from_world, sh_degree=0, backend=backend
+    )
     best = torch.as_tensor(present)[out.features.argmax(dim=-1).cpu()]
     return np.where(out.alpha.cpu().numpy() >= min_alpha, best.numpy(), 0).astype(np.uint8)
 
@@ -71,8 +79,9 @@ def render_run(
     backend = get_backend(backend)
     classifier = run.classifier.to(backend.device)
     with atomic_directory(out, overwrite=overwrite) as tmp:
-        for view in tqdm(run.scene(scene_dir, images=images).split(split), desc="rendering", unit="view",
-                         disable=not progress):
+        for view in tqdm(
+            run.scene(scene_dir, images=images).split(split), desc="rendering", unit="view", disable=not progress
+        ):
             result = run.render(view, with_features="labels" in what, backend=backend)
             if "rgb" in what:
                 write_png(tmp / "rgb" / f"{view.stem}.png", to_uint8(result.rgb))
@@ -83,8 +92,9 @@ def render_run(
                 maps["labels"] = classify_pixels(result.features, classifier).cpu().numpy().astype(np.uint8)
             if segmentation is not None:
                 pose = torch.as_tensor(view.cam_from_world, dtype=torch.float32, device=backend.device)
-                maps["segments"] = segment_pixels(run.gaussians_on(backend.device), segmentation.labels, view.camera,
-                                                  pose, backend=backend)
+                maps["segments"] = segment_pixels(
+                    run.gaussians_on(backend.device), segmentation.labels, view.camera, pose, backend=backend
+                )
             for kind, ids in maps.items():
                 write_png(tmp / kind / f"{view.stem}.png", ids)
                 if colorize:

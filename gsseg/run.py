@@ -62,8 +62,10 @@ class Run:
         """``labels.npz``, refused when it labels another model than the run's."""
         segmentation = Segmentation.load(self.folder.labels)
         if len(segmentation.labels) != len(self.gaussians) or segmentation.model not in ("", self.fingerprint):
-            raise InputError(f"{self.folder.labels}: labels another model than {self.folder.gaussians} (trained "
-                             "again since); run `gsseg segment` on the run again.")
+            raise InputError(
+                f"{self.folder.labels}: labels another model than {self.folder.gaussians} (trained "
+                "again since); run `gsseg segment` on the run again."
+            )
         return segmentation
 
     @property
@@ -81,16 +83,19 @@ class Run:
         """The image folder of the scene the run was trained on (``images`` or ``images_N``)."""
         return self.config.images
 
-    def scene(self, scene_dir: Path | str | None = None, *, masks: str | None = None,
-              images: str | None = None) -> Scene:
+    def scene(
+        self, scene_dir: Path | str | None = None, *, masks: str | None = None, images: str | None = None
+    ) -> Scene:
         """The scene the run was trained on, at the run's image size; ``scene_dir`` names it
         where it moved, and is refused when it is not the scene the run recorded (its views,
         cameras, poses or images differ) unless the run was loaded with ``other_scene``."""
         scene = load_scene(scene_dir or self.record.scene, images=images or self.images, masks=masks)
         difference = None if self.other_scene else scene_difference(self.record, scene)
         if difference is not None:
-            raise InputError(f"{scene.root}: not the scene {self.root} was trained on ({difference}); pass that "
-                             "scene, or --allow-other-scene to use this one.")
+            raise InputError(
+                f"{scene.root}: not the scene {self.root} was trained on ({difference}); pass that "
+                "scene, or --allow-other-scene to use this one."
+            )
         return scene
 
     def inputs(self, scene_dir: Path | str | None = None) -> list[Protected]:
@@ -105,9 +110,16 @@ class Run:
         return self._on_device[device]
 
     @torch.no_grad()
-    def render(self, view: Posed, *, gaussians: Gaussians | None = None, background: Background = "environment",
-               with_features: bool = False, sh_degree: int | None = None,
-               backend: str | Backend = "auto") -> RenderOutput:
+    def render(
+        self,
+        view: Posed,
+        *,
+        gaussians: Gaussians | None = None,
+        background: Background = "environment",
+        with_features: bool = False,
+        sh_degree: int | None = None,
+        backend: str | Backend = "auto",
+    ) -> RenderOutput:
         """Render ``view`` with the run's Gaussians (or edited ones, ``gaussians``) over its
         learned environment, white or black, at the run's SH degree unless told otherwise."""
         backend = get_backend(backend)
@@ -119,8 +131,15 @@ class Run:
             bg = torch.ones(3, device=backend.device)
         else:
             bg = None
-        return render(g, view.camera, pose, sh_degree=self.config.sh_degree if sh_degree is None else sh_degree,
-                      background=bg, with_features=with_features, backend=backend)
+        return render(
+            g,
+            view.camera,
+            pose,
+            sh_degree=self.config.sh_degree if sh_degree is None else sh_degree,
+            background=bg,
+            with_features=with_features,
+            backend=backend,
+        )
 
     def render_rgb(self, view: Posed, **options) -> np.ndarray:
         """(H, W, 3) uint8 colour of :meth:`render`."""
@@ -128,8 +147,10 @@ class Run:
 
 
 def _damaged(path: Path, e: Exception) -> InputError:
-    return InputError(f"{path}: damaged run file ({type(e).__name__}: {str(e).splitlines()[0] if str(e) else ''}); "
-                      "restore it or train the run again.")
+    return InputError(
+        f"{path}: damaged run file ({type(e).__name__}: {str(e).splitlines()[0] if str(e) else ''}); "
+        "restore it or train the run again."
+    )
 
 
 def _classifier(path: Path) -> torch.nn.Linear:
@@ -160,6 +181,11 @@ def load_run(root: Path | str, *, other_scene: bool = False) -> Run:
         record = RunRecord.from_json(json.loads(folder.config.read_text()))
     except (ValueError, KeyError, TypeError, AttributeError) as e:
         raise _damaged(folder.config, e) from None
-    return Run(folder, record, read_ply(folder.gaussians), _classifier(folder.classifier),
-               _environment(folder.environment), other_scene)
-
+    return Run(
+        folder,
+        record,
+        read_ply(folder.gaussians),
+        _classifier(folder.classifier),
+        _environment(folder.environment),
+        other_scene,
+    )

@@ -105,8 +105,9 @@ class RunFolder:
     def require_finished(self) -> None:
         for path in (self.config, self.gaussians, self.classifier):
             if not path.is_file():
-                raise InputError(f"{self.root} has no {path.name}; point to the --out folder of a finished "
-                                 "`gsseg train`.")
+                raise InputError(
+                    f"{self.root} has no {path.name}; point to the --out folder of a finished `gsseg train`."
+                )
 
 
 def write_json(path: Path, data: dict) -> None:

@@ -101,8 +101,10 @@ def read_depths(scene: Scene, folder: Path) -> tuple[list[np.ndarray], str]:
     """Every view's depth map from ``folder/<stem>.npy`` (checked against the view's size), and
     a digest of them all that names the proposals made with them in the cache."""
     if not folder.is_dir():
-        raise InputError(f"{folder}: depth folder not found; write it with `gsseg render RUN --what depth "
-                         "--split all --out DIR` and pass DIR/depth.")
+        raise InputError(
+            f"{folder}: depth folder not found; write it with `gsseg render RUN --what depth "
+            "--split all --out DIR` and pass DIR/depth."
+        )
     depths = [read_depth(folder / f"{view.stem}.npy", (view.camera.width, view.camera.height)) for view in scene.views]
     digest = hashlib.blake2b(digest_size=8)
     for depth in depths:
@@ -110,8 +112,15 @@ def read_depths(scene: Scene, folder: Path) -> tuple[list[np.ndarray], str]:
     return depths, digest.hexdigest()
 
 
-def _segments(scene: Scene, proposer: Proposer, make: Callable[[], Proposer], cfg: BuildConfig,
-              images: list[np.ndarray], engine: Engine, progress: bool) -> list[np.ndarray]:
+def _segments(
+    scene: Scene,
+    proposer: Proposer,
+    make: Callable[[], Proposer],
+    cfg: BuildConfig,
+    images: list[np.ndarray],
+    engine: Engine,
+    progress: bool,
+) -> list[np.ndarray]:
     """Per view, the painted proposals as an (H, W) uint8 segment map, cleaned: read from the
     cache, or proposed on ``engine`` (where each Ray worker makes its proposer once with
     ``make``) and cached view by view, so that an interrupted build resumes."""
@@ -122,11 +131,18 @@ def _segments(scene: Scene, proposer: Proposer, make: Callable[[], Proposer], cf
         name = None if name is None else f"{name}-depth-{digest}"
     cache = None if name is None else scene.root / CACHE / name
     paths = [None if cache is None else cache / f"{view.stem}.png" for view in scene.views]
-    segments = {k: seg for k, path in enumerate(paths)
-                if not cfg.force and (seg := read_cached_segments(path)) is not None}
+    segments = {
+        k: seg for k, path in enumerate(paths) if not cfg.force and (seg := read_cached_segments(path)) is not None
+    }
     todo = [k for k in range(len(paths)) if k not in segments]
-    fresh = engine.map_stateful(make, propose_view, [(images[k], scene.views[k], paths[k], depths[k]) for k in todo],
-                                local_state=proposer, desc=f"proposing ({cfg.proposer})", progress=progress)
+    fresh = engine.map_stateful(
+        make,
+        propose_view,
+        [(images[k], scene.views[k], paths[k], depths[k]) for k in todo],
+        local_state=proposer,
+        desc=f"proposing ({cfg.proposer})",
+        progress=progress,
+    )
     segments.update(zip(todo, fresh))
     return [clean_mask(segments[k], cfg.min_area) for k in range(len(paths))]
 
@@ -155,8 +171,9 @@ def build_scene(job: tuple[Path, BuildConfig]) -> BuildResult:
     return build_masks(job[0], job[1], progress=False)
 
 
-def build_masks(scene_dir: Path | str, cfg: BuildConfig, *, engine: Engine = Engine(),
-                progress: bool = True) -> BuildResult:
+def build_masks(
+    scene_dir: Path | str, cfg: BuildConfig, *, engine: Engine = Engine(), progress: bool = True
+) -> BuildResult:
     """Write consistent, cleaned object-ID maps of every view to ``scene_dir/cfg.out_masks``;
     the views' proposals are made on ``engine``."""
     scene_dir = Path(scene_dir)
@@ -173,8 +190,10 @@ def build_masks(scene_dir: Path | str, cfg: BuildConfig, *, engine: Engine = Eng
     if cfg.proposer == "existing" and not cfg.from_masks:
         raise InputError("--proposer existing needs --from-masks NAME, the mask folder to re-associate.")
     if cfg.depth is not None and cfg.proposer != "graph":
-        raise InputError(f"--depth: only the graph proposer cuts its masks at depth jumps; leave --depth out with "
-                         f"--proposer {cfg.proposer}.")
+        raise InputError(
+            f"--depth: only the graph proposer cuts its masks at depth jumps; leave --depth out with "
+            f"--proposer {cfg.proposer}."
+        )
     out_dir = scene_dir / cfg.out_masks
     reads = scene_inputs(scene_dir, [cfg.from_masks])
     if cfg.depth is not None:
@@ -182,9 +201,15 @@ def build_masks(scene_dir: Path | str, cfg: BuildConfig, *, engine: Engine = Eng
     refuse_overlap(out_dir, reads)
     if cfg.dataset:  # a dataset is no part of the scene: it may replace nothing in it
         refuse_overlap(cfg.dataset, [*scene_entries(scene_dir), ("the mask folder it writes", out_dir)])
-    make = partial(make_proposer, cfg.proposer, cfg.model, device=cfg.device, threads=cfg.threads,
-                   points_per_side=cfg.points_per_side,
-                   embedding_cache=scene_dir / CACHE / "sam-hq-embeddings" if cfg.cache_embeddings else None)
+    make = partial(
+        make_proposer,
+        cfg.proposer,
+        cfg.model,
+        device=cfg.device,
+        threads=cfg.threads,
+        points_per_side=cfg.points_per_side,
+        embedding_cache=scene_dir / CACHE / "sam-hq-embeddings" if cfg.cache_embeddings else None,
+    )
     proposer = make()  # an unknown or unavailable one fails before any work
     if out_dir.exists() and not cfg.force:
         raise InputError(f"{out_dir}: already exists; pass --force to rebuild it.")
@@ -196,8 +221,15 @@ def build_masks(scene_dir: Path | str, cfg: BuildConfig, *, engine: Engine = Eng
         return _build_locked(scene_dir, out_dir, cfg, proposer, make, engine, progress)
 
 
-def _build_locked(scene_dir: Path, out_dir: Path, cfg: BuildConfig, proposer: Proposer,
-                  make: Callable[[], Proposer], engine: Engine, progress: bool) -> BuildResult:
+def _build_locked(
+    scene_dir: Path,
+    out_dir: Path,
+    cfg: BuildConfig,
+    proposer: Proposer,
+    make: Callable[[], Proposer],
+    engine: Engine,
+    progress: bool,
+) -> BuildResult:
     scene = load_scene(scene_dir, images=cfg.images, masks=cfg.from_masks if cfg.proposer == "existing" else None)
     if cfg.proposer == "existing" and scene.mask_dir is None:
         raise InputError(f"{scene_dir / cfg.from_masks}: mask folder not found; check --from-masks.")
@@ -209,8 +241,14 @@ def _build_locked(scene_dir: Path, out_dir: Path, cfg: BuildConfig, proposer: Pr
     else:
         ids = associate_tracks(scene.views, segments, len(scene.points))
     if cfg.consensus:
-        ids = multiview_consensus(images, ids, scene.views, depths=depth_priors(scene, ids, associate),
-                                  neighbours=cfg.consensus, progress=progress)
+        ids = multiview_consensus(
+            images,
+            ids,
+            scene.views,
+            depths=depth_priors(scene, ids, associate),
+            neighbours=cfg.consensus,
+            progress=progress,
+        )
     n_objects = 0
     with atomic_directory(out_dir, overwrite=cfg.force) as tmp:
         for view, m in zip(tqdm(scene.views, desc="writing masks", disable=not progress), ids):
@@ -220,13 +258,20 @@ def _build_locked(scene_dir: Path, out_dir: Path, cfg: BuildConfig, proposer: Pr
     if cfg.dataset:
         from dataset_tools.hf_dataset import export_dataset
 
-        export_dataset(load_scene(scene_dir, images=cfg.images, masks=cfg.out_masks), Path(cfg.dataset), overwrite=cfg.force)
+        export_dataset(
+            load_scene(scene_dir, images=cfg.images, masks=cfg.out_masks), Path(cfg.dataset), overwrite=cfg.force
+        )
     return BuildResult(out_dir, n_objects, len(scene.views), associate)
 
 
 def clean_scene_masks(
-    scene_dir: Path | str, masks: str, out_masks: str, *, min_area: int | None = None, force: bool = False,
-    progress: bool = True
+    scene_dir: Path | str,
+    masks: str,
+    out_masks: str,
+    *,
+    min_area: int | None = None,
+    force: bool = False,
+    progress: bool = True,
 ) -> Path:
     """Noise removal alone: ``scene_dir/masks`` -> ``scene_dir/out_masks``."""
     scene_dir = Path(scene_dir)

@@ -64,8 +64,14 @@ def _largest_of_each_id(area: np.ndarray, value: np.ndarray) -> np.ndarray:
     return largest
 
 
-def remove_small_components(ids: np.ndarray, min_area: int = 500, *, keep_objects: bool = True,
-                            keep: frozenset[int] = frozenset(), max_rounds: int = 8) -> np.ndarray:
+def remove_small_components(
+    ids: np.ndarray,
+    min_area: int = 500,
+    *,
+    keep_objects: bool = True,
+    keep: frozenset[int] = frozenset(),
+    max_rounds: int = 8,
+) -> np.ndarray:
     """Reassign small components to their dominant ring label (rules 2 and 3 of the module).
 
     (H, W) uint8 -> (H, W) uint8.
@@ -92,8 +98,14 @@ def remove_small_components(ids: np.ndarray, min_area: int = 500, *, keep_object
     return out
 
 
-def clean_mask(ids: np.ndarray, min_area: int | None = None, close_size: int = 3, *, keep_objects: bool = True,
-               keep: frozenset[int] = frozenset()) -> np.ndarray:
+def clean_mask(
+    ids: np.ndarray,
+    min_area: int | None = None,
+    close_size: int = 3,
+    *,
+    keep_objects: bool = True,
+    keep: frozenset[int] = frozenset(),
+) -> np.ndarray:
     """The full noise removal: closing, then small-component reassignment.
 
     Args:

@@ -19,26 +19,50 @@ def cli() -> None:
 @click.option("--proposer", default="graph", show_default=True, help="graph, sam-hq or existing.")
 @click.option("--from-masks", default=None, help="Mask folder read by --proposer existing.")
 @click.option("--model", default=None, help="SAM-HQ ONNX model folder (--proposer sam-hq).")
-@click.option("--associate", type=click.Choice(["auto", "flow", "tracks"]), default="auto", show_default=True,
-              help="tracks (through SfM points), flow (optical flow and camera poses); auto: tracks where the scene "
-                   "has SfM observations, flow otherwise.")
-@click.option("--consensus", type=int, default=4, show_default=True,
-              help="Nearest views whose ID maps, carried by optical flow, vote on each view's labels (0: off).")
-@click.option("--min-area", type=int, default=None,
-              help="Components under this many pixels are reassigned (default: the paper's 500 px at 1008x756, "
-                   "scaled to each view's size).")
+@click.option(
+    "--associate",
+    type=click.Choice(["auto", "flow", "tracks"]),
+    default="auto",
+    show_default=True,
+    help="tracks (through SfM points), flow (optical flow and camera poses); auto: tracks where the scene "
+    "has SfM observations, flow otherwise.",
+)
+@click.option(
+    "--consensus",
+    type=int,
+    default=4,
+    show_default=True,
+    help="Nearest views whose ID maps, carried by optical flow, vote on each view's labels (0: off).",
+)
+@click.option(
+    "--min-area",
+    type=int,
+    default=None,
+    help="Components under this many pixels are reassigned (default: the paper's 500 px at 1008x756, "
+    "scaled to each view's size).",
+)
 @click.option("--out-masks", default="object_mask", show_default=True, help="Mask folder to write inside SCENE.")
 @click.option("--images", default="images", show_default=True, help="Image folder (images or images_N).")
 @click.option("--dataset", default=None, help="Also write a Hugging Face dataset (with parquet shards) here.")
 @click.option("--force", is_flag=True, help="Recompute cached proposals and replace existing outputs.")
-@click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto", show_default=True,
-              help="ONNX Runtime device for sam-hq (auto: CUDA when onnxruntime-gpu sees a GPU).")
-@click.option("--threads", type=int, default=0, show_default=True, help="ONNX Runtime threads for sam-hq (0: its choice).")
+@click.option(
+    "--device",
+    type=click.Choice(["auto", "cpu", "cuda"]),
+    default="auto",
+    show_default=True,
+    help="ONNX Runtime device for sam-hq (auto: CUDA when onnxruntime-gpu sees a GPU).",
+)
+@click.option(
+    "--threads", type=int, default=0, show_default=True, help="ONNX Runtime threads for sam-hq (0: its choice)."
+)
 @click.option("--points-per-side", type=int, default=32, show_default=True, help="Point grid of the sam-hq generator.")
 @click.option("--cache-embeddings", is_flag=True, help="Keep sam-hq image embeddings under SCENE/.hqmask_cache.")
-@click.option("--depth", default=None,
-              help="Folder of depth maps (`gsseg render RUN --what depth --split all` writes OUT/depth): "
-                   "the graph proposer cuts its masks where depth jumps.")
+@click.option(
+    "--depth",
+    default=None,
+    help="Folder of depth maps (`gsseg render RUN --what depth --split all` writes OUT/depth): "
+    "the graph proposer cuts its masks where depth jumps.",
+)
 @engine_options
 def build(scenes: tuple[Path, ...], engine, **options) -> None:
     """Propose, clean and associate consistent object masks for every view of each SCENE.
@@ -57,16 +81,22 @@ def build(scenes: tuple[Path, ...], engine, **options) -> None:
     else:  # one task per scene
         results = engine.map(build_scene, [(scene, cfg) for scene in scenes], desc="scenes")
     for result in results:
-        click.echo(f"wrote {result.out_dir}: {result.views} views, {result.n_objects} objects (associated by "
-                   f"{result.associate})")
+        click.echo(
+            f"wrote {result.out_dir}: {result.views} views, {result.n_objects} objects (associated by "
+            f"{result.associate})"
+        )
 
 
 @cli.command()
 @click.argument("scene", type=click.Path(path_type=Path))
 @click.option("--masks", required=True, help="Mask folder to clean.")
 @click.option("--out-masks", required=True, help="Mask folder to write.")
-@click.option("--min-area", type=int, default=None,
-              help="Components under this many pixels are reassigned (default: 500 px at 1008x756, scaled).")
+@click.option(
+    "--min-area",
+    type=int,
+    default=None,
+    help="Components under this many pixels are reassigned (default: 500 px at 1008x756, scaled).",
+)
 @click.option("--force", is_flag=True, help="Replace --out-masks if it exists.")
 def clean(scene: Path, masks: str, out_masks: str, min_area: int, force: bool) -> None:
     """Noise removal alone: 3x3 closing and small-component reassignment."""
@@ -83,14 +113,22 @@ def clean(scene: Path, masks: str, out_masks: str, min_area: int, force: bool) -
 @click.option("--hq-token-only", is_flag=True, help="Use the HQ mask alone instead of adding it to SAM's.")
 @click.option("--single-mask", is_flag=True, help="SAM's single-mask output instead of the best of its three.")
 @click.option("--force", is_flag=True, help="Replace --out if it exists.")
-def export_onnx(checkpoint: Path, model_type: str, out: Path, opset: int, hq_token_only: bool, single_mask: bool,
-                force: bool) -> None:
+def export_onnx(
+    checkpoint: Path, model_type: str, out: Path, opset: int, hq_token_only: bool, single_mask: bool, force: bool
+) -> None:
     """Export an official SAM-HQ checkpoint to encoder.onnx, decoder.onnx and model.json
     (needs `pip install .[export]`)."""
     from hqmask.sam_hq.export import export_checkpoint
 
-    export_checkpoint(checkpoint, model_type, out, opset=opset, hq_token_only=hq_token_only,
-                      multimask_output=not single_mask, overwrite=force)
+    export_checkpoint(
+        checkpoint,
+        model_type,
+        out,
+        opset=opset,
+        hq_token_only=hq_token_only,
+        multimask_output=not single_mask,
+        overwrite=force,
+    )
     click.echo(f"wrote {out}")
 
 

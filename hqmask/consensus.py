@@ -35,7 +35,7 @@ def vote(labels: np.ndarray, weights: np.ndarray) -> np.ndarray:
     Returns:
         (H, W) uint8; ties go to the earliest candidate, so to the view's own label.
     """
-    score = np.stack([np.where(w > 0, ((labels == l) * weights).sum(0), -1.0) for l, w in zip(labels, weights)])
+    score = np.stack([np.where(w > 0, ((labels == label) * weights).sum(0), -1.0) for label, w in zip(labels, weights)])
     return np.take_along_axis(labels, score.argmax(0)[None], 0)[0]
 
 
@@ -44,8 +44,10 @@ def nearest_views(views: list[CameraPose], k: int) -> list[list[int]]:
     views on either side) are ordered by the centres' coordinates, never by file order."""
     centers = np.stack([v.center for v in views])
     dist = np.sum((centers[:, None] - centers[None]) ** 2, axis=-1)
-    return [sorted((j for j in range(len(views)) if j != v), key=lambda j: (dist[v, j], tuple(centers[j])))[:k]
-            for v in range(len(views))]
+    return [
+        sorted((j for j in range(len(views)) if j != v), key=lambda j: (dist[v, j], tuple(centers[j])))[:k]
+        for v in range(len(views))
+    ]
 
 
 def multiview_consensus(
@@ -92,13 +94,19 @@ def multiview_consensus(
                 # the neighbour brought to this view's size, with its camera
                 view_j = CameraPose(views[j].camera.resized(W, H), views[j].cam_from_world) if resized else views[j]
                 to_j = geometric_flow(images[v], images[j], views[v], views[j], depths[v])
-                from_j = geometric_flow(image, images[v], view_j, views[v],
-                                        None if depths[j] is None else to_size(depths[j], (H, W), nearest=True))
+                from_j = geometric_flow(
+                    image,
+                    images[v],
+                    view_j,
+                    views[v],
+                    None if depths[j] is None else to_size(depths[j], (H, W), nearest=True),
+                )
                 if not resized and j > v and v in near[j]:
                     saved[j, v] = from_j, to_j
             labels.append(pull_labels(other, to_j))
-            trusted = consistent_flow(to_j, from_j, fb_tolerance) & matching_colors(images[v], image, to_j,
-                                                                                     color_tolerance)
+            trusted = consistent_flow(to_j, from_j, fb_tolerance) & matching_colors(
+                images[v], image, to_j, color_tolerance
+            )
             weights.append(trusted.astype(np.float32))
         out.append(vote(np.stack(labels), np.stack(weights)))
     return out

@@ -92,19 +92,32 @@ def plane_homography(view: CameraPose, other: CameraPose, depth: float, shape: t
     return K_other @ (depth * R + np.outer(t, [0.0, 0.0, 1.0])) @ np.linalg.inv(K_view)
 
 
-def pull_along_plane(labels: np.ndarray, view: CameraPose, other: CameraPose, depth: float,
-                     shape: tuple[int, ...]) -> np.ndarray:
+def pull_along_plane(
+    labels: np.ndarray, view: CameraPose, other: CameraPose, depth: float, shape: tuple[int, ...]
+) -> np.ndarray:
     """The other view's (H', W') label map carried into ``view`` (size ``shape``) as if it lay
     on a fronto-parallel plane at ``depth`` in front of ``view`` (nearest, 0 outside)."""
     H, W = shape[:2]
     warp = plane_homography(view, other, depth, shape)
-    return cv2.warpPerspective(to_size(labels, (H, W), nearest=True), warp, (W, H),
-                               flags=cv2.INTER_NEAREST | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_CONSTANT,
-                               borderValue=0)
+    return cv2.warpPerspective(
+        to_size(labels, (H, W), nearest=True),
+        warp,
+        (W, H),
+        flags=cv2.INTER_NEAREST | cv2.WARP_INVERSE_MAP,
+        borderMode=cv2.BORDER_CONSTANT,
+        borderValue=0,
+    )
 
 
-def geometric_flow(image: np.ndarray, other: np.ndarray, view: CameraPose, other_view: CameraPose,
-                   depth: np.ndarray | None, *, max_side: int = FLOW_MAX_SIDE) -> np.ndarray:
+def geometric_flow(
+    image: np.ndarray,
+    other: np.ndarray,
+    view: CameraPose,
+    other_view: CameraPose,
+    depth: np.ndarray | None,
+    *,
+    max_side: int = FLOW_MAX_SIDE,
+) -> np.ndarray:
     """:func:`flow_between` for views far apart: ``other`` is first warped along the flow a
     rough ``depth`` (H, W) of ``image`` implies (:func:`depth_flow`), DIS finds what is left,
     and the two are composed, all at the working size. Without a depth it is plain
@@ -122,8 +135,9 @@ def geometric_flow(image: np.ndarray, other: np.ndarray, view: CameraPose, other
 def _sample(values: np.ndarray, flow: np.ndarray, interpolation: int, fill: float) -> np.ndarray:
     H, W = flow.shape[:2]
     gx, gy = np.meshgrid(np.arange(W, dtype=np.float32), np.arange(H, dtype=np.float32))
-    return cv2.remap(values, gx + flow[..., 0], gy + flow[..., 1], interpolation, borderMode=cv2.BORDER_CONSTANT,
-                     borderValue=fill)
+    return cv2.remap(
+        values, gx + flow[..., 0], gy + flow[..., 1], interpolation, borderMode=cv2.BORDER_CONSTANT, borderValue=fill
+    )
 
 
 def pull_labels(labels: np.ndarray, flow: np.ndarray, fill: int = 0) -> np.ndarray:

@@ -57,14 +57,16 @@ def _touching(seg: np.ndarray, edges: np.ndarray | None = None) -> tuple[np.ndar
     (M, 2) and how many pixel pairs touch (M,)."""
     free = np.ones(seg.shape, bool) if edges is None else ~edges
     across, down = free[:, :-1] & free[:, 1:], free[:-1] & free[1:]
-    p = np.concatenate([np.stack([seg[:, :-1][across], seg[:, 1:][across]], 1),
-                        np.stack([seg[:-1][down], seg[1:][down]], 1)])
+    p = np.concatenate(
+        [np.stack([seg[:, :-1][across], seg[:, 1:][across]], 1), np.stack([seg[:-1][down], seg[1:][down]], 1)]
+    )
     p = np.sort(p[p[:, 0] != p[:, 1]], axis=1)
     return np.unique(p, axis=0, return_counts=True)
 
 
-def _join_detached_parts(objects: np.ndarray, areas: np.ndarray, pairs: np.ndarray, touches: np.ndarray,
-                         min_touch: int) -> np.ndarray:
+def _join_detached_parts(
+    objects: np.ndarray, areas: np.ndarray, pairs: np.ndarray, touches: np.ndarray, min_touch: int
+) -> np.ndarray:
     """Objects that touch no background other than across a depth jump are parts of what they
     stand on or grow from (a head that the bush behind it outlines, above its torso): each
     joins the larger object it shares the longest boundary with, off the jumps.
@@ -138,7 +140,10 @@ class GraphProposer:
             seg = cut_at_edges(seg, edges, min_size)
         n = int(seg.max()) + 1
         counts = np.bincount(seg.ravel(), minlength=n).astype(float)
-        mean = np.stack([np.bincount(seg.ravel(), lab[..., c].ravel(), n) for c in range(3)], 1) / np.maximum(counts, 1)[:, None]
+        mean = (
+            np.stack([np.bincount(seg.ravel(), lab[..., c].ravel(), n) for c in range(3)], 1)
+            / np.maximum(counts, 1)[:, None]
+        )
         border = np.unique(np.concatenate([seg[0], seg[-1], seg[:, 0], seg[:, -1]]))
         reference = border[counts[border] >= self.reference_fraction * H * W]
         background = np.zeros(n, bool)

@@ -73,8 +73,9 @@ class DemoResult:
     match: int | None = None  # the ground-truth object the edited one was matched to, where there is truth
 
 
-def _demo_object(scene_dir: Path, run: Run, labels: np.ndarray, default: int, synth_point: np.ndarray | None,
-                 backend: Backend) -> tuple[int, np.ndarray]:
+def _demo_object(
+    scene_dir: Path, run: Run, labels: np.ndarray, default: int, synth_point: np.ndarray | None, backend: Backend
+) -> tuple[int, np.ndarray]:
     """The object the demo edits and the 3D point that selects it: the synthetic scene's first
     object; in a user's scene the object under the centre of the first test view, or, where
     the centre shows background, the ``default`` object at the median of its Gaussians."""
@@ -83,13 +84,21 @@ def _demo_object(scene_dir: Path, run: Run, labels: np.ndarray, default: int, sy
         return pick_object(means, labels, synth_point), np.asarray(synth_point, np.float64)
     view = run.scene(scene_dir).split("test")[0]
     try:
-        point = point_from_click(run.gaussians, view.camera, view.cam_from_world, view.camera.width / 2,
-                                 view.camera.height / 2, backend=backend)
+        point = point_from_click(
+            run.gaussians,
+            view.camera,
+            view.cam_from_world,
+            view.camera.width / 2,
+            view.camera.height / 2,
+            backend=backend,
+        )
         return pick_object(means, labels, point), point
     except InputError:
         if not (labels == default).any():
-            raise InputError(f"{run.folder.labels}: no Gaussian carries an object label; train longer (--iters) "
-                             "or check the masks in the scene's object_mask/.") from None
+            raise InputError(
+                f"{run.folder.labels}: no Gaussian carries an object label; train longer (--iters) "
+                "or check the masks in the scene's object_mask/."
+            ) from None
         return default, np.median(means[labels == default], axis=0).astype(np.float64)
 
 
@@ -106,21 +115,43 @@ def demo_images(scene: Path) -> str:
     return present[-1]
 
 
-def masks_at_depth_jumps(run_dir: Path, scene_dir: Path, images: str, out_masks: str, depth_dir: Path, *,
-                         backend: str | Backend = "auto", progress: bool = True) -> Path:
+def masks_at_depth_jumps(
+    run_dir: Path,
+    scene_dir: Path,
+    images: str,
+    out_masks: str,
+    depth_dir: Path,
+    *,
+    backend: str | Backend = "auto",
+    progress: bool = True,
+) -> Path:
     """The mask stage's second pass: the trained run's depth of every view at the size of
     ``images`` (``depth_dir/depth/<stem>.npy``), then the masks built again from it into
     ``scene_dir/out_masks`` (the ``graph`` proposer, cut at its depth jumps). Returns the mask
     folder."""
-    render_run(run_dir, scene_dir, depth_dir, split="all", what=("depth",), images=images, backend=backend,
-               progress=progress)
-    return build_masks(scene_dir, BuildConfig(proposer="graph", associate="tracks", out_masks=out_masks, images=images,
-                                              depth=str(depth_dir / "depth")), progress=progress).out_dir
+    render_run(
+        run_dir, scene_dir, depth_dir, split="all", what=("depth",), images=images, backend=backend, progress=progress
+    )
+    return build_masks(
+        scene_dir,
+        BuildConfig(
+            proposer="graph", associate="tracks", out_masks=out_masks, images=images, depth=str(depth_dir / "depth")
+        ),
+        progress=progress,
+    ).out_dir
 
 
-def run_demo(out: Path | str, *, scene: Path | str | None = None, images: str | None = None, iters: int = DEMO_ITERS,
-             max_gaussians: int = DEMO_MAX_GAUSSIANS, backend: str = "auto", overwrite: bool = False,
-             progress: bool = True) -> DemoResult:
+def run_demo(
+    out: Path | str,
+    *,
+    scene: Path | str | None = None,
+    images: str | None = None,
+    iters: int = DEMO_ITERS,
+    max_gaussians: int = DEMO_MAX_GAUSSIANS,
+    backend: str = "auto",
+    overwrite: bool = False,
+    progress: bool = True,
+) -> DemoResult:
     """Run the pipeline into ``out``: ``out/scene`` (the synthetic scene; for photos or a video,
     the scene structure from motion makes of them; for a scene folder, links to it, so that
     its masks are written here and never into ``scene``), ``out/run``, ``out/depth`` (the
@@ -129,15 +160,17 @@ def run_demo(out: Path | str, *, scene: Path | str | None = None, images: str | 
     start = time.perf_counter()
     out = Path(out)
     backend = get_backend(backend)
-    cfg = TrainConfig(iters=iters, masks=MASKS, images=images or "images", backend=backend.name,
-                      max_gaussians=max_gaussians)
+    cfg = TrainConfig(
+        iters=iters, masks=MASKS, images=images or "images", backend=backend.name, max_gaussians=max_gaussians
+    )
     if scene is not None and not Path(scene).exists():
         raise InputError(f"{scene}: not found; pass a scene folder, a folder of photos or a video with --scene.")
     require_folder_path(out)
     if scene is not None:
         scene = Path(scene)
-        refuse_overlap(out, scene_entries(scene) if scene.is_dir() and (scene / "sparse").is_dir()
-                       else [("the photos", scene)])
+        refuse_overlap(
+            out, scene_entries(scene) if scene.is_dir() and (scene / "sparse").is_dir() else [("the photos", scene)]
+        )
     if out.exists() and any(out.iterdir()) and not overwrite:
         raise InputError(f"{out}: already exists and is not empty; pass --force or choose another --out.")
     for owned in ("scene", "run", "depth", "report"):  # --force: the demo's own outputs, nothing else
@@ -154,8 +187,9 @@ def run_demo(out: Path | str, *, scene: Path | str | None = None, images: str | 
         raise
 
 
-def _run_demo(out: Path, scene: Path | None, images: str | None, cfg: TrainConfig, backend: Backend, start: float,
-              progress: bool) -> DemoResult:
+def _run_demo(
+    out: Path, scene: Path | None, images: str | None, cfg: TrainConfig, backend: Backend, start: float, progress: bool
+) -> DemoResult:
     synth_point, warning = None, None
     if scene is None:
         result = generate_scene(DEMO_SCENE, out / "scene", progress=progress)
@@ -173,24 +207,38 @@ def _run_demo(out: Path, scene: Path | None, images: str | None, cfg: TrainConfi
         images = images or demo_images(scene_dir)
         mask_images = images
     cfg = replace(cfg, images=images)
-    build_masks(scene_dir, BuildConfig(proposer="graph", associate="tracks", out_masks=MASKS, images=mask_images),
-                progress=progress)
+    build_masks(
+        scene_dir,
+        BuildConfig(proposer="graph", associate="tracks", out_masks=MASKS, images=mask_images),
+        progress=progress,
+    )
     run_dir = out / "run"
     train(scene_dir, run_dir, cfg, progress=progress)
-    masks_at_depth_jumps(run_dir, scene_dir, mask_images, DEPTH_MASKS, out / "depth", backend=backend,
-                         progress=progress)
-    segmentation = segment_run(run_dir, scene_dir, options=DEMO_LABELS, masks=DEPTH_MASKS, backend=backend,
-                               progress=progress)
+    masks_at_depth_jumps(
+        run_dir, scene_dir, mask_images, DEPTH_MASKS, out / "depth", backend=backend, progress=progress
+    )
+    segmentation = segment_run(
+        run_dir, scene_dir, options=DEMO_LABELS, masks=DEPTH_MASKS, backend=backend, progress=progress
+    )
     run = load_run(run_dir)
-    object_id, point = _demo_object(scene_dir, run, segmentation.labels, default_object(segmentation), synth_point,
-                                    backend)
+    object_id, point = _demo_object(
+        scene_dir, run, segmentation.labels, default_object(segmentation), synth_point, backend
+    )
     for op, color in (("remove", None), ("extract", None), ("recolor", (255, 40, 200))):
-        edit_run(run_dir, op, object_id=object_id, color=color, scene_dir=scene_dir, backend=backend,
-                 progress=progress)
+        edit_run(run_dir, op, object_id=object_id, color=color, scene_dir=scene_dir, backend=backend, progress=progress)
     report = out / "report"
     with torch.no_grad():
-        ev = report_run(run_dir, scene_dir, report, gt_masks=gt_masks, object_id=object_id, backend=backend,
-                        progress=progress)
+        ev = report_run(
+            run_dir, scene_dir, report, gt_masks=gt_masks, object_id=object_id, backend=backend, progress=progress
+        )
     miou = ev.summary()["visible"]["miou"]
-    return DemoResult(out, report / "report.html", object_id, point, miou, time.perf_counter() - start, warning,
-                      ev.id_map.get(object_id))
+    return DemoResult(
+        out,
+        report / "report.html",
+        object_id,
+        point,
+        miou,
+        time.perf_counter() - start,
+        warning,
+        ev.id_map.get(object_id),
+    )

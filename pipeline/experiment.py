@@ -75,8 +75,11 @@ def shuffled_copy(scene: Path, out: Path, *, seed: int = 0) -> Path:
     source = load_scene(scene, masks=None)
     order = np.random.default_rng(seed).permutation(len(source.views))
     name_of = {v.name: f"{order[k]:04d}{Path(v.name).suffix}" for k, v in enumerate(source.views)}
-    renamed = replace(source, views=[replace(v, name=name_of[v.name]) for v in source.views],
-                      test_names=frozenset(name_of[n] for n in source.test_names))
+    renamed = replace(
+        source,
+        views=[replace(v, name=name_of[v.name]) for v in source.views],
+        test_names=frozenset(name_of[n] for n in source.test_names),
+    )
     save_scene(renamed, out)
     folders = [p for p in Path(scene).iterdir() if p.is_dir() and not p.name.startswith(".")]
     for folder in (p for p in folders if p.name not in ("images", "sparse")):
@@ -88,8 +91,9 @@ def shuffled_copy(scene: Path, out: Path, *, seed: int = 0) -> Path:
     return out
 
 
-def corrupt_masks(scene: Path, out_masks: str, *, severity: str = "medium", model: str = "blobs", seed: int = 0,
-                  coarse: bool = False) -> str:
+def corrupt_masks(
+    scene: Path, out_masks: str, *, severity: str = "medium", model: str = "blobs", seed: int = 0, coarse: bool = False
+) -> str:
     """``scene/out_masks``: the exact masks corrupted at ``severity`` by the error family
     ``model``; made once."""
     if not (Path(scene) / out_masks).is_dir():
@@ -97,14 +101,16 @@ def corrupt_masks(scene: Path, out_masks: str, *, severity: str = "medium", mode
     return out_masks
 
 
-def associate_masks(scene: Path, source: str, out_masks: str, *, associate: str = "tracks",
-                    **options) -> str:
+def associate_masks(scene: Path, source: str, out_masks: str, *, associate: str = "tracks", **options) -> str:
     """``scene/out_masks``: ``hqmask build --proposer existing --from-masks source`` (noise
     removal, association, consensus; ``options`` are further :class:`BuildConfig` fields);
     made once."""
     if not (Path(scene) / out_masks).is_dir():
-        build_masks(scene, BuildConfig(proposer="existing", from_masks=source, associate=associate,
-                                       out_masks=out_masks, **options), progress=False)
+        build_masks(
+            scene,
+            BuildConfig(proposer="existing", from_masks=source, associate=associate, out_masks=out_masks, **options),
+            progress=False,
+        )
     return out_masks
 
 
@@ -127,8 +133,15 @@ def train_run(scene: Path, run: Path, cfg: TrainConfig, *, progress: bool = Fals
     return time.perf_counter() - start
 
 
-def segmentation_scores(run_dir: Path, scene: Path, masks: str, settings: list[tuple[str, float]], *,
-                        truth: str = "object_mask", backend: str | Backend = "cpu") -> list[dict]:
+def segmentation_scores(
+    run_dir: Path,
+    scene: Path,
+    masks: str,
+    settings: list[tuple[str, float]],
+    *,
+    truth: str = "object_mask",
+    backend: str | Backend = "cpu",
+) -> list[dict]:
     """For each (method, gamma_p) of ``settings``: the run's Gaussians labelled from ``masks``
     (one contribution matrix for every setting), scored on the test views against ``truth``.
     Returns :meth:`eval.evaluate.Evaluation.summary` of each setting."""
@@ -139,8 +152,9 @@ def segmentation_scores(run_dir: Path, scene: Path, masks: str, settings: list[t
     out = []
     for method, gamma_p in settings:
         segmentation = reassign(contributions, prior_labels, prior_probs, method=method, gamma_p=gamma_p)
-        evaluation, _ = evaluate(run, segmentation, views, with_truth=True, scene=str(scene), split="test",
-                                 backend=backend, progress=False)
+        evaluation, _ = evaluate(
+            run, segmentation, views, with_truth=True, scene=str(scene), split="test", backend=backend, progress=False
+        )
         out.append(evaluation.summary())
     return out
 
@@ -153,10 +167,13 @@ def test_view_scores(run_dir: Path, scene: Path, *, backend: str | Backend = "cp
     renders = [run.render(v, with_features=run.config.masks is not None, backend=backend) for v in views]
     rgb = [to_uint8(r.rgb) for r in renders]
     images = [v.load_image() for v in views]
-    out = {"test_views": len(views), "test_psnr": float(np.mean([psnr(a, b) for a, b in zip(rgb, images)])),
-           "test_ssim": float(np.mean([ssim(a, b) for a, b in zip(rgb, images)]))}
+    out = {
+        "test_views": len(views),
+        "test_psnr": float(np.mean([psnr(a, b) for a, b in zip(rgb, images)])),
+        "test_ssim": float(np.mean([ssim(a, b) for a, b in zip(rgb, images)])),
+    }
     truth = [v.load_mask() for v in views]
     if run.config.masks is not None and all(t is not None for t in truth):
         labels = [classify_pixels(r.features, run.classifier.to(r.features.device)).cpu().numpy() for r in renders]
-        out["test_miou"] = mean_iou([l.astype(np.uint8) for l in labels], truth)
+        out["test_miou"] = mean_iou([label.astype(np.uint8) for label in labels], truth)
     return out

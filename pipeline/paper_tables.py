@@ -41,8 +41,15 @@ from eval.report import markdown_table
 from gsseg.render import Backend, get_backend
 from gsseg.train import TrainConfig
 from hqmask.build import clean_scene_masks
-from pipeline.experiment import (SceneSpec, associate_masks, corrupt_masks, mask_scores, segmentation_scores,
-                                 synthetic_scene, train_run)
+from pipeline.experiment import (
+    SceneSpec,
+    associate_masks,
+    corrupt_masks,
+    mask_scores,
+    segmentation_scores,
+    synthetic_scene,
+    train_run,
+)
 
 TRAINING_MASKS = ("exact", "coarse", "noisy", "hqmask")
 MASK_FOLDERS = {"exact": "object_mask", "coarse": "coarse_hqmask", "noisy": "noisy", "hqmask": "noisy_hqmask"}
@@ -75,8 +82,16 @@ SETUPS = {
     # Masks are made, corrupted and cleaned at 256x256 (the corruption's speckles are sized
     # against the 500 px cleanup threshold); quick trains on the 128x128 copies, and stops
     # densifying at 20k Gaussians (a 128x128 view has 16k pixels).
-    "quick": TableSetup(paths=("orbit", "forward"), seeds=(0,), res=256, views=16, objects=4, iters=300,
-                        images="images_2", max_gaussians=20_000),
+    "quick": TableSetup(
+        paths=("orbit", "forward"),
+        seeds=(0,),
+        res=256,
+        views=16,
+        objects=4,
+        iters=300,
+        images="images_2",
+        max_gaussians=20_000,
+    ),
     "full": TableSetup(paths=("orbit", "forward"), seeds=(0, 1, 2), res=256, views=24, objects=6, iters=None),
 }
 
@@ -119,24 +134,42 @@ def _training_task(task: _Task) -> dict:
     """Train on one kind of masks and score the run."""
     scene, run = task.root / "scene", task.root / f"run_{task.kind}"
     setup = task.setup
-    seconds = train_run(scene, run, TrainConfig(iters=setup.iters, images=setup.images, masks=MASK_FOLDERS[task.kind],
-                                                backend=task.backend, max_gaussians=setup.max_gaussians))
+    seconds = train_run(
+        scene,
+        run,
+        TrainConfig(
+            iters=setup.iters,
+            images=setup.images,
+            masks=MASK_FOLDERS[task.kind],
+            backend=task.backend,
+            max_gaussians=setup.max_gaussians,
+        ),
+    )
     # The pipeline segments with the masks it trained on; `noisy` ones cannot be voted
     # with (their IDs differ per view), so that run is segmented by its classifier alone.
     method = ("classifier", 0.0) if task.kind == "noisy" else ("prior", 0.2)
-    summary, = segmentation_scores(run, scene, MASK_FOLDERS[task.kind], [method], backend=task.backend)
-    return {"psnr": summary["psnr"], "ssim": summary["ssim"], "miou": summary["visible"]["miou"],
-            "method": method[0], "train_seconds": seconds}
+    (summary,) = segmentation_scores(run, scene, MASK_FOLDERS[task.kind], [method], backend=task.backend)
+    return {
+        "psnr": summary["psnr"],
+        "ssim": summary["ssim"],
+        "miou": summary["visible"]["miou"],
+        "method": method[0],
+        "train_seconds": seconds,
+    }
 
 
 def _methods_task(task: _Task) -> dict:
     """The reassignment methods and the gamma_p ablation on the ``hqmask`` run."""
     settings = list(METHODS) + [("prior", g) for g in GAMMAS]
-    summaries = segmentation_scores(task.root / "run_hqmask", task.root / "scene", MASK_FOLDERS["hqmask"], settings,
-                                    backend=task.backend)
-    return {"methods": {m: {p: s[p] for p in ("visible", "extracted")} for (m, _), s in zip(METHODS, summaries)},
-            "gamma_p": {f"{g:g}": {p: s[p] for p in ("visible", "extracted")}
-                        for g, s in zip(GAMMAS, summaries[len(METHODS):])}}
+    summaries = segmentation_scores(
+        task.root / "run_hqmask", task.root / "scene", MASK_FOLDERS["hqmask"], settings, backend=task.backend
+    )
+    return {
+        "methods": {m: {p: s[p] for p in ("visible", "extracted")} for (m, _), s in zip(METHODS, summaries)},
+        "gamma_p": {
+            f"{g:g}": {p: s[p] for p in ("visible", "extracted")} for g, s in zip(GAMMAS, summaries[len(METHODS) :])
+        },
+    }
 
 
 def _f(x: float | None, digits: int = 3) -> str:
@@ -153,47 +186,95 @@ def render_tables(scenes: dict[str, dict], setup: TableSetup) -> str:
     schedule = "the CPU default schedule" if setup.iters is None else f"{setup.iters} iterations"
     if setup.max_gaussians is not None:
         schedule += f", at most {setup.max_gaussians} Gaussians"
-    parts = [f"Scenes: {', '.join(names)} ({setup.res}x{setup.res}, {setup.views} views, {setup.objects} objects; "
-             f"masks made at that size, noise removal min_area {setup.min_area} px; trained on `{setup.images}` "
-             f"for {schedule}; test views: LLFF hold-out)."]
+    parts = [
+        f"Scenes: {', '.join(names)} ({setup.res}x{setup.res}, {setup.views} views, {setup.objects} objects; "
+        f"masks made at that size, noise removal min_area {setup.min_area} px; trained on `{setup.images}` "
+        f"for {schedule}; test views: LLFF hold-out)."
+    ]
 
     rows = []
     for kind in TRAINING_MASKS:
         cells = [scenes[n]["training"][kind] for n in names]
-        rows.append([kind, _f(_mean([c["psnr"] for c in cells]), 2), _f(_mean([c["ssim"] for c in cells])),
-                     _f(_mean([c["miou"] for c in cells])), cells[0]["method"]])
-    parts.append("### Table 1: training masks (test views, mean over scenes)\n\n" + markdown_table(
-        ["training masks", "PSNR", "SSIM", "mIoU (visible)", "labels by"], rows))
+        rows.append(
+            [
+                kind,
+                _f(_mean([c["psnr"] for c in cells]), 2),
+                _f(_mean([c["ssim"] for c in cells])),
+                _f(_mean([c["miou"] for c in cells])),
+                cells[0]["method"],
+            ]
+        )
+    parts.append(
+        "### Table 1: training masks (test views, mean over scenes)\n\n"
+        + markdown_table(["training masks", "PSNR", "SSIM", "mIoU (visible)", "labels by"], rows)
+    )
 
-    labels = {"noisy": "noisy (medium)", "noisy_cleaned": "noisy + noise removal",
-              "noisy_hqmask": "noisy + noise removal + association", "coarse": "coarse",
-              "coarse_hqmask": "coarse + noise removal + association"}
-    rows = [[label, _f(_mean([scenes[n]["masks"][k]["consistency"] for n in names])),
-             _f(_mean([scenes[n]["masks"][k]["miou"] for n in names]))] for k, label in labels.items()]
-    parts.append("### Table 2: 2D masks against the exact masks (all views, mean over scenes)\n\n" + markdown_table(
-        ["masks", "ID consistency", "mIoU"], rows))
+    labels = {
+        "noisy": "noisy (medium)",
+        "noisy_cleaned": "noisy + noise removal",
+        "noisy_hqmask": "noisy + noise removal + association",
+        "coarse": "coarse",
+        "coarse_hqmask": "coarse + noise removal + association",
+    }
+    rows = [
+        [
+            label,
+            _f(_mean([scenes[n]["masks"][k]["consistency"] for n in names])),
+            _f(_mean([scenes[n]["masks"][k]["miou"] for n in names])),
+        ]
+        for k, label in labels.items()
+    ]
+    parts.append(
+        "### Table 2: 2D masks against the exact masks (all views, mean over scenes)\n\n"
+        + markdown_table(["masks", "ID consistency", "mIoU"], rows)
+    )
 
     head = ["scene"] + [f"{m} {p}" for m, _ in METHODS for p in ("mIoU", "mAcc")]
     for protocol in ("visible", "extracted"):
-        rows = [[n] + [_f(scenes[n]["methods"][m][protocol][k]) for m, _ in METHODS for k in ("miou", "macc")]
-                for n in names]
-        rows.append(["mean"] + [_f(_mean([scenes[n]["methods"][m][protocol][k] for n in names]))
-                                for m, _ in METHODS for k in ("miou", "macc")])
-        parts.append(f"### Table 3: reassignment methods, `{protocol}` protocol (trained on hqmask masks)\n\n"
-                     + markdown_table(head, rows))
+        rows = [
+            [n] + [_f(scenes[n]["methods"][m][protocol][k]) for m, _ in METHODS for k in ("miou", "macc")]
+            for n in names
+        ]
+        rows.append(
+            ["mean"]
+            + [
+                _f(_mean([scenes[n]["methods"][m][protocol][k] for n in names]))
+                for m, _ in METHODS
+                for k in ("miou", "macc")
+            ]
+        )
+        parts.append(
+            f"### Table 3: reassignment methods, `{protocol}` protocol (trained on hqmask masks)\n\n"
+            + markdown_table(head, rows)
+        )
 
     gammas = [f"{g:g}" for g in GAMMAS]
-    rows = [[n] + [_f(scenes[n]["gamma_p"][g][p]["miou"]) for g in gammas for p in ("visible", "extracted")]
-            for n in names]
-    rows.append(["mean"] + [_f(_mean([scenes[n]["gamma_p"][g][p]["miou"] for n in names]))
-                            for g in gammas for p in ("visible", "extracted")])
-    parts.append("### Table 4: gamma_p ablation of `prior` (mIoU, visible / extracted)\n\n" + markdown_table(
-        ["scene"] + [f"gamma_p {g} {p[:3]}" for g in gammas for p in ("visible", "extracted")], rows))
+    rows = [
+        [n] + [_f(scenes[n]["gamma_p"][g][p]["miou"]) for g in gammas for p in ("visible", "extracted")] for n in names
+    ]
+    rows.append(
+        ["mean"]
+        + [
+            _f(_mean([scenes[n]["gamma_p"][g][p]["miou"] for n in names]))
+            for g in gammas
+            for p in ("visible", "extracted")
+        ]
+    )
+    parts.append(
+        "### Table 4: gamma_p ablation of `prior` (mIoU, visible / extracted)\n\n"
+        + markdown_table(["scene"] + [f"gamma_p {g} {p[:3]}" for g in gammas for p in ("visible", "extracted")], rows)
+    )
     return "\n\n".join(parts) + "\n"
 
 
-def paper_tables(out: Path | str, *, setup: TableSetup = SETUPS["full"], backend: str | Backend = "auto",
-                 engine: Engine = Engine(), progress: bool = True) -> Path:
+def paper_tables(
+    out: Path | str,
+    *,
+    setup: TableSetup = SETUPS["full"],
+    backend: str | Backend = "auto",
+    engine: Engine = Engine(),
+    progress: bool = True,
+) -> Path:
     """Run the tables' experiments on ``setup`` (one of :data:`SETUPS` or your own), reusing
     finished work in ``out/work``, and write ``out/paper_tables.md`` and
     ``out/paper_tables.json``. Returns the markdown path.
@@ -205,19 +286,24 @@ def paper_tables(out: Path | str, *, setup: TableSetup = SETUPS["full"], backend
     backend = get_backend(backend)
     start = time.perf_counter()
     names = [f"{path}-{seed}" for path, seed in setup.scenes]
-    tasks = [_Task(out / "work" / name, path, seed, setup, backend.name) for name, (path, seed) in
-             zip(names, setup.scenes)]
+    tasks = [
+        _Task(out / "work" / name, path, seed, setup, backend.name) for name, (path, seed) in zip(names, setup.scenes)
+    ]
     masks = engine.map(_scene_task, tasks, desc="scenes and masks", progress=progress)
-    trainings = engine.map(_training_task, [replace(t, kind=k) for t in tasks for k in TRAINING_MASKS],
-                           desc="trainings", progress=progress)
+    trainings = engine.map(
+        _training_task, [replace(t, kind=k) for t in tasks for k in TRAINING_MASKS], desc="trainings", progress=progress
+    )
     methods = engine.map(_methods_task, tasks, desc="reassignment methods", progress=progress)
     scenes = {}
     for i, name in enumerate(names):
-        done = trainings[i * len(TRAINING_MASKS): (i + 1) * len(TRAINING_MASKS)]
+        done = trainings[i * len(TRAINING_MASKS) : (i + 1) * len(TRAINING_MASKS)]
         scenes[name] = {"masks": masks[i], "training": dict(zip(TRAINING_MASKS, done)), **methods[i]}
     markdown = "## Paper tables\n\n" + render_tables(scenes, setup)
     write_bytes_atomic(out / "paper_tables.md", markdown.encode())
-    data = {"setup": {**asdict(setup), "backend": backend.name},
-            "seconds": time.perf_counter() - start, "scenes": scenes}
+    data = {
+        "setup": {**asdict(setup), "backend": backend.name},
+        "seconds": time.perf_counter() - start,
+        "scenes": scenes,
+    }
     write_bytes_atomic(out / "paper_tables.json", (json.dumps(data, indent=2) + "\n").encode())
     return out / "paper_tables.md"

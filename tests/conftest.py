@@ -24,7 +24,9 @@ def pytest_collection_modifyitems(items) -> None:
 @pytest.fixture(scope="session")
 def small_scene(tmp_path_factory) -> SynthResult:
     """An 8-view 96x96 orbit scene with 4 objects (read-only: copy it before changing it)."""
-    return generate_scene(SynthConfig(views=8, res=96, objects=4, seed=1), tmp_path_factory.mktemp("s") / "small", progress=False)
+    return generate_scene(
+        SynthConfig(views=8, res=96, objects=4, seed=1), tmp_path_factory.mktemp("s") / "small", progress=False
+    )
 
 
 @pytest.fixture

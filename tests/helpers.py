@@ -26,8 +26,9 @@ def script(name: str) -> str:
 GEOMETRY = ("means", "log_scales", "quats", "opacity_logits")  # the Gaussian fields that place and shape them
 
 
-def random_gaussians(n: int, seed: int, dtype: torch.dtype = torch.float32,
-                     scales: tuple[float, float] = (0.04, 0.24)) -> Gaussians:
+def random_gaussians(
+    n: int, seed: int, dtype: torch.dtype = torch.float32, scales: tuple[float, float] = (0.04, 0.24)
+) -> Gaussians:
     """``n`` Gaussians in front of :func:`look_down_z`, with varied shapes (axis standard
     deviations drawn in ``scales``), opacities, SH colours and object features."""
     gen = torch.Generator().manual_seed(seed)
@@ -62,6 +63,10 @@ def weighted_sum(out, weights: dict[str, torch.Tensor]) -> torch.Tensor:
 
 def output_weights(width: int, height: int, seed: int, dtype: torch.dtype) -> dict[str, torch.Tensor]:
     rng = np.random.default_rng(seed)
-    shapes = {"rgb": (height, width, 3), "features": (height, width, 16), "alpha": (height, width),
-              "depth": (height, width)}
+    shapes = {
+        "rgb": (height, width, 3),
+        "features": (height, width, 16),
+        "alpha": (height, width),
+        "depth": (height, width),
+    }
     return {k: torch.as_tensor(rng.standard_normal(s), dtype=dtype) for k, s in shapes.items()}

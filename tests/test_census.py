@@ -30,8 +30,12 @@ from dataset_tools.synth import SynthConfig, generate_scene
 
 pytestmark = pytest.mark.slow  # 128 commands run in-process: about 3 minutes on 2 cores
 
-ENTRY = {"dataset_tools": dataset_tools.cli.main, "hqmask": hqmask.cli.main, "gsseg": gsseg.cli.main,
-         "gseval": eval.cli.main}
+ENTRY = {
+    "dataset_tools": dataset_tools.cli.main,
+    "hqmask": hqmask.cli.main,
+    "gsseg": gsseg.cli.main,
+    "gseval": eval.cli.main,
+}
 
 
 def _copy(src: Path, dst: Path) -> Path:
@@ -72,8 +76,9 @@ def _damage_scenes(world: Path) -> None:
     write_png(same_names / "images" / first.name, 255 - image)
     moved = variant("moved_camera")  # the same photos, one camera's focal length changed
     _scale_focal(moved / sparse)
-    (variant("all_test") / "scene.json").write_text(json.dumps({"split": {"test": sorted(
-        p.name for p in (scene / "images").iterdir())}}))
+    (variant("all_test") / "scene.json").write_text(
+        json.dumps({"split": {"test": sorted(p.name for p in (scene / "images").iterdir())}})
+    )
     short = variant("short_cameras") / sparse / "cameras.bin"
     short.write_bytes(short.read_bytes()[:-8])  # the last parameter cut: pycolmap still reads it
 
@@ -100,6 +105,7 @@ def _damage_runs(world: Path) -> None:
     ply = variant("cut_ply") / "gaussians.ply"
     ply.write_bytes(ply.read_bytes()[:300])
     from gsseg.ply import read_ply, write_ply
+
     g = read_ply(run / "gaussians.ply")
     g.means[0, 0] = float("nan")
     write_ply(g, variant("nan_ply") / "gaussians.ply")
@@ -181,8 +187,11 @@ CASES = [
     ("hqmask", "build {w}/scene --proposer nope", "nope"),
     ("hqmask", "build {w}/scene --out-masks n --depth {w}/nowhere", "depth folder not found"),
     ("hqmask", "build {w}/scene --out-masks n --depth {w}/run", "depth map not found"),
-    ("hqmask", "build {w}/scene --out-masks n --proposer existing --from-masks object_mask --depth {w}/run",
-     "only the graph proposer"),
+    (
+        "hqmask",
+        "build {w}/scene --out-masks n --proposer existing --from-masks object_mask --depth {w}/run",
+        "only the graph proposer",
+    ),
     ("hqmask", "build {w}/scene --associate nope", "nope"),
     ("hqmask", "build {w}/scene --min-area -5", "--min-area -5"),
     ("hqmask", "build {w}/scene --min-area 0", "--min-area 0"),
@@ -205,7 +214,11 @@ CASES = [
     ("hqmask", "build {w}/rgb_mask --out-masks n --proposer existing --from-masks object_mask", "3 channels"),
     ("hqmask", "build {w}/wide_mask --out-masks n --proposer existing --from-masks object_mask", "more than the 255"),
     ("hqmask", "build {w}/small_mask --out-masks n --proposer existing --from-masks object_mask", "masks must have"),
-    ("hqmask", "build {w}/cut_mask --out-masks n --proposer existing --from-masks object_mask", "cannot read this mask"),
+    (
+        "hqmask",
+        "build {w}/cut_mask --out-masks n --proposer existing --from-masks object_mask",
+        "cannot read this mask",
+    ),
     ("hqmask", "build {w}/no_sparse --out-masks n", "COLMAP model folder not found"),
     ("hqmask", "clean {w}/scene --masks nothing --out-masks n", "mask folder not found"),
     ("hqmask", "clean {w}/scene --masks object_mask --out-masks ../escape", "plain folder name"),
@@ -350,8 +363,12 @@ OVERLAPS = [
     ("gseval", "report {w}/run --out {w}/report --lpips {w}/report/report.md"),
     ("gseval", "compare {w}/run --out {w}/run/evaluation.json"),
 ]
-CASES += [(c, a + force, "which this command reads") for c, a in OVERLAPS for force in ("", " --force")
-          if not (force and a.split()[0] in ("inspect", "compare", "train"))]  # these have no --force
+CASES += [
+    (c, a + force, "which this command reads")
+    for c, a in OVERLAPS
+    for force in ("", " --force")
+    if not (force and a.split()[0] in ("inspect", "compare", "train"))
+]  # these have no --force
 CASES += [
     # a run knows its scene: another scene with the same view names is refused
     ("gsseg", "segment {w}/run --scene {w}/same_names", "the image of view"),
@@ -386,8 +403,11 @@ CASES += [
 def _snapshot(root: Path) -> dict[str, tuple[int, int]]:
     """Size and time of every file and the set of folders; a run's ``.lock`` (the OS lock a
     command takes on a run folder, which stays there by design) is left out."""
-    files = {str(p.relative_to(root)): (p.stat().st_size, p.stat().st_mtime_ns)
-             for p in root.rglob("*") if p.is_file() and not p.is_symlink() and p.name != ".lock"}
+    files = {
+        str(p.relative_to(root)): (p.stat().st_size, p.stat().st_mtime_ns)
+        for p in root.rglob("*")
+        if p.is_file() and not p.is_symlink() and p.name != ".lock"
+    }
     return {**files, **{str(p.relative_to(root)): (-1, -1) for p in root.rglob("*") if p.is_dir()}}
 
 
@@ -396,12 +416,16 @@ def _message_lines(err: str) -> list[str]:
     return [line for line in err.splitlines() if line.strip() and not re.search(r"\[\d+:\d\d[<,]", line)]
 
 
-@pytest.mark.parametrize("command, args, message", CASES, ids=[f"{c} {a.split()[0]}-{i}" for i, (c, a, _) in
-                                                               enumerate(CASES)])
+@pytest.mark.parametrize(
+    "command, args, message", CASES, ids=[f"{c} {a.split()[0]}-{i}" for i, (c, a, _) in enumerate(CASES)]
+)
 def test_a_bad_input_is_one_line_exit_2_and_changes_nothing(world, monkeypatch, capsys, command, args, message):
     argv = [a.format(w=world) for a in args.split()]
-    scene = ["--scene", str(world / "scene")] if command in ("gsseg", "gseval") and argv[0] in (
-        "report",) and "--scene" not in argv else []
+    scene = (
+        ["--scene", str(world / "scene")]
+        if command in ("gsseg", "gseval") and argv[0] in ("report",) and "--scene" not in argv
+        else []
+    )
     before = _snapshot(world)
     monkeypatch.setattr(sys, "argv", [command, *argv, *scene])
     with pytest.raises(SystemExit) as exit_:
@@ -433,8 +457,20 @@ def test_a_palette_mask_is_a_valid_mask(tmp_path):
 
 
 def _train_command(scene: Path, run: Path, *extra: str) -> list[str]:
-    return [script("gsseg"), "train", str(scene), "--out", str(run), "--iters", "40", "--backend", "cpu",
-            "--max-gaussians", "3000", *extra]
+    return [
+        script("gsseg"),
+        "train",
+        str(scene),
+        "--out",
+        str(run),
+        "--iters",
+        "40",
+        "--backend",
+        "cpu",
+        "--max-gaussians",
+        "3000",
+        *extra,
+    ]
 
 
 def test_ctrl_c_then_resume_gives_the_bytes_of_an_uninterrupted_run(world, tmp_path):
@@ -445,8 +481,13 @@ def test_ctrl_c_then_resume_gives_the_bytes_of_an_uninterrupted_run(world, tmp_p
     env.pop("TQDM_DISABLE", None)
     whole = subprocess.run(_train_command(world / "scene", tmp_path / "whole"), env=env, capture_output=True, text=True)
     assert whole.returncode == 0, whole.stderr
-    proc = subprocess.Popen(_train_command(world / "scene", tmp_path / "cut"), env=env, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        _train_command(world / "scene", tmp_path / "cut"),
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     checkpoints = tmp_path / "cut" / "checkpoints"
     seen = ""
     while "training:" not in seen and proc.poll() is None:  # the loop's bar: steps are under way
@@ -458,21 +499,28 @@ def test_ctrl_c_then_resume_gives_the_bytes_of_an_uninterrupted_run(world, tmp_p
     assert proc.returncode == 130 and "--resume" in err, err
     saved = sorted(checkpoints.glob("step_*.pt"))
     assert saved and not (tmp_path / "cut" / "gaussians.ply").exists()
-    resumed = subprocess.run(_train_command(world / "scene", tmp_path / "cut", "--resume"), env=env,
-                             capture_output=True, text=True)
+    resumed = subprocess.run(
+        _train_command(world / "scene", tmp_path / "cut", "--resume"), env=env, capture_output=True, text=True
+    )
     assert resumed.returncode == 0, resumed.stderr
     assert (tmp_path / "cut" / "gaussians.ply").read_bytes() == (tmp_path / "whole" / "gaussians.ply").read_bytes()
 
 
 def test_a_second_writer_is_refused_while_the_first_trains(world, tmp_path):
     env = {**os.environ, "TQDM_DISABLE": "1"}
-    first = subprocess.Popen(_train_command(world / "scene", tmp_path / "run", "--iters", "400"), env=env,
-                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    first = subprocess.Popen(
+        _train_command(world / "scene", tmp_path / "run", "--iters", "400"),
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     deadline = time.time() + 120
     while not (tmp_path / "run" / "config.json").exists() and time.time() < deadline:
         time.sleep(0.05)
-    second = subprocess.run(_train_command(world / "scene", tmp_path / "run", "--resume"), env=env,
-                            capture_output=True, text=True)
+    second = subprocess.run(
+        _train_command(world / "scene", tmp_path / "run", "--resume"), env=env, capture_output=True, text=True
+    )
     first.send_signal(signal.SIGTERM)
     first.communicate(timeout=120)
     assert second.returncode == 2 and "another command" in second.stderr, second.stderr
@@ -482,8 +530,12 @@ def test_a_second_writer_is_refused_while_the_first_trains(world, tmp_path):
 
 def test_an_error_after_a_progress_bar_starts_on_its_own_line(world, tmp_path):
     shutil.copytree(world / "cut_image", tmp_path / "s")
-    r = subprocess.run([script("hqmask"), "build", str(tmp_path / "s"), "--out-masks", "n"], capture_output=True,
-                       text=True, env={k: v for k, v in os.environ.items() if k != "TQDM_DISABLE"})
+    r = subprocess.run(
+        [script("hqmask"), "build", str(tmp_path / "s"), "--out-masks", "n"],
+        capture_output=True,
+        text=True,
+        env={k: v for k, v in os.environ.items() if k != "TQDM_DISABLE"},
+    )
     assert r.returncode == 2
     assert any(line.startswith("error: ") for line in r.stderr.split("\n")), r.stderr
     assert not (tmp_path / "s" / "n").exists()

@@ -26,9 +26,26 @@ def test_console_scripts_list_their_subcommands(command, subcommands):
 def test_synth_corrupt_inspect(tmp_path):
     py = [sys.executable, "-m", "dataset_tools"]
     scene = tmp_path / "scene"
-    r = run(*py, "synth", "--out", str(scene), "--seed", "2", "--views", "5", "--res", "64", "--objects", "3", "--path", "forward")
+    r = run(
+        *py,
+        "synth",
+        "--out",
+        str(scene),
+        "--seed",
+        "2",
+        "--views",
+        "5",
+        "--res",
+        "64",
+        "--objects",
+        "3",
+        "--path",
+        "forward",
+    )
     assert r.returncode == 0, r.stderr
-    r = run(*py, "corrupt", "--scene", str(scene), "--out-masks", "noisy", "--severity", "high", "--coarse", "--seed", "1")
+    r = run(
+        *py, "corrupt", "--scene", str(scene), "--out-masks", "noisy", "--severity", "high", "--coarse", "--seed", "1"
+    )
     assert r.returncode == 0, r.stderr
     assert len(list((scene / "noisy").glob("*.png"))) == 5
     r = run(*py, "inspect", str(scene), "--masks", "noisy")
@@ -54,12 +71,15 @@ def test_user_errors_are_one_line_and_exit_2(tmp_path, args, message):
     assert not (tmp_path / "x").exists()
 
 
-@pytest.mark.parametrize("command, name, options", [
-    ("gsseg", "train", "gsseg.train.TrainConfig"),
-    ("gsseg", "segment", "gsseg.segment.segment_run.LabelOptions"),
-    ("hqmask", "build", "hqmask.build.BuildConfig"),
-    ("dataset_tools", "sfm", "dataset_tools.sfm.SfmConfig"),
-])
+@pytest.mark.parametrize(
+    "command, name, options",
+    [
+        ("gsseg", "train", "gsseg.train.TrainConfig"),
+        ("gsseg", "segment", "gsseg.segment.segment_run.LabelOptions"),
+        ("hqmask", "build", "hqmask.build.BuildConfig"),
+        ("dataset_tools", "sfm", "dataset_tools.sfm.SfmConfig"),
+    ],
+)
 def test_every_cli_default_is_its_dataclass_default(command, name, options):
     """Each option of a command that is a field of the stage's options dataclass has the
     dataclass's default; ``train --schedule auto`` is the one option the command resolves

@@ -49,8 +49,9 @@ def _clickable(run, labels: np.ndarray, objects: list[int]) -> dict[int, tuple[s
     found = {}
     g = run.gaussians
     for view in run.scene().split("train"):
-        ids = segment_pixels(g, labels, view.camera, torch.as_tensor(view.cam_from_world, dtype=torch.float32),
-                             backend="cpu")
+        ids = segment_pixels(
+            g, labels, view.camera, torch.as_tensor(view.cam_from_world, dtype=torch.float32), backend="cpu"
+        )
         for obj in objects:
             depth = ndimage.distance_transform_edt(ids == obj)
             if obj not in found and depth.max() > 3:
@@ -85,8 +86,11 @@ def test_exclude_click_splits_an_object_joined_to_another(segmented, tmp_path):
     clicks = _clickable(run, seg.labels, [a, b])
 
     def edit(*args: str) -> Path:
-        r = subprocess.run([script("gsseg"), "edit", str(run_dir), "--op", "extract", "--backend", "cpu", *args],
-                           capture_output=True, text=True)
+        r = subprocess.run(
+            [script("gsseg"), "edit", str(run_dir), "--op", "extract", "--backend", "cpu", *args],
+            capture_output=True,
+            text=True,
+        )
         assert r.returncode == 0, r.stderr
         return Path(r.stdout.split()[-1])
 
@@ -104,8 +108,25 @@ def test_exclude_click_splits_an_object_joined_to_another(segmented, tmp_path):
     record = json.loads((run_dir / "edits" / f"extract_{a}_split" / "edit.json").read_text())
     assert [c["positive"] for c in record["clicks"]] == [True, False] and record["object_id"] is None
     exported = tmp_path / "alone.ply"  # the selection is an object like any other for export
-    r = subprocess.run([script("gsseg"), "export", str(run_dir), "--out", str(exported), "--click", va, str(ua),
-                        str(wa), "--exclude-click", vb, str(ub), str(wb)], capture_output=True, text=True)
+    r = subprocess.run(
+        [
+            script("gsseg"),
+            "export",
+            str(run_dir),
+            "--out",
+            str(exported),
+            "--click",
+            va,
+            str(ua),
+            str(wa),
+            "--exclude-click",
+            vb,
+            str(ub),
+            str(wb),
+        ],
+        capture_output=True,
+        text=True,
+    )
     assert r.returncode == 0, r.stderr
     assert len(read_ply(exported)) == alone.sum()  # no environment shell for a selection
     seg.save(run.folder.labels)  # the original labels: two clicks join the two objects
@@ -132,8 +153,13 @@ def test_the_viewers_shift_click_splits_what_gsseg_edit_exclude_click_splits(seg
         at(b, "exclude")
     assert at(a, "select") == a and session.selection().sum() == (merged == a).sum()
     assert at(b, "exclude") is None
-    expected = select_by_points(run.gaussians.means.numpy(), run.gaussians.obj_feat.detach().numpy(), merged,
-                                clicks[a][3][None], clicks[b][3][None])
+    expected = select_by_points(
+        run.gaussians.means.numpy(),
+        run.gaussians.obj_feat.detach().numpy(),
+        merged,
+        clicks[a][3][None],
+        clicks[b][3][None],
+    )
     np.testing.assert_array_equal(session.selection(), expected)
     session.edit("remove")
     assert len(session.current()[0]) == len(run.gaussians) - expected.sum() and session.selection() is None

@@ -10,8 +10,15 @@ from dataset_tools.cameras import CameraPose, PinholeCamera
 from hqmask.association.anchors import Anchor
 from hqmask.consensus import multiview_consensus, vote
 from hqmask.depth_prior import depth_from_anchors, depth_from_points
-from hqmask.optical_flow import (consistent_flow, depth_flow, flow_between, geometric_flow, matching_colors,
-                                 pull_along_plane, pull_labels)
+from hqmask.optical_flow import (
+    consistent_flow,
+    depth_flow,
+    flow_between,
+    geometric_flow,
+    matching_colors,
+    pull_along_plane,
+    pull_labels,
+)
 
 SHIFT = 4  # pixels the scene moves left from one view to the next
 FOCAL, DEPTH = 100.0, 10.0  # the plane stands DEPTH in front of cameras of focal FOCAL
@@ -33,10 +40,10 @@ def _views(n: int = 5, size: int = 128):
     plane = (255 * (plane - plane.min()) / np.ptp(plane)).astype(np.uint8)
     images, truth = [], []
     for v in range(n):
-        crop = plane[:, SHIFT * v: SHIFT * v + size]
+        crop = plane[:, SHIFT * v : SHIFT * v + size]
         images.append(np.repeat(crop[..., None], 3, axis=2))
         ids = np.zeros((size, size), np.uint8)
-        ids[40:80, 40 - SHIFT * v: 80 - SHIFT * v] = 7
+        ids[40:80, 40 - SHIFT * v : 80 - SHIFT * v] = 7
         truth.append(ids)
     return images, truth, panning(n, size)
 
@@ -53,7 +60,9 @@ def test_vote_takes_the_weighted_majority_and_the_own_label_on_ties():
 def test_flow_carries_labels_from_the_other_view():
     images, truth, _ = _views()
     flow = flow_between(images[2], images[3])
-    assert np.allclose(np.median(flow[..., 0]), -SHIFT, atol=0.25) and np.allclose(np.median(flow[..., 1]), 0, atol=0.25)
+    assert np.allclose(np.median(flow[..., 0]), -SHIFT, atol=0.25) and np.allclose(
+        np.median(flow[..., 1]), 0, atol=0.25
+    )
     carried = pull_labels(truth[3], flow)
     trusted = consistent_flow(flow, flow_between(images[3], images[2]), 1.0)
     inner = np.s_[8:-8, 8:-8]
@@ -65,7 +74,7 @@ def test_consensus_restores_a_missed_object_and_a_wandering_boundary():
     images, truth, views = _views()
     noisy = [t.copy() for t in truth]
     noisy[2][:] = 0  # the object missed in the middle view
-    noisy[1][40:80, 36 - SHIFT: 45 - SHIFT] = 7  # its left edge 4 px too far out in another
+    noisy[1][40:80, 36 - SHIFT : 45 - SHIFT] = 7  # its left edge 4 px too far out in another
     lone = [t.copy() for t in truth]
     lone[2][60:70, 10:20] = 7  # a blob only this view has: one witness cannot outvote it
     fixed = multiview_consensus(images, noisy, views, neighbours=4)
@@ -95,8 +104,9 @@ def test_a_neighbour_of_another_size_is_resized_to_witness():
         images[v] = np.concatenate([images[v], images[v][-4:]])
         noisy[v] = np.concatenate([noisy[v], noisy[v][-4:]])
         camera = views[v].camera
-        views[v] = CameraPose(PinholeCamera(camera.width, camera.height + 4, FOCAL, FOCAL, camera.cx, camera.cy),
-                              views[v].cam_from_world)
+        views[v] = CameraPose(
+            PinholeCamera(camera.width, camera.height + 4, FOCAL, FOCAL, camera.cx, camera.cy), views[v].cam_from_world
+        )
     fixed = multiview_consensus(images, noisy, views, neighbours=2)
     assert fixed[1].shape == truth[1].shape
     assert (fixed[1] == truth[1])[8:-8, 8:-8].mean() > 0.99
@@ -124,8 +134,11 @@ def test_mutual_neighbours_share_their_flows(monkeypatch):
         for j in near:
             to_j, from_j = flow_between(images[v], images[j]), flow_between(images[j], images[v])
             labels.append(pull_labels(noisy[j], to_j))
-            weights.append((consistent_flow(to_j, from_j, 2.0)
-                            & matching_colors(images[v], images[j], to_j, 10.0)).astype(np.float32))
+            weights.append(
+                (consistent_flow(to_j, from_j, 2.0) & matching_colors(images[v], images[j], to_j, 10.0)).astype(
+                    np.float32
+                )
+            )
         return vote(np.stack(labels), np.stack(weights))
 
     monkeypatch.setattr(consensus, "geometric_flow", counted)
@@ -149,7 +162,7 @@ def test_a_depth_lets_the_flow_follow_a_step_plain_flow_cannot():
     plane = ndimage.gaussian_filter(rng.random((128, 256)), 1.0)
     plane = (255 * (plane - plane.min()) / np.ptp(plane)).astype(np.uint8)
     step = 40
-    images = [np.repeat(plane[:, s: s + 128, None], 3, axis=2) for s in (0, step)]
+    images = [np.repeat(plane[:, s : s + 128, None], 3, axis=2) for s in (0, step)]
     views = panning(2, 128, step_px=step)
     depth = np.full((128, 128), DEPTH, np.float32)
     inner = np.s_[16:-16, 16:-56]
@@ -174,8 +187,11 @@ def test_depth_priors_have_known_answers():
     assert (depth[ids == 3] == 4.0).all() and depth[0, 0] == 7.0
     # object 5, missed in this view, stands where its anchor projects: a disk of 5 px radius
     # about (30, 15); the background lies as far as the farthest anchor, object 6
-    anchors = {3: anchors[3], 5: Anchor(np.array([1.0, 0.0, 5.0]), 0.5, 0.3),
-               6: Anchor(np.array([-3.0, 0.0, 9.0]), 0.5, 0.3)}
+    anchors = {
+        3: anchors[3],
+        5: Anchor(np.array([1.0, 0.0, 5.0]), 0.5, 0.3),
+        6: Anchor(np.array([-3.0, 0.0, 9.0]), 0.5, 0.3),
+    }
     depth = depth_from_anchors(view, ids, anchors)
     assert depth[15, 30] == 5.0 and depth[15, 34] == 5.0 and depth[15, 37] == 9.0 and depth[28, 2] == 9.0
     assert (depth[ids == 3] == 4.0).all()

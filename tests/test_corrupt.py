@@ -26,8 +26,10 @@ def test_same_seed_same_masks_other_seed_other_masks(scene_copy):
 
 @pytest.mark.parametrize("model", ["blobs", "proposer"])
 def test_error_grows_with_severity(scene_copy, model):
-    errors = [corrupt_scene(scene_copy, s, s, model=model, seed=0, progress=False)["mean_error"]
-              for s in ("low", "medium", "high")]
+    errors = [
+        corrupt_scene(scene_copy, s, s, model=model, seed=0, progress=False)["mean_error"]
+        for s in ("low", "medium", "high")
+    ]
     assert 0 < errors[0] < errors[1] < errors[2]
     report = json.loads((scene_copy / "high" / "corruption.json").read_text())
     assert report["severity"] == "high" and report["model"] == model and len(report["error_per_view"]) == 8
@@ -57,7 +59,7 @@ def test_blob_sizes_straddle_the_paper_threshold_scaled_to_the_image(side):
     256 x 256 the same blobs cover a quarter of the pixels, as a proposer's errors would."""
     threshold = 500 * (side / 512) ** 2
     gt = np.zeros((side, side), np.uint8)
-    gt[:, side // 2:] = 1
+    gt[:, side // 2 :] = 1
     rng = np.random.default_rng(0)
     small = corrupt_mask(gt, BlobModel(**{**QUIET.__dict__, "small_blobs": 30}), rng)
     assert blob_areas(gt, small).max() < threshold
@@ -94,8 +96,9 @@ def test_existing_output_is_kept_without_force(scene_copy):
     assert load_scene(scene_copy, masks="noisy").has_masks
 
 
-QUIET_PROPOSER = ProposerModel(p_parts=0, p_merge=0, p_miss=0, p_shadow=0, fragments=0, p_bleed=0, bleed_px=0,
-                               jitter_px=0)
+QUIET_PROPOSER = ProposerModel(
+    p_parts=0, p_merge=0, p_miss=0, p_shadow=0, fragments=0, p_bleed=0, bleed_px=0, jitter_px=0
+)
 
 
 def two_boxes() -> np.ndarray:
@@ -117,8 +120,7 @@ def test_a_run_holds_over_consecutive_views_and_nowhere_else():
 
 def test_shadow_fragments_and_bleeding_touch_only_the_background():
     gt = two_boxes()
-    model = ProposerModel(p_parts=0, p_merge=0, p_miss=0, p_shadow=0, fragments=3, p_bleed=1.0, bleed_px=3,
-                          jitter_px=0)
+    model = ProposerModel(p_parts=0, p_merge=0, p_miss=0, p_shadow=0, fragments=3, p_bleed=1.0, bleed_px=3, jitter_px=0)
     out = corrupt_view(gt, 0, [Run("shadow", 1, 0, 1)], model, np.random.default_rng(0))
     for label in (1, 2):
         assert len(np.unique(out[gt == label])) == 1  # objects keep their pixels
@@ -127,8 +129,9 @@ def test_shadow_fragments_and_bleeding_touch_only_the_background():
 
 
 def test_runs_are_planned_from_the_seed_and_last_at_most_their_share():
-    model = ProposerModel(p_parts=1, p_merge=1, p_miss=1, p_shadow=1, fragments=0, p_bleed=0, bleed_px=0,
-                          jitter_px=0, run_share=0.25)
+    model = ProposerModel(
+        p_parts=1, p_merge=1, p_miss=1, p_shadow=1, fragments=0, p_bleed=0, bleed_px=0, jitter_px=0, run_share=0.25
+    )
     runs = plan_runs([1, 2, 3], 40, model, np.random.default_rng(5))
     assert runs == plan_runs([1, 2, 3], 40, model, np.random.default_rng(5))
     assert len(runs) == 12 and all(1 <= r.stop - r.start <= 10 for r in runs)

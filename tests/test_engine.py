@@ -19,7 +19,6 @@ from dataset_tools.scene import load_scene
 from hqmask.build import CACHE, BuildConfig, build_masks, propose_view
 from hqmask.proposers import make_proposer
 
-
 # Ray workers import a task's function by name: a library function, not one of this module.
 CHECK_NAME = functools.partial(plain_name, option="--name")
 
@@ -50,11 +49,16 @@ def test_ray_maps_in_order_and_raises_the_tasks_own_error(ray_engine):
 @pytest.mark.slow
 def test_hqmask_build_of_two_scenes_on_ray_writes_the_masks_of_local(small_scene, tmp_path):
     pytest.importorskip("ray", reason="Ray is not installed (pip install -e .[ray])")
-    scenes = {engine: [shutil.copytree(small_scene.root, tmp_path / engine / name) for name in ("a", "b")]
-              for engine in ("local", "ray")}
+    scenes = {
+        engine: [shutil.copytree(small_scene.root, tmp_path / engine / name) for name in ("a", "b")]
+        for engine in ("local", "ray")
+    }
     for engine, paths in scenes.items():
-        r = subprocess.run([script("hqmask"), "build", *map(str, paths), "--out-masks", "built", "--engine", engine],
-                           capture_output=True, text=True)
+        r = subprocess.run(
+            [script("hqmask"), "build", *map(str, paths), "--out-masks", "built", "--engine", engine],
+            capture_output=True,
+            text=True,
+        )
         assert r.returncode == 0, r.stderr
         assert r.stdout.count("wrote") == 2
     for local, ray in zip(scenes["local"], scenes["ray"]):
@@ -73,11 +77,16 @@ def test_one_scene_has_its_views_proposed_by_ray_workers_as_here(ray_engine, sma
     for folder in ("built", f"{CACHE}/graph"):  # the masks, and the proposals the workers cached
         names = sorted(p.name for p in (scenes["local"] / folder).iterdir())
         assert len(names) == len(list((small_scene.root / "images").iterdir()))
-        match, mismatch, errors = filecmp.cmpfiles(scenes["local"] / folder, scenes["ray"] / folder, names,
-                                                   shallow=False)
+        match, mismatch, errors = filecmp.cmpfiles(
+            scenes["local"] / folder, scenes["ray"] / folder, names, shallow=False
+        )
         assert match == names
     # A worker whose proposer cannot be made raises that error here.
     view = load_scene(small_scene.root).views[0]
     with pytest.raises(InputError, match="encoder.onnx: missing"):
-        ray_engine.map_stateful(functools.partial(make_proposer, "sam-hq", str(tmp_path / "no-model")), propose_view,
-                                [(view.load_image(), view, None)], progress=False)
+        ray_engine.map_stateful(
+            functools.partial(make_proposer, "sam-hq", str(tmp_path / "no-model")),
+            propose_view,
+            [(view.load_image(), view, None)],
+            progress=False,
+        )

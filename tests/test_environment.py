@@ -68,7 +68,6 @@ def test_elevation_profile_is_linear_between_bin_centres():
     assert profile_bins(1.0 / np.tan(np.pi / 180)) == 180  # one-degree pixels
 
 
-
 def test_profile_gradient_is_the_in_order_sum_of_its_pixels():
     """Each bin's gradient is the float32 sum of its rays' gradients taken in ray order (as
     ``np.add.at`` takes them), the same bits however the threads are scheduled."""
@@ -87,6 +86,7 @@ def test_profile_gradient_is_the_in_order_sum_of_its_pixels():
     np.add.at(upper, np.minimum(lo + 1, bins - 1), (w * grad).numpy())
     assert np.array_equal(env.profile.grad.numpy(), lower + upper)
 
+
 @pytest.mark.slow
 def test_a_sharp_horizon_is_learned_by_the_profile_and_not_by_sh_alone():
     """An environment that is the sky's gradient above the horizon and a flat ground colour
@@ -94,8 +94,10 @@ def test_a_sharp_horizon_is_learned_by_the_profile_and_not_by_sh_alone():
     under 1e-4 (what is left is the one-bin blur at the step); degree-3 SH alone blurs the
     step into an error 50 times larger."""
     camera = PinholeCamera(width=24, height=24, fx=26.0, fy=26.0, cx=12.0, cy=12.0)
-    poses = [torch.as_tensor(look_at(np.zeros(3), np.array([np.cos(a), np.sin(a), -0.1])), dtype=torch.float32)
-             for a in np.linspace(0, 2 * np.pi, 4, endpoint=False)]
+    poses = [
+        torch.as_tensor(look_at(np.zeros(3), np.array([np.cos(a), np.sin(a), -0.1])), dtype=torch.float32)
+        for a in np.linspace(0, 2 * np.pi, 4, endpoint=False)
+    ]
 
     def truth(pose):
         z = ray_directions(camera, pose)[..., 2:3]
@@ -126,9 +128,15 @@ def test_environment_state_round_trip_with_and_without_profile():
 
 
 def test_render_composites_an_image_background_behind_the_gaussians():
-    g = Gaussians(means=torch.tensor([[0.0, 0.0, 2.0]]), log_scales=torch.full((1, 3), -2.0),
-                  quats=torch.tensor([[1.0, 0, 0, 0]]), opacity_logits=torch.tensor([2.0]),
-                  sh_dc=torch.zeros(1, 3), sh_rest=torch.zeros(1, 15, 3), obj_feat=torch.zeros(1, 16))
+    g = Gaussians(
+        means=torch.tensor([[0.0, 0.0, 2.0]]),
+        log_scales=torch.full((1, 3), -2.0),
+        quats=torch.tensor([[1.0, 0, 0, 0]]),
+        opacity_logits=torch.tensor([2.0]),
+        sh_dc=torch.zeros(1, 3),
+        sh_rest=torch.zeros(1, 15, 3),
+        obj_feat=torch.zeros(1, 16),
+    )
     pose = torch.eye(4)[:3]
     background = torch.rand(6, 8, 3, generator=torch.Generator().manual_seed(0))
     plain = render(g, CAMERA, pose, with_features=False)
@@ -140,9 +148,15 @@ def test_render_composites_an_image_background_behind_the_gaussians():
 def test_environment_is_learned_through_the_composite():
     """Fitting a render whose only Gaussian covers part of the view to a sky that brightens
     upwards recovers that sky in the environment: the gradient reaches it through (1 - alpha)."""
-    g = Gaussians(means=torch.tensor([[0.0, 0.0, 2.0]]), log_scales=torch.full((1, 3), -2.0),
-                  quats=torch.tensor([[1.0, 0, 0, 0]]), opacity_logits=torch.tensor([4.0]),
-                  sh_dc=torch.zeros(1, 3), sh_rest=torch.zeros(1, 15, 3), obj_feat=torch.zeros(1, 16))
+    g = Gaussians(
+        means=torch.tensor([[0.0, 0.0, 2.0]]),
+        log_scales=torch.full((1, 3), -2.0),
+        quats=torch.tensor([[1.0, 0, 0, 0]]),
+        opacity_logits=torch.tensor([4.0]),
+        sh_dc=torch.zeros(1, 3),
+        sh_rest=torch.zeros(1, 15, 3),
+        obj_feat=torch.zeros(1, 16),
+    )
     pose = torch.as_tensor([[1.0, 0, 0, 0], [0, 0, -1, 0], [0, 1, 0, 0]])  # looking along world +y
     sky = 0.5 + 0.4 * ray_directions(CAMERA, pose)[..., 2:3].expand(-1, -1, 3)
     target = render(g, CAMERA, pose, background=sky, with_features=False).rgb
@@ -169,8 +183,13 @@ def test_runs_carry_their_environment_to_the_renderers(small_scene, trained, tmp
     view = load_scene(small_scene.root).split("test")[0]
     pose = torch.as_tensor(view.cam_from_world, dtype=torch.float32)
     with torch.no_grad():
-        expected = render(run.gaussians, view.camera, pose, with_features=False,
-                          background=background_image(run.environment, view.camera, pose)).rgb
+        expected = render(
+            run.gaussians,
+            view.camera,
+            pose,
+            with_features=False,
+            background=background_image(run.environment, view.camera, pose),
+        ).rgb
         black = render(run.gaussians, view.camera, pose, with_features=False).rgb
     written = read_image(out / "rgb" / f"{view.stem}.png")
     assert np.array_equal(written, to_uint8(expected)) and not np.array_equal(written, to_uint8(black))

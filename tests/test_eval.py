@@ -98,12 +98,24 @@ def two_walls() -> tuple[Gaussians, Segmentation, HandView]:
     back = np.stack([xs.ravel(), ys.ravel(), np.full(xs.size, 4.0)], 1) * [2, 2, 1]
     means = torch.tensor(np.concatenate([front, back]), dtype=torch.float32)
     n = len(means)
-    g = Gaussians(means=means, log_scales=torch.full((n, 3), np.log(0.05)).float() + torch.tensor([0, 0, -2.0]),
-                  quats=torch.tensor([[1.0, 0, 0, 0]]).repeat(n, 1), opacity_logits=torch.full((n,), 6.0),
-                  sh_dc=torch.zeros(n, 3), sh_rest=torch.zeros(n, 15, 3), obj_feat=torch.zeros(n, 16))
+    g = Gaussians(
+        means=means,
+        log_scales=torch.full((n, 3), np.log(0.05)).float() + torch.tensor([0, 0, -2.0]),
+        quats=torch.tensor([[1.0, 0, 0, 0]]).repeat(n, 1),
+        opacity_logits=torch.full((n,), 6.0),
+        sh_dc=torch.zeros(n, 3),
+        sh_rest=torch.zeros(n, 15, 3),
+        obj_feat=torch.zeros(n, 16),
+    )
     labels = np.array([1] * len(front) + [2] * len(back), np.uint8)
-    seg = Segmentation(labels=labels, objects=np.array([1, 2], np.uint8),
-                       selections=np.stack([labels == 1, labels == 2]), method="hand", mode="multi", gamma_p=0.0)
+    seg = Segmentation(
+        labels=labels,
+        objects=np.array([1, 2], np.uint8),
+        selections=np.stack([labels == 1, labels == 2]),
+        method="hand",
+        mode="multi",
+        gamma_p=0.0,
+    )
     view = HandView("v", PinholeCamera(64, 48, 50.0, 50.0, 32.0, 24.0), np.eye(4)[:3])
     return g, seg, view
 
@@ -125,8 +137,21 @@ def test_visible_and_extracted_differ_only_for_the_occluded_object():
 
 def test_report_writes_tables_images_and_a_self_contained_page(segmented, small_scene, tmp_path):
     out = tmp_path / "report"
-    r = subprocess.run([script("gseval"), "report", str(segmented), "--scene", str(small_scene.root), "--out", str(out),
-                        "--backend", "cpu"], capture_output=True, text=True)
+    r = subprocess.run(
+        [
+            script("gseval"),
+            "report",
+            str(segmented),
+            "--scene",
+            str(small_scene.root),
+            "--out",
+            str(out),
+            "--backend",
+            "cpu",
+        ],
+        capture_output=True,
+        text=True,
+    )
     assert r.returncode == 0, r.stderr
     assert f"wrote {out / 'report.html'}" in r.stdout
     metrics = json.loads((out / "metrics.json").read_text())
@@ -172,20 +197,33 @@ def test_report_page_renders_in_chromium(segmented, small_scene, tmp_path):
 
     report_run(segmented, small_scene.root, tmp_path / "report", backend="cpu", progress=False)
     shot = tmp_path / "shot.png"
-    subprocess.run(["chromium", "--headless", "--no-sandbox", "--disable-gpu", f"--screenshot={shot}",
-                    "--window-size=1200,1600", (tmp_path / "report" / "report.html").as_uri()], capture_output=True,
-                   timeout=120)
+    subprocess.run(
+        [
+            "chromium",
+            "--headless",
+            "--no-sandbox",
+            "--disable-gpu",
+            f"--screenshot={shot}",
+            "--window-size=1200,1600",
+            (tmp_path / "report" / "report.html").as_uri(),
+        ],
+        capture_output=True,
+        timeout=120,
+    )
     import cv2
 
     image = cv2.imread(str(shot))
     assert image is not None and image.std() > 10  # not a blank page
 
 
-@pytest.mark.parametrize("case, message", [
-    ("no-labels", "labels.npz does not exist; run `gsseg segment`"),
-    ("no-gt", "no ground-truth masks for the metrics; pass --gt-masks NAME"),
-    ("no-evaluation", "evaluation.json: missing; run `gseval report"),
-])
+@pytest.mark.parametrize(
+    "case, message",
+    [
+        ("no-labels", "labels.npz does not exist; run `gsseg segment`"),
+        ("no-gt", "no ground-truth masks for the metrics; pass --gt-masks NAME"),
+        ("no-evaluation", "evaluation.json: missing; run `gseval report"),
+    ],
+)
 def test_bad_input_is_one_sentence_and_exit_2(case, message, trained, segmented, small_scene, tmp_path):
     scene, out = str(small_scene.root), str(tmp_path / "out")
     args = {
@@ -207,8 +245,15 @@ def _standin_lpips(path: Path) -> None:
             return ((image0 - image1) ** 2).mean().reshape(1, 1, 1, 1)
 
     x = torch.zeros(1, 3, 8, 8)
-    torch.onnx.export(MeanSquared(), (x, x), str(path), input_names=["image0", "image1"], output_names=["d"],
-                      dynamic_axes={"image0": {2: "h", 3: "w"}, "image1": {2: "h", 3: "w"}}, dynamo=False)
+    torch.onnx.export(
+        MeanSquared(),
+        (x, x),
+        str(path),
+        input_names=["image0", "image1"],
+        output_names=["d"],
+        dynamic_axes={"image0": {2: "h", 3: "w"}, "image1": {2: "h", 3: "w"}},
+        dynamo=False,
+    )
 
 
 def test_lpips_plumbing_reports_the_networks_value_per_view(segmented, small_scene, tmp_path):
@@ -217,8 +262,9 @@ def test_lpips_plumbing_reports_the_networks_value_per_view(segmented, small_sce
     net = tmp_path / "lpips.onnx"
     _standin_lpips(net)
     ev = report_run(segmented, small_scene.root, tmp_path / "report", backend="cpu", lpips=net, progress=False)
-    renders = render_run(segmented, small_scene.root, tmp_path / "renders", what=("rgb",), backend="cpu",
-                         progress=False)
+    renders = render_run(
+        segmented, small_scene.root, tmp_path / "renders", what=("rgb",), backend="cpu", progress=False
+    )
     for row, view in zip(ev.views, load_scene(small_scene.root).split("test"), strict=True):
         rgb = read_image(renders / "rgb" / f"{view.stem}.png").astype(np.float64)
         assert row["lpips"] == pytest.approx(np.mean(((rgb - view.load_image()) / 127.5) ** 2), rel=1e-4)
@@ -229,8 +275,21 @@ def test_lpips_plumbing_reports_the_networks_value_per_view(segmented, small_sce
 def test_unusable_lpips_file_is_one_sentence(segmented, small_scene, tmp_path):
     bad = tmp_path / "lpips.onnx"
     bad.write_bytes(b"not onnx")
-    r = subprocess.run([script("gseval"), "report", str(segmented), "--scene", str(small_scene.root),
-                        "--out", str(tmp_path / "out"), "--lpips", str(bad)], capture_output=True, text=True)
+    r = subprocess.run(
+        [
+            script("gseval"),
+            "report",
+            str(segmented),
+            "--scene",
+            str(small_scene.root),
+            "--out",
+            str(tmp_path / "out"),
+            "--lpips",
+            str(bad),
+        ],
+        capture_output=True,
+        text=True,
+    )
     assert r.returncode == 2 and "ONNX Runtime cannot load it" in r.stderr
     assert len(r.stderr.strip().splitlines()) == 1 and not (tmp_path / "out").exists()
 
@@ -239,8 +298,11 @@ def test_unusable_lpips_file_is_one_sentence(segmented, small_scene, tmp_path):
 def test_demo_plumbing_runs_every_stage_with_few_iterations(tmp_path):
     """Plumbing only: 20 training iterations, so the scores mean nothing; every stage runs and
     the report is where the demo says."""
-    r = subprocess.run([script("gsseg"), "demo", "--out", str(tmp_path / "demo"), "--iters", "20", "--backend", "cpu"],
-                       capture_output=True, text=True)
+    r = subprocess.run(
+        [script("gsseg"), "demo", "--out", str(tmp_path / "demo"), "--iters", "20", "--backend", "cpu"],
+        capture_output=True,
+        text=True,
+    )
     if r.returncode == 2 and "lies on the background" in r.stderr:
         pytest.fail("the demo's prompt point found no object: " + r.stderr)
     assert r.returncode == 0, r.stderr
@@ -267,8 +329,9 @@ def test_paper_tables_plumbing_writes_every_table_and_reuses_its_work(tmp_path):
     every number the markdown shows, and a second run retrains nothing."""
     from pipeline.paper_tables import GAMMAS, METHODS, TRAINING_MASKS, TableSetup, paper_tables
 
-    setup = TableSetup(paths=("orbit",), seeds=(3,), res=128, views=8, objects=2, iters=30, images="images_4",
-                       min_area=20)
+    setup = TableSetup(
+        paths=("orbit",), seeds=(3,), res=128, views=8, objects=2, iters=30, images="images_4", min_area=20
+    )
     md = paper_tables(tmp_path, setup=setup, backend="cpu", progress=False).read_text()
     for title in ("Table 1", "Table 2", "Table 3", "Table 4"):
         assert title in md

@@ -71,6 +71,7 @@ def test_a_mask_split_in_two_separate_views_gets_one_id():
 def test_a_lost_object_is_reidentified_by_its_colours():
     """A red box is missed in views 3 and 4 and seen again far from where its mask was carried;
     a blue box appearing at the same place and time is another object."""
+
     def view(boxes: dict[int, tuple[tuple[int, int, int, int], tuple[int, int, int]]]):
         seg, image = np.zeros((40, 200), np.int32), np.full((40, 200, 3), 128, np.uint8)
         for label, ((y0, y1, x0, x1), color) in boxes.items():
@@ -79,8 +80,11 @@ def test_a_lost_object_is_reidentified_by_its_colours():
 
     red, blue = (200, 30, 30), (30, 30, 200)
     for color, same in ((red, True), (blue, False)):
-        views = ([view({1: ((10, 30, 10, 30), red)}) for _ in range(3)] + [view({}) for _ in range(2)]
-                 + [view({1: ((10, 30, 150, 170), color)}) for _ in range(3)])
+        views = (
+            [view({1: ((10, 30, 10, 30), red)}) for _ in range(3)]
+            + [view({}) for _ in range(2)]
+            + [view({1: ((10, 30, 150, 170), color)}) for _ in range(3)]
+        )
         out = associate_flow_on_a_line([v[0] for v in views], [v[1] for v in views])
         assert (out[0][20, 20] == out[7][20, 160]) == same and out[0][20, 20] > 0 and out[7][20, 160] > 0
 
@@ -95,7 +99,7 @@ def test_a_weak_overlap_with_another_objects_colours_is_not_a_match():
     def view(red_x: int, blue_x: int) -> tuple[np.ndarray, np.ndarray]:
         seg, image = np.zeros((40, 200), np.int32), np.full((40, 200, 3), 128, np.uint8)
         for label, x, color in ((1, red_x, red), (2, blue_x, blue)):
-            seg[10:30, x:x + 20], image[10:30, x:x + 20] = label, color
+            seg[10:30, x : x + 20], image[10:30, x : x + 20] = label, color
         return image, seg
 
     views = [view(10, 100) for _ in range(3)] + [view(160, 24) for _ in range(3)]

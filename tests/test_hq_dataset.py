@@ -52,7 +52,9 @@ def test_scene_folders_and_archives_convert_to_identical_scenes(standin, small_s
 def test_a_single_archive_and_a_scene_filter(standin, tmp_path):
     written = convert_hq(standin / "archives" / "teatime.tar.gz", tmp_path / "out", progress=False)
     assert [p.name for p in written] == ["teatime"]
-    assert [p.name for p in convert_hq(standin, tmp_path / "two", scenes=["figurines"], progress=False)] == ["figurines"]
+    assert [p.name for p in convert_hq(standin, tmp_path / "two", scenes=["figurines"], progress=False)] == [
+        "figurines"
+    ]
 
 
 def test_dataset_rows_convert_to_scene_folders(small_scene, tmp_path):
@@ -84,8 +86,9 @@ def test_existing_output_is_kept_without_force(standin, tmp_path):
 
 def _cli_error(*args: str, **env: str) -> str:
     """Run `python -m dataset_tools hq`, check it failed with exit code 2, return its error line."""
-    r = subprocess.run([sys.executable, "-m", "dataset_tools", "hq", *args], capture_output=True, text=True,
-                       env={**os.environ, **env})
+    r = subprocess.run(
+        [sys.executable, "-m", "dataset_tools", "hq", *args], capture_output=True, text=True, env={**os.environ, **env}
+    )
     assert r.returncode == 2, r.stderr
     errors = [line for line in r.stderr.splitlines() if line.startswith("error:")]
     assert len(errors) == 1 and r.stderr.rstrip().endswith(errors[0]), r.stderr
@@ -98,10 +101,13 @@ def test_offline_download_says_so_and_points_to_local(tmp_path):
     assert not (tmp_path / "out").exists()
 
 
-@pytest.mark.parametrize("make, message", [
-    (lambda p: p / "missing", "no such dataset path"),
-    (lambda p: (p / "empty").mkdir() or p / "empty", "found no scenes"),
-    (lambda p: (p / "bad.zip").write_bytes(b"not a zip") and p / "bad.zip", "damaged archive"),
-])
+@pytest.mark.parametrize(
+    "make, message",
+    [
+        (lambda p: p / "missing", "no such dataset path"),
+        (lambda p: (p / "empty").mkdir() or p / "empty", "found no scenes"),
+        (lambda p: (p / "bad.zip").write_bytes(b"not a zip") and p / "bad.zip", "damaged archive"),
+    ],
+)
 def test_bad_dataset_paths(tmp_path, make, message):
     assert message in _cli_error("--out", str(tmp_path / "out"), "--local", str(make(tmp_path)))

@@ -20,7 +20,9 @@ from hqmask.build import BuildConfig, build_masks, clean_scene_masks, read_cache
 def permuted_masks(scene_dir: Path, name: str) -> None:
     scene = load_scene(scene_dir)
     for k, v in enumerate(scene.views):
-        write_png(scene_dir / name / f"{v.stem}.png", corrupt_mask(v.load_mask(), PERMUTE_ONLY, np.random.default_rng(k)))
+        write_png(
+            scene_dir / name / f"{v.stem}.png", corrupt_mask(v.load_mask(), PERMUTE_ONLY, np.random.default_rng(k))
+        )
 
 
 @pytest.mark.parametrize("method, path", [("flow", "forward"), ("tracks", "forward"), ("tracks", "orbit")])
@@ -28,8 +30,11 @@ def test_association_undoes_per_view_permutations(tmp_path, method, path):
     """Flow is tested on a forward-facing capture (small motion between views), what it is for."""
     scene = generate_scene(SynthConfig(views=12, res=128, path=path, seed=1), tmp_path / "s", progress=False).root
     permuted_masks(scene, "perm")
-    build_masks(scene, BuildConfig(proposer="existing", from_masks="perm", associate=method, min_area=20,
-                                   out_masks="out"), progress=False)
+    build_masks(
+        scene,
+        BuildConfig(proposer="existing", from_masks="perm", associate=method, min_area=20, out_masks="out"),
+        progress=False,
+    )
     gt = [v.load_mask() for v in load_scene(scene).views]
     before = [v.load_mask() for v in load_scene(scene, masks="perm").views]
     after = [v.load_mask() for v in load_scene(scene, masks="out").views]
@@ -53,22 +58,33 @@ def views_of_different_sizes(scene_dir: Path) -> None:
             write_png(v.mask_path, read_mask(v.mask_path)[:-cut, :-cut])
         cameras.append(camera)
     keep = [(ids, uv) for ids, uv in ((v.point_ids, v.uv) for v in scene.views)]
-    keep = [(ids[(uv < [c.width, c.height]).all(1)], uv[(uv < [c.width, c.height]).all(1)])
-            for (ids, uv), c in zip(keep, cameras)]
-    colmap.write_model(scene_dir / "sparse" / "0", [v.name for v in scene.views], cameras,
-                       [v.cam_from_world for v in scene.views], keep, scene.points.xyz, scene.points.rgb)
+    keep = [
+        (ids[(uv < [c.width, c.height]).all(1)], uv[(uv < [c.width, c.height]).all(1)])
+        for (ids, uv), c in zip(keep, cameras)
+    ]
+    colmap.write_model(
+        scene_dir / "sparse" / "0",
+        [v.name for v in scene.views],
+        cameras,
+        [v.cam_from_world for v in scene.views],
+        keep,
+        scene.points.xyz,
+        scene.points.rgb,
+    )
 
 
 @pytest.mark.parametrize("method", ["flow", "tracks"])
 def test_views_of_different_sizes_build_with_each_association(tmp_path, method):
     """Every place that relates two views (flow, consensus, association) takes views whose
     sizes differ by a few pixels, and the masks come out at each view's own size."""
-    scene = generate_scene(SynthConfig(views=10, res=96, objects=3, path="forward", seed=2), tmp_path / "s",
-                           progress=False).root
+    scene = generate_scene(
+        SynthConfig(views=10, res=96, objects=3, path="forward", seed=2), tmp_path / "s", progress=False
+    ).root
     views_of_different_sizes(scene)
     permuted_masks(scene, "perm")
-    build_masks(scene, BuildConfig(proposer="existing", from_masks="perm", associate=method, out_masks="out"),
-                progress=False)
+    build_masks(
+        scene, BuildConfig(proposer="existing", from_masks="perm", associate=method, out_masks="out"), progress=False
+    )
     out = load_scene(scene, masks="out").views
     gt = [v.load_mask() for v in load_scene(scene).views]
     assert len({v.load_mask().shape for v in out}) > 1
@@ -80,8 +96,18 @@ def test_dataset_export_round_trips(scene_copy, tmp_path):
     import datasets
 
     permuted_masks(scene_copy, "perm")
-    build_masks(scene_copy, BuildConfig(proposer="existing", from_masks="perm", associate="tracks", min_area=20,
-                                        out_masks="out", dataset=str(tmp_path / "ds")), progress=False)
+    build_masks(
+        scene_copy,
+        BuildConfig(
+            proposer="existing",
+            from_masks="perm",
+            associate="tracks",
+            min_area=20,
+            out_masks="out",
+            dataset=str(tmp_path / "ds"),
+        ),
+        progress=False,
+    )
     ds = datasets.load_from_disk(str(tmp_path / "ds"))
     assert len(ds) == 8 and ds[0]["view"] == "0000" and ds[0]["split"] == "test"
     assert np.array_equal(np.array(ds[3]["mask"]), load_scene(scene_copy, masks="out").views[3].load_mask())
@@ -114,8 +140,11 @@ def test_bad_options_are_refused_before_writing(scene_copy, cfg, message):
 def test_masks_of_the_wrong_size_exit_2(scene_copy):
     write_png(scene_copy / "bad" / "0000.png", np.zeros((10, 10), np.uint8))
     hq = str(Path(sys.executable).parent / "hqmask")
-    r = subprocess.run([hq, "build", str(scene_copy), "--proposer", "existing", "--from-masks", "bad", "--out-masks", "o"],
-                       capture_output=True, text=True)
+    r = subprocess.run(
+        [hq, "build", str(scene_copy), "--proposer", "existing", "--from-masks", "bad", "--out-masks", "o"],
+        capture_output=True,
+        text=True,
+    )
     assert r.returncode == 2 and "mask is 10x10" in r.stderr and "Traceback" not in r.stderr
     assert not (scene_copy / "o").exists()
 
@@ -143,8 +172,11 @@ def test_tracks_splits_a_mask_that_merges_two_objects(tmp_path):
         if k == 3:
             m[m == b] = a
         write_png(scene / "merged" / f"{v.stem}.png", m)
-    build_masks(scene, BuildConfig(proposer="existing", from_masks="merged", associate="tracks", min_area=20,
-                                   out_masks="out"), progress=False)
+    build_masks(
+        scene,
+        BuildConfig(proposer="existing", from_masks="merged", associate="tracks", min_area=20, out_masks="out"),
+        progress=False,
+    )
     out = load_scene(scene, masks="out").views[3].load_mask()
     mapping = match_ids(sum(overlap(o.load_mask(), g) for o, g in zip(load_scene(scene, masks="out").views, gt)))
     for obj in (a, b):
@@ -167,8 +199,11 @@ def test_tracks_keeps_an_object_whose_mask_bleeds_into_the_floor(tmp_path):
         if k == 3:
             m[bleed] = obj
         write_png(scene / "bleed" / f"{v.stem}.png", m)
-    build_masks(scene, BuildConfig(proposer="existing", from_masks="bleed", associate="tracks", min_area=20,
-                                   out_masks="out"), progress=False)
+    build_masks(
+        scene,
+        BuildConfig(proposer="existing", from_masks="bleed", associate="tracks", min_area=20, out_masks="out"),
+        progress=False,
+    )
     out = [o.load_mask() for o in load_scene(scene, masks="out").views]
     mapping = match_ids(sum(overlap(o, g) for o, g in zip(out, gt)))
     assert np.mean(mapping[out[3][gt[3] == obj]] == obj) > 0.85
@@ -196,8 +231,13 @@ def test_tracks_keeps_an_object_cut_in_half_in_most_views(tmp_path):
             left[:, : int(np.median(np.nonzero(m == obj)[1]))] = True
             m[left & (m == obj)] = 0
         write_png(scene / "cut" / f"{v.stem}.png", m)
-    build_masks(scene, BuildConfig(proposer="existing", from_masks="cut", associate="tracks", min_area=20,
-                                   consensus=0, out_masks="out"), progress=False)
+    build_masks(
+        scene,
+        BuildConfig(
+            proposer="existing", from_masks="cut", associate="tracks", min_area=20, consensus=0, out_masks="out"
+        ),
+        progress=False,
+    )
     out = [o.load_mask() for o in load_scene(scene, masks="out").views]
     mapping = match_ids(sum(overlap(o, g) for o, g in zip(out, gt)))
     for k in whole:
@@ -221,8 +261,11 @@ def test_tracks_joins_the_pieces_of_a_mask_split_alike_in_two_views(tmp_path):
             m[(m == obj) & left] = 201
             m[(m == obj) & ~left] = 202
         write_png(scene / "split" / f"{v.stem}.png", m)
-    build_masks(scene, BuildConfig(proposer="existing", from_masks="split", associate="tracks", min_area=20,
-                                   out_masks="out"), progress=False)
+    build_masks(
+        scene,
+        BuildConfig(proposer="existing", from_masks="split", associate="tracks", min_area=20, out_masks="out"),
+        progress=False,
+    )
     out = [o.load_mask() for o in load_scene(scene, masks="out").views]
     mapping = match_ids(sum(overlap(o, g) for o, g in zip(out, gt)))
     for k in (3, 4):
@@ -236,13 +279,17 @@ def test_shuffled_file_names_give_the_same_masks(tmp_path, method):
     from dataset_tools.corruption import corrupt_scene
     from pipeline.experiment import shuffled_copy
 
-    scene = generate_scene(SynthConfig(views=10, res=96, objects=4, path="orbit", seed=4), tmp_path / "s",
-                           progress=False).root
+    scene = generate_scene(
+        SynthConfig(views=10, res=96, objects=4, path="orbit", seed=4), tmp_path / "s", progress=False
+    ).root
     corrupt_scene(scene, "noisy", "medium", seed=4, progress=False)
     shuffled = shuffled_copy(scene, tmp_path / "shuffled", seed=3)
     for root in (scene, shuffled):
-        build_masks(root, BuildConfig(proposer="existing", from_masks="noisy", associate=method, out_masks="out"),
-                    progress=False)
+        build_masks(
+            root,
+            BuildConfig(proposer="existing", from_masks="noisy", associate=method, out_masks="out"),
+            progress=False,
+        )
     ours = [v.load_mask() for v in load_scene(scene, masks="out").views]
     theirs = {v.image_path.read_bytes(): v.load_mask() for v in load_scene(shuffled, masks="out").views}
     gt = [v.load_mask() for v in load_scene(scene).views]

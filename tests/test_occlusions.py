@@ -71,9 +71,13 @@ def test_one_colour_at_two_depths_is_two_objects():
 
 
 def test_a_part_that_only_depth_jumps_outline_joins_the_object_it_sits_on():
-    image, depth = _drawn([("rect", (0, 101, 127, 127), (150, 150, 150), 2.0),  # the floor it stands on
-                           ("rect", (40, 60, 88, 100), (40, 40, 160), 2.0),  # a blue torso
-                           ("circle", (64, 48, 16), (190, 150, 60), 2.0)])  # an ochre head on it
+    image, depth = _drawn(
+        [
+            ("rect", (0, 101, 127, 127), (150, 150, 150), 2.0),  # the floor it stands on
+            ("rect", (40, 60, 88, 100), (40, 40, 160), 2.0),  # a blue torso
+            ("circle", (64, 48, 16), (190, 150, 60), 2.0),
+        ]
+    )  # an ochre head on it
     proposer = GraphProposer()
     assert len(proposer.propose(image, None).masks) == 2  # hues 100 degrees apart
     masks = proposer.propose(image, None, depth).masks
@@ -137,8 +141,11 @@ def test_a_depth_map_of_the_wrong_size_is_refused_naming_it(small_scene, scene_c
         build_masks(scene_copy, BuildConfig(out_masks="cut", depth=str(depth)), progress=False)
     assert not (scene_copy / "cut").exists()
     with pytest.raises(InputError, match="only the graph proposer"):
-        build_masks(scene_copy, BuildConfig(out_masks="cut", proposer="existing", from_masks="object_mask",
-                                            depth=str(depth)), progress=False)
+        build_masks(
+            scene_copy,
+            BuildConfig(out_masks="cut", proposer="existing", from_masks="object_mask", depth=str(depth)),
+            progress=False,
+        )
     with pytest.raises(InputError, match="depth folder not found"):
         build_masks(scene_copy, BuildConfig(out_masks="cut", depth=str(tmp_path / "none")), progress=False)
 
@@ -148,8 +155,9 @@ def test_the_rendered_depth_of_a_run_is_the_scenes(trained, small_scene, tmp_pat
     exact depth: the median relative error where both see a surface."""
     from gsseg.render_views import render_run
 
-    out = render_run(trained, small_scene.root, tmp_path / "r", split="all", what=("depth",), backend="cpu",
-                     progress=False)
+    out = render_run(
+        trained, small_scene.root, tmp_path / "r", split="all", what=("depth",), backend="cpu", progress=False
+    )
     errors = []
     for view in load_scene(small_scene.root, masks=None).views:
         rendered = read_depth(out / "depth" / f"{view.stem}.npy", (view.camera.width, view.camera.height))
@@ -171,8 +179,7 @@ def test_voting_with_masks_the_run_was_not_trained_on_leaves_the_prior_out(segme
     shutil.copytree(small_scene.root, scene)
     shutil.copytree(scene / "object_mask", scene / "rebuilt")
     same = segment_run(run, scene, options=LabelOptions(gamma_p=0.2), backend="cpu", progress=False)
-    other = segment_run(run, scene, options=LabelOptions(gamma_p=0.2), masks="rebuilt", backend="cpu",
-                        progress=False)
+    other = segment_run(run, scene, options=LabelOptions(gamma_p=0.2), masks="rebuilt", backend="cpu", progress=False)
     assert same.gamma_p == 0.2 and other.gamma_p == 0.0
 
 

@@ -17,10 +17,21 @@ from dataset_tools.locks import exclusive, exclusive_folder, try_lock
 from dataset_tools.overlap import overlap, refuse_overlap, scene_entries, scene_inputs
 
 
-@pytest.mark.parametrize("out, relation", [
-    ("a/b", "is"), ("a/b/", "is"), ("a/./b", "is"), ("a", "contains"), (".", "contains"), ("a/b/c", "lies inside"),
-    ("a/b/c/d", "lies inside"), ("a/bc", None), ("a/c", None), ("b", None),
-])
+@pytest.mark.parametrize(
+    "out, relation",
+    [
+        ("a/b", "is"),
+        ("a/b/", "is"),
+        ("a/./b", "is"),
+        ("a", "contains"),
+        (".", "contains"),
+        ("a/b/c", "lies inside"),
+        ("a/b/c/d", "lies inside"),
+        ("a/bc", None),
+        ("a/c", None),
+        ("b", None),
+    ],
+)
 def test_overlap_is_is_contains_or_lies_inside(tmp_path, monkeypatch, out, relation):
     monkeypatch.chdir(tmp_path)
     assert overlap(out, "a/b") == relation
@@ -72,13 +83,23 @@ def test_the_next_write_removes_what_a_killed_write_left_but_not_a_live_one(tmp_
     _age(stale_file)
     write_bytes_atomic(tmp_path / "labels.npz", b"whole")
     assert not stale_file.exists() and (tmp_path / "labels.npz").read_bytes() == b"whole"
-    assert sorted(p.name for p in tmp_path.iterdir()) == [".renders.live.tmp", ".renders.young.tmp", "labels.npz",
-                                                         "renders"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == [
+        ".renders.live.tmp",
+        ".renders.young.tmp",
+        "labels.npz",
+        "renders",
+    ]
 
 
-@pytest.mark.parametrize("damage", [
-    lambda b: b[: len(b) // 2], lambda b: b[:-1], lambda b: b"", lambda b: bytes([b[0] ^ 1]) + b[1:],
-])
+@pytest.mark.parametrize(
+    "damage",
+    [
+        lambda b: b[: len(b) // 2],
+        lambda b: b[:-1],
+        lambda b: b"",
+        lambda b: bytes([b[0] ^ 1]) + b[1:],
+    ],
+)
 def test_a_damaged_cache_file_reads_as_missing(tmp_path, damage):
     path = tmp_path / "entry"
     payload = np.arange(1000, dtype=np.int32).tobytes()

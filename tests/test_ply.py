@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
+from helpers import random_gaussians
 from plyfile import PlyData, PlyElement
 
 from dataset_tools.errors import InputError
 from gsseg.ply import read_ply, write_ply
-from helpers import random_gaussians
 
 
 def test_round_trip_is_exact(tmp_path):
@@ -22,9 +22,11 @@ def test_round_trip_is_exact(tmp_path):
 def _plain_3dgs_ply(path, n: int, degree: int, drop: str | None = None):
     """A PLY laid out as 3D-GS writes it, without object features."""
     n_rest = 3 * ((degree + 1) ** 2 - 1)
-    names = (["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"]
-             + [f"f_rest_{i}" for i in range(n_rest)]
-             + ["opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"])
+    names = (
+        ["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"]
+        + [f"f_rest_{i}" for i in range(n_rest)]
+        + ["opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"]
+    )
     names = [x for x in names if x != drop]
     data = np.zeros(n, dtype=[(x, "f4") for x in names])
     rng = np.random.default_rng(0)

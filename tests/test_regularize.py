@@ -14,8 +14,14 @@ from gsseg.segment.regularize import fill_interiors, smooth_weak_labels, weak_ev
 def _segmentation(labels: np.ndarray) -> Segmentation:
     labels = labels.astype(np.uint8)
     objects = np.unique(labels[labels > 0])
-    return Segmentation(labels=labels, objects=objects, selections=labels[None] == objects[:, None],
-                        method="prior", mode="multi", gamma_p=0.2)
+    return Segmentation(
+        labels=labels,
+        objects=objects,
+        selections=labels[None] == objects[:, None],
+        method="prior",
+        mode="multi",
+        gamma_p=0.2,
+    )
 
 
 def _sphere(n: int, radius: float, rng: np.random.Generator) -> np.ndarray:
@@ -25,8 +31,7 @@ def _sphere(n: int, radius: float, rng: np.random.Generator) -> np.ndarray:
 
 def test_weak_evidence_flags_small_totals_and_near_ties():
     # Columns: a clear winner, a near tie (0.55 / 0.45), a clear winner seen 100x less than the median.
-    weights = torch.tensor([[9.0, 5.5, 0.09, 8.0],
-                            [1.0, 4.5, 0.01, 2.0]])
+    weights = torch.tensor([[9.0, 5.5, 0.09, 8.0], [1.0, 4.5, 0.01, 2.0]])
     weak = weak_evidence(Contributions(labels=np.array([0, 1], np.uint8), weights=weights))
     np.testing.assert_array_equal(weak, [False, True, True, False])
 
@@ -59,15 +64,16 @@ def test_fill_takes_the_interior_and_the_rim_but_not_the_outside_despite_floater
     filled = fill_interiors(_segmentation(labels), means)
     out = filled.labels
     start = len(shell) + len(floaters)
-    assert (out[start:start + len(interior)] == 1).all()
-    assert (out[start + len(interior):start + len(interior) + len(rim)] == 1).all()
-    assert (out[-len(outside):] == 0).all()
+    assert (out[start : start + len(interior)] == 1).all()
+    assert (out[start + len(interior) : start + len(interior) + len(rim)] == 1).all()
+    assert (out[-len(outside) :] == 0).all()
 
 
 def test_the_regularisation_applied_is_saved_with_the_labels(tmp_path):
     labels = np.array([0, 1, 1, 2])
-    seg = fill_interiors(smooth_weak_labels(_segmentation(labels), np.eye(4, 3), np.ones(4), np.zeros(4, bool), k=4),
-                         np.eye(4, 3))
+    seg = fill_interiors(
+        smooth_weak_labels(_segmentation(labels), np.eye(4, 3), np.ones(4), np.zeros(4, bool), k=4), np.eye(4, 3)
+    )
     seg.save(tmp_path / "labels.npz")
     loaded = Segmentation.load(tmp_path / "labels.npz")
     assert (loaded.smooth, loaded.fill) == (4, True)

@@ -8,11 +8,11 @@ import math
 import numpy as np
 import pytest
 import torch
+from helpers import GEOMETRY, look_down_z, output_weights, random_gaussians, weighted_sum
 
 from dataset_tools.cameras import PinholeCamera
 from gsseg.gaussians import Gaussians
 from gsseg.render import BACKENDS, cpu_kernels, get_backend, render
-from helpers import GEOMETRY, look_down_z, output_weights, random_gaussians, weighted_sum
 
 OUTPUTS = ("rgb", "features", "alpha", "depth")
 
@@ -24,12 +24,17 @@ def _render_with_grads(g: Gaussians, backend: str, weights, cam, pose):
     return out, {k: v.grad for k, v in g.tensors().items()}
 
 
-@pytest.mark.parametrize("seed, n, size, scales", [
-    (0, 150, (40, 32), (0.04, 0.24)), (1, 150, (40, 32), (0.04, 0.24)), (2, 150, (40, 32), (0.04, 0.24)),
-    # small, elongated Gaussians over many tiles: the cpu kernels visit only the rows of a
-    # tile that a Gaussian's footprint reaches, and tiles at the image border are partial
-    (3, 400, (90, 70), (0.005, 0.08)),
-])
+@pytest.mark.parametrize(
+    "seed, n, size, scales",
+    [
+        (0, 150, (40, 32), (0.04, 0.24)),
+        (1, 150, (40, 32), (0.04, 0.24)),
+        (2, 150, (40, 32), (0.04, 0.24)),
+        # small, elongated Gaussians over many tiles: the cpu kernels visit only the rows of a
+        # tile that a Gaussian's footprint reaches, and tiles at the image border are partial
+        (3, 400, (90, 70), (0.005, 0.08)),
+    ],
+)
 def test_cpu_backend_matches_torch_reference(seed, n, size, scales):
     cam, pose = look_down_z(*size)
     g = random_gaussians(n, seed, scales=scales)
@@ -53,8 +58,10 @@ def test_features_without_geometry_grad_train_only_the_features(backend):
     cam, pose = look_down_z(40, 32)
     g = random_gaussians(150, 4)
     weights = output_weights(cam.width, cam.height, 4, torch.float32)
-    split = {"features": {"features": weights["features"]},
-             "rest": {k: w for k, w in weights.items() if k != "features"}}
+    split = {
+        "features": {"features": weights["features"]},
+        "rest": {k: w for k, w in weights.items() if k != "features"},
+    }
     for part, w in split.items():
         grads = {}
         for coupled in (True, False):
@@ -103,9 +110,15 @@ def test_single_gaussian_known_answer(backend):
     (f s / z)^2 + 0.3 on the diagonal, and a pixel's alpha is o * exp(-d^2 / (2 var))."""
     f, s, z, o = 20.0, 0.1, 2.0, 0.7
     cam = PinholeCamera(16, 16, f, f, 8.0, 8.0)
-    g = Gaussians(means=torch.tensor([[0.0, 0.0, z]]), log_scales=torch.full((1, 3), math.log(s)),
-                  quats=torch.tensor([[1.0, 0, 0, 0]]), opacity_logits=torch.logit(torch.tensor([o])),
-                  sh_dc=torch.zeros(1, 3), sh_rest=torch.zeros(1, 15, 3), obj_feat=torch.ones(1, 16))
+    g = Gaussians(
+        means=torch.tensor([[0.0, 0.0, z]]),
+        log_scales=torch.full((1, 3), math.log(s)),
+        quats=torch.tensor([[1.0, 0, 0, 0]]),
+        opacity_logits=torch.logit(torch.tensor([o])),
+        sh_dc=torch.zeros(1, 3),
+        sh_rest=torch.zeros(1, 15, 3),
+        obj_feat=torch.ones(1, 16),
+    )
     out = render(g, cam, torch.eye(4)[:3], backend=backend)
     var = (f * s / z) ** 2 + 0.3
     yy, xx = torch.meshgrid(torch.arange(16) + 0.5, torch.arange(16) + 0.5, indexing="ij")
@@ -132,15 +145,25 @@ def test_gaussians_behind_the_camera_are_culled_with_zero_gradient(backend):
 
 @pytest.mark.parametrize("backend", ["cpu", "torch"])
 def test_the_cameras_near_plane_culls_nearer_gaussians(backend):
-    g = Gaussians(means=torch.tensor([[0.0, 0.0, 0.5], [0.0, 0.0, 3.0]]), log_scales=torch.full((2, 3), math.log(0.05)),
-                  quats=torch.tensor([[1.0, 0, 0, 0]] * 2), opacity_logits=torch.zeros(2),
-                  sh_dc=torch.zeros(2, 3), sh_rest=torch.zeros(2, 15, 3), obj_feat=torch.ones(2, 16))
+    g = Gaussians(
+        means=torch.tensor([[0.0, 0.0, 0.5], [0.0, 0.0, 3.0]]),
+        log_scales=torch.full((2, 3), math.log(0.05)),
+        quats=torch.tensor([[1.0, 0, 0, 0]] * 2),
+        opacity_logits=torch.zeros(2),
+        sh_dc=torch.zeros(2, 3),
+        sh_rest=torch.zeros(2, 15, 3),
+        obj_feat=torch.ones(2, 16),
+    )
     for near, drawn in ((0.2, [True, True]), (1.0, [False, True])):
         out = render(g, PinholeCamera(16, 16, 20.0, 20.0, 8.0, 8.0, near=near), torch.eye(4)[:3], backend=backend)
         assert (out.radii > 0).tolist() == drawn
     # with the near Gaussian culled, the image is the far one's alone
-    alone = render(g.select(torch.tensor([False, True])), PinholeCamera(16, 16, 20.0, 20.0, 8.0, 8.0), torch.eye(4)[:3],
-                   backend=backend)
+    alone = render(
+        g.select(torch.tensor([False, True])),
+        PinholeCamera(16, 16, 20.0, 20.0, 8.0, 8.0),
+        torch.eye(4)[:3],
+        backend=backend,
+    )
     torch.testing.assert_close(out.alpha, alone.alpha)
 
 

@@ -24,8 +24,8 @@ from hqmask.sam_hq.mask_ops import (
     remove_small_regions,
     stability_score,
 )
-from hqmask.sam_hq.transforms import preprocess, resized_shape, transform_coords
 from hqmask.sam_hq.standin import export_standin_model
+from hqmask.sam_hq.transforms import preprocess, resized_shape, transform_coords
 
 MEAN = np.array([123.675, 116.28, 103.53], np.float32)
 STD = np.array([58.395, 57.12, 57.375], np.float32)
@@ -153,7 +153,9 @@ def test_plumbing_batched_decoding_equals_one_prompt_at_a_time(plumbing_model):
     coords = np.array([[[60, 70], [0, 0]], [[190, 50], [0, 0]], [[250, 150], [0, 0]]], np.float32)
     labels = np.tile(np.array([[1, -1]], np.float32), (3, 1))
     batch = model.decode(embedding, coords, labels)
-    assert batch.logits.shape == (3, 200, 320) and batch.iou.shape == (3,) and batch.low_res_logits.shape == (3, 256, 256)
+    assert (
+        batch.logits.shape == (3, 200, 320) and batch.iou.shape == (3,) and batch.low_res_logits.shape == (3, 256, 256)
+    )
     for i in range(3):
         one = model.decode(embedding, coords[i : i + 1], labels[i : i + 1])
         np.testing.assert_allclose(one.logits[0], batch.logits[i], atol=1e-4)
@@ -216,7 +218,9 @@ def test_embedding_cache_returns_the_stored_embedding(plumbing_model, tmp_path):
 def test_plumbing_hqmask_build_with_sam_hq(plumbing_model, scene_copy):
     result = build_masks(
         scene_copy,
-        BuildConfig(proposer="sam-hq", model=str(plumbing_model), points_per_side=8, out_masks="sam_masks", min_area=20),
+        BuildConfig(
+            proposer="sam-hq", model=str(plumbing_model), points_per_side=8, out_masks="sam_masks", min_area=20
+        ),
         progress=False,
     )
     scene = load_scene(scene_copy, masks="sam_masks")
@@ -233,7 +237,9 @@ def test_missing_file_names_the_folder_contents_and_the_export(plumbing_model, t
     broken = tmp_path / "model"
     broken.mkdir()
     (broken / "encoder.onnx").write_bytes((plumbing_model / "encoder.onnx").read_bytes())
-    with pytest.raises(InputError, match=r"decoder.onnx: missing.*encoder.onnx, decoder.onnx and model.json.*export-onnx"):
+    with pytest.raises(
+        InputError, match=r"decoder.onnx: missing.*encoder.onnx, decoder.onnx and model.json.*export-onnx"
+    ):
         SamHQ(broken)
 
 
@@ -248,12 +254,18 @@ def test_decoder_with_other_inputs_lists_the_expected_ones(plumbing_model, tmp_p
     x = helper.make_tensor_value_info("embeddings", TensorProto.FLOAT, [1, 256, 64, 64])
     y = helper.make_tensor_value_info("masks", TensorProto.FLOAT, [1, 256, 64, 64])
     graph = helper.make_graph([helper.make_node("Identity", ["embeddings"], ["masks"])], "sam", [x], [y])
-    onnx.save(helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)], ir_version=8), str(broken / "decoder.onnx"))
+    onnx.save(
+        helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)], ir_version=8),
+        str(broken / "decoder.onnx"),
+    )
     with pytest.raises(InputError) as e:
         SamHQ(broken)
     message = str(e.value)
     assert "decoder.onnx: the decoder inputs are embeddings" in message
-    assert "image_embeddings, interm_embeddings, point_coords, point_labels, mask_input, has_mask_input, orig_im_size" in message
+    assert (
+        "image_embeddings, interm_embeddings, point_coords, point_labels, mask_input, has_mask_input, orig_im_size"
+        in message
+    )
     assert "hqmask export-onnx" in message
 
 
@@ -270,7 +282,9 @@ def test_cli_sam_hq_without_model_exits_2(scene_copy):
 
 def test_export_of_the_real_vit_tiny_runs_in_the_runtime(tmp_path):
     pytest.importorskip("torchvision", reason="the SAM-HQ export needs torchvision (pip install .[export])")
-    pytest.importorskip("segment_anything_hq", reason="the SAM-HQ export needs segment-anything-hq (pip install .[export])")
+    pytest.importorskip(
+        "segment_anything_hq", reason="the SAM-HQ export needs segment-anything-hq (pip install .[export])"
+    )
     from hqmask.sam_hq.export import export_checkpoint
 
     out = export_checkpoint(None, "vit_tiny", tmp_path / "vit_tiny")

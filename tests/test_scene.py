@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from dataset_tools import InputError, load_scene, save_scene
-from dataset_tools.image_files import write_png
 from dataset_tools.cameras import DEFAULT_NEAR
 from dataset_tools.colmap import ColmapImage, read_model
+from dataset_tools.image_files import write_png
 from dataset_tools.scene import llff_test_names, scene_near_plane
 
 
@@ -101,7 +101,8 @@ def test_full_size_masks_follow_downsampled_images(scene_copy):
     assert v_half.camera.fx == pytest.approx(v_full.camera.fx / 2)
     assert v_half.load_image().shape == (48, 48, 3)
     assert np.array_equal(v_half.load_mask(), v_full.load_mask()[::2, ::2][:48, :48]) or (
-        np.mean(v_half.load_mask() == cv2.resize(v_full.load_mask(), (48, 48), interpolation=cv2.INTER_NEAREST_EXACT)) == 1
+        np.mean(v_half.load_mask() == cv2.resize(v_full.load_mask(), (48, 48), interpolation=cv2.INTER_NEAREST_EXACT))
+        == 1
     )
     assert np.allclose(v_half.uv, v_full.uv / 2)
 

@@ -13,8 +13,7 @@ from dataset_tools.errors import InputError
 from gsseg.edits import apply_edit
 from gsseg.gaussians import Gaussians
 from gsseg.ply import read_ply
-from gsseg.render import render
-from gsseg.render import BACKENDS
+from gsseg.render import BACKENDS, render
 from gsseg.render.contributions import Contributions, MaskedView, contribution_matrix
 from gsseg.segment import object_at_point, reassign
 
@@ -24,12 +23,15 @@ F, SIZE = 20.0, 16
 def _two_gaussians() -> Gaussians:
     """An isotropic Gaussian at depth 2 (opacity 0.6) in front of one at depth 3 (opacity 0.8),
     both on the optical axis of a 16x16 camera."""
-    return Gaussians(means=torch.tensor([[0.0, 0.0, 2.0], [0.0, 0.0, 3.0]]),
-                     log_scales=torch.log(torch.tensor([[0.2] * 3, [0.3] * 3])),
-                     quats=torch.tensor([[1.0, 0, 0, 0]] * 2),
-                     opacity_logits=torch.logit(torch.tensor([0.6, 0.8])),
-                     sh_dc=torch.tensor([[1.0, 0, 0], [0, 0, 1.0]]), sh_rest=torch.zeros(2, 15, 3),
-                     obj_feat=torch.zeros(2, 16))
+    return Gaussians(
+        means=torch.tensor([[0.0, 0.0, 2.0], [0.0, 0.0, 3.0]]),
+        log_scales=torch.log(torch.tensor([[0.2] * 3, [0.3] * 3])),
+        quats=torch.tensor([[1.0, 0, 0, 0]] * 2),
+        opacity_logits=torch.logit(torch.tensor([0.6, 0.8])),
+        sh_dc=torch.tensor([[1.0, 0, 0], [0, 0, 1.0]]),
+        sh_rest=torch.zeros(2, 15, 3),
+        obj_feat=torch.zeros(2, 16),
+    )
 
 
 def _camera() -> tuple[PinholeCamera, np.ndarray]:
@@ -49,13 +51,24 @@ def _hand_alphas(g: Gaussians) -> np.ndarray:
     return np.stack(out)
 
 
-@pytest.mark.parametrize("backend", ["cpu", "torch", pytest.param("gsplat", marks=pytest.mark.skipif(
-    not BACKENDS["gsplat"].available(), reason="the gsplat backend needs gsplat and a CUDA GPU"))])
+@pytest.mark.parametrize(
+    "backend",
+    [
+        "cpu",
+        "torch",
+        pytest.param(
+            "gsplat",
+            marks=pytest.mark.skipif(
+                not BACKENDS["gsplat"].available(), reason="the gsplat backend needs gsplat and a CUDA GPU"
+            ),
+        ),
+    ],
+)
 def test_contribution_matrix_equals_hand_computed_alpha_t_sums(backend):
     g = _two_gaussians()
     cam, pose = _camera()
     mask = np.zeros((SIZE, SIZE), np.uint8)
-    mask[:, : SIZE // 2], mask[:, SIZE // 2:], mask[:4] = 3, 7, 0
+    mask[:, : SIZE // 2], mask[:, SIZE // 2 :], mask[:4] = 3, 7, 0
     a = _hand_alphas(g)
     weights = np.stack([a[0], a[1] * (1 - a[0])])  # alpha_i T_i, front to back
     expected = np.stack([weights[:, mask == label].sum(1) for label in (0, 3, 7)])
@@ -83,7 +96,10 @@ def test_prior_is_added_to_per_gaussian_shares_so_gamma_is_scale_free():
     # Gaussian 0 is seen 55% under label 1 and 45% under label 2; its classifier says 2 with p = 1.
     for scale in (1.0, 1000.0):
         c = _contributions([[0.0], [0.55 * scale], [0.45 * scale]])
-        label = lambda gamma: reassign(c, torch.tensor([2]), torch.tensor([1.0]), gamma_p=gamma).labels[0]
+
+        def label(gamma: float) -> int:
+            return reassign(c, torch.tensor([2]), torch.tensor([1.0]), gamma_p=gamma).labels[0]
+
         assert label(0.0) == 1 and label(0.2) == 2 and label(0.05) == 1 and label(-1.0) == 1
 
 
@@ -151,10 +167,11 @@ def test_segment_edit_and_render_segments_from_the_command_line(trained, small_s
     import shutil
     import subprocess
 
+    from helpers import script
+
     from dataset_tools.image_files import read_image, read_mask
     from dataset_tools.scene import load_scene
     from gsseg.segment.reassign import Segmentation
-    from helpers import script
 
     run = tmp_path / "run"
     shutil.copytree(trained, run)
@@ -170,8 +187,9 @@ def test_segment_edit_and_render_segments_from_the_command_line(trained, small_s
     assert set(seg.objects.tolist()) == {1, 2, 3, 4}
     ok("render", run, "--scene", small_scene.root, "--out", tmp_path / "r", "--what", "segments", "--split", "train")
     scene = load_scene(small_scene.root)
-    agree = [np.mean(read_mask(tmp_path / "r" / "segments" / f"{v.stem}.png") == v.load_mask())
-             for v in scene.split("train")]
+    agree = [
+        np.mean(read_mask(tmp_path / "r" / "segments" / f"{v.stem}.png") == v.load_mask()) for v in scene.split("train")
+    ]
     assert np.mean(agree) > 0.8
 
     # A point at the centre of object 2's Gaussians selects object 2; removing it edits only them.
@@ -187,7 +205,9 @@ def test_segment_edit_and_render_segments_from_the_command_line(trained, small_s
 
     r = subprocess.run([gsseg, "edit", str(run), "--object-id", "42", "--op", "remove"], capture_output=True, text=True)
     assert r.returncode == 2 and "object 42 is not among" in r.stderr and "Traceback" not in r.stderr
-    r = subprocess.run([gsseg, "edit", str(trained), "--object-id", "1", "--op", "remove"], capture_output=True, text=True)
+    r = subprocess.run(
+        [gsseg, "edit", str(trained), "--object-id", "1", "--op", "remove"], capture_output=True, text=True
+    )
     assert r.returncode == 2 and "run `gsseg segment`" in r.stderr
 
 

@@ -10,17 +10,17 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from helpers import script
 
 from dataset_tools import InputError, load_scene
 from dataset_tools.cameras import turned_frames
-from dataset_tools.sfm import SfmConfig, run_sfm
-from dataset_tools.locks import exclusive
-from dataset_tools.sfm.pipeline import _input_images, incremental_options, pixel_scale, sift_peak_threshold
 from dataset_tools.image_files import read_image
+from dataset_tools.locks import exclusive
+from dataset_tools.sfm import SfmConfig, run_sfm
+from dataset_tools.sfm.pipeline import _input_images, incremental_options, pixel_scale, sift_peak_threshold
 from dataset_tools.synth import SynthConfig, generate_scene
 from eval.metrics import camera_errors, similarity_alignment
 from pipeline.demo import run_demo
-from helpers import script
 
 
 def test_similarity_alignment_recovers_a_known_similarity():
@@ -58,8 +58,9 @@ def test_camera_errors_leave_a_camera_on_the_far_side_out_of_the_alignment():
     rot, ctr = camera_errors(copy, poses)
     assert rot[1] == pytest.approx(180.0) and np.allclose(np.delete(rot, 1), 0, atol=1e-5)
     centre = -poses[1][:, :3].T @ poses[1][:, 3]
-    extent = max(np.linalg.norm(-p[:, :3].T @ p[:, 3] - np.mean([-q[:, :3].T @ q[:, 3] for q in poses], 0))
-                 for p in poses)
+    extent = max(
+        np.linalg.norm(-p[:, :3].T @ p[:, 3] - np.mean([-q[:, :3].T @ q[:, 3] for q in poses], 0)) for p in poses
+    )
     assert ctr[1] == pytest.approx(np.linalg.norm(half @ centre - centre) / extent)
     assert np.allclose(np.delete(ctr, 1), 0, atol=1e-9)
 
@@ -84,8 +85,13 @@ def test_sift_threshold_is_colmaps_for_large_images_and_lower_for_small_ones():
 def test_mapper_thresholds_are_colmaps_for_large_images_and_scaled_for_small_ones():
     def thresholds(side: int) -> list[float]:
         o = incremental_options(pixel_scale(side), seed=0, threads=1)
-        return [o.mapper.init_max_error, o.mapper.abs_pose_max_error, o.mapper.filter_max_reproj_error,
-                o.triangulation.complete_max_reproj_error, o.triangulation.merge_max_reproj_error]
+        return [
+            o.mapper.init_max_error,
+            o.mapper.abs_pose_max_error,
+            o.mapper.filter_max_reproj_error,
+            o.triangulation.complete_max_reproj_error,
+            o.triangulation.merge_max_reproj_error,
+        ]
 
     assert thresholds(4000) == thresholds(1000) == pytest.approx([4, 12, 4, 4, 4])  # COLMAP's defaults
     assert thresholds(320) == pytest.approx([1.28, 3.84, 1.28, 1.28, 1.28])
@@ -141,8 +147,11 @@ def test_sfm_takes_a_phone_style_video(beer, tmp_path):
 def speckled(tmp_path_factory) -> Path:
     """A 40-view synthetic orbit with the irregular ground SIFT can match (the checker ground
     repeats), as photos and as the frames of a video."""
-    return generate_scene(SynthConfig(views=40, res=320, objects=5, seed=3, ground="speckle"),
-                          tmp_path_factory.mktemp("sfm") / "truth", progress=False).root
+    return generate_scene(
+        SynthConfig(views=40, res=320, objects=5, seed=3, ground="speckle"),
+        tmp_path_factory.mktemp("sfm") / "truth",
+        progress=False,
+    ).root
 
 
 @pytest.mark.slow
@@ -156,8 +165,12 @@ def test_sfm_recovers_the_exact_cameras_of_a_synthetic_orbit_and_again_the_same(
     rot, ctr = camera_errors([v.cam_from_world for v in made.views], [truth[v.name].cam_from_world for v in made.views])
     assert np.median(rot) < 0.5 and np.median(ctr) < 0.01
     again = load_scene(run_sfm(tmp_path / "photos", tmp_path / "again", progress=False).scene)
-    assert np.abs(np.stack([v.cam_from_world for v in again.views]) -
-                  np.stack([v.cam_from_world for v in made.views])).max() < 1e-9
+    assert (
+        np.abs(
+            np.stack([v.cam_from_world for v in again.views]) - np.stack([v.cam_from_world for v in made.views])
+        ).max()
+        < 1e-9
+    )
 
 
 def _video_of(views, path: Path) -> Path:
@@ -178,8 +191,24 @@ def test_demo_takes_a_synthetic_video_whose_frames_register_with_the_true_camera
     (200 iterations at 160 px: plumbing, the scores mean nothing)."""
     views = load_scene(speckled).views
     video = _video_of(views, tmp_path / "walk.mp4")
-    r = subprocess.run([script("gsseg"), "demo", "--scene", str(video), "--out", str(tmp_path / "demo"),
-                        "--images", "images_2", "--iters", "200", "--backend", "cpu"], capture_output=True, text=True)
+    r = subprocess.run(
+        [
+            script("gsseg"),
+            "demo",
+            "--scene",
+            str(video),
+            "--out",
+            str(tmp_path / "demo"),
+            "--images",
+            "images_2",
+            "--iters",
+            "200",
+            "--backend",
+            "cpu",
+        ],
+        capture_output=True,
+        text=True,
+    )
     assert r.returncode == 0, r.stderr
     made = load_scene(tmp_path / "demo" / "scene", masks=None).views
     assert len(made) >= 38
@@ -188,14 +217,20 @@ def test_demo_takes_a_synthetic_video_whose_frames_register_with_the_true_camera
     assert np.median(rot) < 1.0 and np.median(ctr) < 0.02
     assert (tmp_path / "demo" / "report" / "report.html").is_file()
     assert sorted(p.name.split("_")[0] for p in (tmp_path / "demo" / "run" / "edits").iterdir()) == [
-        "extract", "recolor", "remove"]
+        "extract",
+        "recolor",
+        "remove",
+    ]
 
 
-@pytest.mark.parametrize("make, message", [
-    (lambda p: p.mkdir(), "holds no JPEG or PNG images"),
-    (lambda p: (p.mkdir(), (p / "a.jpg").write_bytes(b"\xff\xd8\xff junk")), "not a readable image"),
-    (lambda p: p.with_suffix(".mp4").write_text("not a video") or None, "cannot open this video"),
-])
+@pytest.mark.parametrize(
+    "make, message",
+    [
+        (lambda p: p.mkdir(), "holds no JPEG or PNG images"),
+        (lambda p: (p.mkdir(), (p / "a.jpg").write_bytes(b"\xff\xd8\xff junk")), "not a readable image"),
+        (lambda p: p.with_suffix(".mp4").write_text("not a video") or None, "cannot open this video"),
+    ],
+)
 def test_bad_photos_are_one_sentence_and_write_nothing(tmp_path, make, message):
     source = tmp_path / "photos"
     make(source)
@@ -225,7 +260,7 @@ def test_photos_that_do_not_overlap_are_refused(tmp_path):
 def _some_photos(speckled: Path, into: Path, first: int, count: int = 12) -> Path:
     """``count`` consecutive orbit views from ``first``, named 00.png, 01.png, ..."""
     into.mkdir()
-    for k, src in enumerate(sorted((speckled / "images").iterdir())[first:first + count]):
+    for k, src in enumerate(sorted((speckled / "images").iterdir())[first : first + count]):
         shutil.copy(src, into / f"{k:02d}.png")
     return into
 
@@ -262,8 +297,14 @@ def test_photos_of_two_sizes_register_with_a_camera_each(speckled, tmp_path):
 
 def test_the_photo_search_skips_scene_folders_and_hidden_ones(tmp_path):
     photos = tmp_path / "photos"
-    for name in ("a.jpg", "trip/b.png", "scene/images/c.png", "old/.sfm/frames/d.png", ".thumbs/e.png",
-                 "copy/images_2/f.png"):
+    for name in (
+        "a.jpg",
+        "trip/b.png",
+        "scene/images/c.png",
+        "old/.sfm/frames/d.png",
+        ".thumbs/e.png",
+        "copy/images_2/f.png",
+    ):
         (photos / name).parent.mkdir(parents=True, exist_ok=True)
         cv2.imwrite(str(photos / name), np.full((8, 8, 3), 128, np.uint8))
     (photos / "scene" / "scene.json").write_text("{}")

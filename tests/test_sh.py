@@ -17,19 +17,19 @@ def fibonacci_sphere(n: int) -> np.ndarray:
     """(n, 3) nearly uniform unit vectors."""
     i = np.arange(n) + 0.5
     z = 1 - 2 * i / n
-    phi = math.pi * (1 + 5 ** 0.5) * i
+    phi = math.pi * (1 + 5**0.5) * i
     r = np.sqrt(1 - z * z)
     return np.stack([r * np.cos(phi), r * np.sin(phi), z], -1)
 
 
-def real_sh_from_legendre(l: int, m: int, dirs: np.ndarray) -> np.ndarray:
-    """3D-GS's real SH of degree l, order m: sqrt(2) times the real (m > 0) or imaginary
+def real_sh_from_legendre(degree: int, m: int, dirs: np.ndarray) -> np.ndarray:
+    """3D-GS's real SH of degree ``degree``, order m: sqrt(2) times the real (m > 0) or imaginary
     (m < 0) part of the complex SH with the Condon-Shortley phase, built from scipy's
     associated Legendre functions."""
     theta, phi = np.arccos(np.clip(dirs[:, 2], -1, 1)), np.arctan2(dirs[:, 1], dirs[:, 0])
     a = abs(m)
-    norm = math.sqrt((2 * l + 1) / (4 * math.pi) * math.factorial(l - a) / math.factorial(l + a))
-    legendre = norm * lpmv(a, l, np.cos(theta))
+    norm = math.sqrt((2 * degree + 1) / (4 * math.pi) * math.factorial(degree - a) / math.factorial(degree + a))
+    legendre = norm * lpmv(a, degree, np.cos(theta))
     if m == 0:
         return legendre
     return math.sqrt(2) * legendre * (np.cos(a * phi) if m > 0 else np.sin(a * phi))
@@ -38,7 +38,8 @@ def real_sh_from_legendre(l: int, m: int, dirs: np.ndarray) -> np.ndarray:
 def test_the_basis_equals_the_real_sh_of_3dgs_built_from_legendre_functions():
     dirs = fibonacci_sphere(500)
     basis = sh_basis(3, torch.as_tensor(dirs)).numpy()
-    expected = np.stack([real_sh_from_legendre(l, m, dirs) for l in range(4) for m in range(-l, l + 1)], -1)
+    orders = [(degree, m) for degree in range(4) for m in range(-degree, degree + 1)]
+    expected = np.stack([real_sh_from_legendre(degree, m, dirs) for degree, m in orders], -1)
     assert basis == pytest.approx(expected, abs=1e-12)
     for degree in range(3):  # lower degrees are the first (degree + 1)^2 columns
         assert np.array_equal(sh_basis(degree, torch.as_tensor(dirs)).numpy(), basis[:, : (degree + 1) ** 2])
@@ -56,8 +57,9 @@ def test_shared_coefficients_equal_the_same_coefficients_per_direction():
     dirs = torch.nn.functional.normalize(torch.randn(50, 3, generator=gen), dim=-1)
     coeffs = 0.3 * torch.randn(16, 3, generator=gen)
     for degree in range(4):
-        assert torch.allclose(eval_sh(degree, coeffs, dirs), eval_sh(degree, coeffs.expand(50, -1, -1), dirs),
-                              atol=1e-6)
+        assert torch.allclose(
+            eval_sh(degree, coeffs, dirs), eval_sh(degree, coeffs.expand(50, -1, -1), dirs), atol=1e-6
+        )
 
 
 def test_eval_sh_gradients_match_finite_differences():
@@ -67,7 +69,9 @@ def test_eval_sh_gradients_match_finite_differences():
     dirs = torch.nn.functional.normalize(torch.randn(6, 3, generator=gen, dtype=torch.float64), dim=-1)
     coeffs = 0.1 * torch.randn(6, 16, 3, generator=gen, dtype=torch.float64)
     for degree in range(4):
-        assert torch.autograd.gradcheck(lambda c, d: eval_sh(degree, c, d),
-                                        (coeffs.clone().requires_grad_(), dirs.clone().requires_grad_()))
-        assert torch.autograd.gradcheck(lambda c, d: eval_sh(degree, c, d),
-                                        (coeffs[0].clone().requires_grad_(), dirs.clone().requires_grad_()))
+        assert torch.autograd.gradcheck(
+            lambda c, d: eval_sh(degree, c, d), (coeffs.clone().requires_grad_(), dirs.clone().requires_grad_())
+        )
+        assert torch.autograd.gradcheck(
+            lambda c, d: eval_sh(degree, c, d), (coeffs[0].clone().requires_grad_(), dirs.clone().requires_grad_())
+        )

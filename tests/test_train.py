@@ -9,6 +9,7 @@ import cv2
 import numpy as np
 import pytest
 import torch
+from helpers import GEOMETRY, random_gaussians
 
 from dataset_tools.errors import InputError
 from dataset_tools.image_files import read_mask
@@ -18,10 +19,9 @@ from gsseg.render_views import render_run
 from gsseg.train import TrainConfig, TrainingDiverged, train
 from gsseg.train import trainer as trainer_module
 from gsseg.train.config import LearningRates
-from gsseg.train.strategy import DensifyOptions, DensifyStats, densify_and_prune
 from gsseg.train.optim import GaussianOptimizer
+from gsseg.train.strategy import DensifyOptions, DensifyStats, densify_and_prune
 from gsseg.train.views import TrainViews, view_bytes
-from helpers import GEOMETRY, random_gaussians
 
 
 def _history(run):
@@ -60,9 +60,11 @@ def test_resume_keeps_its_options_and_its_scene(small_scene, tmp_path):
     scene; a copy with one photo changed is not."""
     cfg = TrainConfig(iters=20, backend="cpu", seed=2)
     train(small_scene.root, tmp_path / "run", cfg, stop_after=5, progress=False)
-    for asked, message in ((TrainConfig(iters=20, backend="cpu", seed=3), "seed = 2, not 3"),
-                           (TrainConfig(iters=20, backend="cpu", seed=2, masks=None), "masks = 'object_mask'"),
-                           (TrainConfig(iters=10, backend="cpu", seed=2), "only lengthen it, not shorten it to 10")):
+    for asked, message in (
+        (TrainConfig(iters=20, backend="cpu", seed=3), "seed = 2, not 3"),
+        (TrainConfig(iters=20, backend="cpu", seed=2, masks=None), "masks = 'object_mask'"),
+        (TrainConfig(iters=10, backend="cpu", seed=2), "only lengthen it, not shorten it to 10"),
+    ):
         with pytest.raises(InputError, match=message):
             train(small_scene.root, tmp_path / "run", asked, resume=True, progress=False)
     with pytest.raises(InputError, match="seed = 2, not 0"):  # asked on a command line, though the default
@@ -81,8 +83,9 @@ def test_resume_keeps_its_options_and_its_scene(small_scene, tmp_path):
     assert set(record["scene_fingerprint"]["views"]) == {v.name for v in load_scene(small_scene.root).views}
 
 
-@pytest.mark.parametrize("iters, resets", [(None, [1000]), (3000, [1000]), (1500, []), (1000, []),
-                                           (6000, [2000]), (12000, [4000])])
+@pytest.mark.parametrize(
+    "iters, resets", [(None, [1000]), (3000, [1000]), (1500, []), (1000, []), (6000, [2000]), (12000, [4000])]
+)
 def test_a_shorter_run_drops_opacity_resets_rather_than_compress_them(iters, resets):
     """A reset needs about as many steps to recover from whatever the run's length: its period
     stretches with ``--iters`` but never shrinks, and resets come only while densifying."""
@@ -105,9 +108,11 @@ def test_masks_train_the_features_alone_unless_asked(small_scene, tmp_path):
     """By default the object loss leaves the geometry where colour alone puts it (same
     Gaussians, bit for bit, as training without it); --geometry-from-masks moves it."""
     runs = {}
-    for name, cfg in {"colour": TrainConfig(iters=40, backend="cpu", gamma_obj=0.0),
-                      "default": TrainConfig(iters=40, backend="cpu"),
-                      "coupled": TrainConfig(iters=40, backend="cpu", geometry_from_masks=True)}.items():
+    for name, cfg in {
+        "colour": TrainConfig(iters=40, backend="cpu", gamma_obj=0.0),
+        "default": TrainConfig(iters=40, backend="cpu"),
+        "coupled": TrainConfig(iters=40, backend="cpu", geometry_from_masks=True),
+    }.items():
         runs[name] = read_ply(train(small_scene.root, tmp_path / name, cfg, progress=False).run / "gaussians.ply")
     assert all(torch.equal(getattr(runs["default"], k), getattr(runs["colour"], k)) for k in GEOMETRY)
     assert not torch.equal(runs["default"].obj_feat, runs["colour"].obj_feat)
@@ -116,8 +121,9 @@ def test_masks_train_the_features_alone_unless_asked(small_scene, tmp_path):
 
 @pytest.mark.slow
 def test_max_gaussians_caps_densification(small_scene, tmp_path):
-    free = _history(train(small_scene.root, tmp_path / "free", TrainConfig(iters=60, backend="cpu"),
-                          progress=False).run)
+    free = _history(
+        train(small_scene.root, tmp_path / "free", TrainConfig(iters=60, backend="cpu"), progress=False).run
+    )
     start = free[0]["gaussians"]
     assert max(h["gaussians"] for h in free) > start + 20  # densification does grow this scene
     cap = start + 20
@@ -135,8 +141,9 @@ def test_densification_over_budget_takes_the_largest_gradients():
     opt = GaussianOptimizer(g, LearningRates(), extent=100.0)
     grads = torch.tensor([5.0, 9.0, 1.0, 7.0, 2.0, 8.0, 3.0, 4.0, 6.0, 1.5]) * 1e-3
     stats = DensifyStats(grad_sum=grads.clone(), count=torch.ones(10), max_radii=torch.ones(10))
-    options = DensifyOptions(grad_threshold=1e-4, percent_dense=0.01, prune_opacity=0.005, extent=100.0,
-                             max_gaussians=13)
+    options = DensifyOptions(
+        grad_threshold=1e-4, percent_dense=0.01, prune_opacity=0.005, extent=100.0, max_gaussians=13
+    )
     densify_and_prune(opt, stats, options, prune_large=False, generator=torch.Generator().manual_seed(0))
     means = opt.gaussians.means.detach()
     copies = [int((means == g.means[i]).all(dim=1).sum()) for i in range(10)]

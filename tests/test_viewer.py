@@ -58,8 +58,10 @@ def test_the_browser_camera_of_a_training_view_is_that_view(small_scene):
     for size, scale in ((view.camera.width, 1.0), (view.camera.width // 2, 0.5)):
         got = browser_camera(wxyz, centre, fov_y, view.camera.width, view.camera.height, max_size=size, near=0.1)
         np.testing.assert_allclose(got.cam_from_world, view.cam_from_world, atol=1e-6)
-        assert (got.camera.width, got.camera.height) == (round(view.camera.width * scale),
-                                                          round(view.camera.height * scale))
+        assert (got.camera.width, got.camera.height) == (
+            round(view.camera.width * scale),
+            round(view.camera.height * scale),
+        )
         np.testing.assert_allclose([got.camera.fy, got.camera.cy], [view.camera.fy * scale, view.camera.cy * scale])
 
 
@@ -88,8 +90,11 @@ def test_export_ply_keeps_the_3dgs_layout_and_adds_the_labels(segmented, tmp_pat
     r = subprocess.run([script("gsseg"), "export", str(segmented), "--out", str(out)], capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
     names = PlyData.read(str(out))["vertex"].data.dtype.names
-    expected = (["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"] + [f"f_rest_{i}" for i in range(45)]
-                + ["opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"])
+    expected = (
+        ["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"]
+        + [f"f_rest_{i}" for i in range(45)]
+        + ["opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"]
+    )
     assert list(names[: len(expected)]) == expected and names[-1] == "label"
     run = load_run(segmented)
     back, n = read_ply(out), len(run.gaussians)
@@ -115,8 +120,9 @@ def test_an_export_in_a_standard_renderer_looks_like_gsseg_render(trained, small
         for view in run.scene().views:
             c = view.camera
             ours = run.render(view).rgb.clamp(0, 1).numpy()
-            theirs = np.clip(render_reference(splats, c.fx, c.fy, c.cx, c.cy, c.width, c.height,
-                                              view.cam_from_world), 0, 1)
+            theirs = np.clip(
+                render_reference(splats, c.fx, c.fy, c.cx, c.cy, c.width, c.height, view.cam_from_world), 0, 1
+            )
             errors.append(((ours - theirs) ** 2).mean())
         psnr[environment] = float(np.mean([-10 * np.log10(e) for e in errors]))
     assert psnr[True] >= 30 and psnr[False] < 20, psnr
@@ -128,8 +134,11 @@ def test_export_one_object_as_splat(segmented, tmp_path):
     labels = run.labels().labels
     obj = int(np.bincount(labels)[1:].argmax() + 1)
     out = tmp_path / "object.splat"
-    r = subprocess.run([script("gsseg"), "export", str(segmented), "--out", str(out), "--object", str(obj)],
-                       capture_output=True, text=True)
+    r = subprocess.run(
+        [script("gsseg"), "export", str(segmented), "--out", str(out), "--object", str(obj)],
+        capture_output=True,
+        text=True,
+    )
     assert r.returncode == 0, r.stderr
     records = read_splat(out)
     mine = run.gaussians.means.numpy()[labels == obj]
@@ -152,8 +161,25 @@ def test_a_click_selects_what_gsseg_edit_click_selects(segmented, small_scene, t
     for label in [int(x) for x in np.unique(mask) if x][:3]:
         u, v = _inside_pixel(mask, label)
         chosen = session.select_at(ViewCamera(view.camera, view.cam_from_world), u, v)
-        r = subprocess.run([script("gsseg"), "edit", str(run), "--click", view.stem, str(u), str(v), "--op", "remove",
-                            "--name", f"click_{label}", "--backend", "cpu"], capture_output=True, text=True)
+        r = subprocess.run(
+            [
+                script("gsseg"),
+                "edit",
+                str(run),
+                "--click",
+                view.stem,
+                str(u),
+                str(v),
+                "--op",
+                "remove",
+                "--name",
+                f"click_{label}",
+                "--backend",
+                "cpu",
+            ],
+            capture_output=True,
+            text=True,
+        )
         assert r.returncode == 0, r.stderr
         assert chosen == label == json.loads((run / "edits" / f"click_{label}" / "edit.json").read_text())["object_id"]
 
@@ -168,13 +194,29 @@ def test_edits_undo_and_save_write_what_gsseg_edit_writes(segmented, small_scene
     session.edit("remove")
     assert session.selected is None and len(session.current()[0]) == len(base) - count
     saved = session.save("viewer")
-    r = subprocess.run([script("gsseg"), "edit", str(run), "--object-id", str(obj), "--op", "remove", "--name", "cli",
-                        "--backend", "cpu"], capture_output=True, text=True)
+    r = subprocess.run(
+        [
+            script("gsseg"),
+            "edit",
+            str(run),
+            "--object-id",
+            str(obj),
+            "--op",
+            "remove",
+            "--name",
+            "cli",
+            "--backend",
+            "cpu",
+        ],
+        capture_output=True,
+        text=True,
+    )
     assert r.returncode == 0, r.stderr
     for name, value in read_ply(run / "edits" / "cli" / "gaussians.ply").tensors().items():
         assert torch.equal(getattr(read_ply(saved / "gaussians.ply"), name), value), name
     assert sorted(p.name for p in (saved / "renders").iterdir()) == sorted(
-        p.name for p in (run / "edits" / "cli" / "renders").iterdir())
+        p.name for p in (run / "edits" / "cli" / "renders").iterdir()
+    )
     assert json.loads((saved / "edit.json").read_text())["steps"] == [{"op": "remove", "object_id": obj, "color": None}]
     assert session.undo().op == "remove" and session.current()[0] is base and session.undo() is None
     with pytest.raises(InputError, match="select an object first"):
@@ -201,8 +243,11 @@ def test_a_run_without_labels_opens_with_segments_off(trained, small_scene):
     session = ViewerSession(load_run(trained), scene_dir=small_scene.root, backend="cpu")
     assert "gsseg segment" in session.segments_missing and session.objects() == []
     view = load_scene(small_scene.root).views[0]
-    assert session.frame(ViewCamera(view.camera, view.cam_from_world)).shape == (view.camera.height,
-                                                                                 view.camera.width, 3)
+    assert session.frame(ViewCamera(view.camera, view.cam_from_world)).shape == (
+        view.camera.height,
+        view.camera.width,
+        3,
+    )
     with pytest.raises(InputError, match="gsseg segment"):
         session.select_at(ViewCamera(view.camera, view.cam_from_world), 40, 40)
 
@@ -214,8 +259,9 @@ def test_a_port_in_use_is_one_sentence_and_exit_2(segmented):
         busy.bind(("127.0.0.1", 0))
         busy.listen()
         port = busy.getsockname()[1]
-        r = subprocess.run([script("gsseg"), "view", str(segmented), "--port", str(port)], capture_output=True,
-                           text=True, timeout=120)
+        r = subprocess.run(
+            [script("gsseg"), "view", str(segmented), "--port", str(port)], capture_output=True, text=True, timeout=120
+        )
     assert r.returncode == 2 and f"cannot serve on 127.0.0.1:{port}" in r.stderr and "--port" in r.stderr
     assert len(r.stderr.strip().splitlines()) == 1, r.stderr
 
@@ -227,8 +273,12 @@ def test_gsseg_view_serves_the_page_and_stops_cleanly_on_ctrl_c(segmented):
     import signal
     import urllib.request
 
-    proc = subprocess.Popen([script("gsseg"), "view", str(segmented), "--port", "0"], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [script("gsseg"), "view", str(segmented), "--port", "0"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
         url = None
         for line in proc.stdout:
@@ -261,8 +311,9 @@ def browser():
         options.add_argument(flag)
     options.binary_location = CHROMIUM
     driver = webdriver.Chrome(options=options, service=Service(CHROMEDRIVER))
-    driver.execute_cdp_cmd("Emulation.setDeviceMetricsOverride",
-                           {"width": 900, "height": 480, "deviceScaleFactor": 1, "mobile": False})
+    driver.execute_cdp_cmd(
+        "Emulation.setDeviceMetricsOverride", {"width": 900, "height": 480, "deviceScaleFactor": 1, "mobile": False}
+    )
     yield driver
     driver.quit()
 
@@ -273,7 +324,7 @@ def _canvas_image(driver, canvas) -> np.ndarray:
 
     page = cv2.imdecode(np.frombuffer(driver.get_screenshot_as_png(), np.uint8), cv2.IMREAD_COLOR)[..., ::-1]
     x, y, w, h = (int(canvas.rect[k]) for k in ("x", "y", "width", "height"))
-    return page[y: y + h, x: x + w]
+    return page[y : y + h, x : x + w]
 
 
 def _wait(condition, seconds: float = 60.0, what: str = ""):
@@ -342,8 +393,13 @@ def test_the_viewer_in_headless_chromium_selects_and_removes_by_click(segmented,
 
         # a click on the pixel of the view's largest object selects it, and it is highlighted
         session = viewer.session
-        mask = segment_pixels(session.run.gaussians, session.segmentation.labels, view.camera,
-                              torch.as_tensor(view.cam_from_world, dtype=torch.float32), backend="cpu")
+        mask = segment_pixels(
+            session.run.gaussians,
+            session.segmentation.labels,
+            view.camera,
+            torch.as_tensor(view.cam_from_world, dtype=torch.float32),
+            backend="cpu",
+        )
         label = int(np.bincount(mask.ravel())[1:].argmax() + 1)
         canvas = _Canvas(element, view.camera)
         x, y = canvas.from_view(*_inside_pixel(mask, label))
@@ -355,8 +411,25 @@ def test_the_viewer_in_headless_chromium_selects_and_removes_by_click(segmented,
         highlighted = _canvas_image(browser, element)
         # the same pixel through `gsseg edit --click` selects the same object
         u, v = canvas.to_view(x, y)
-        r = subprocess.run([script("gsseg"), "edit", str(run), "--click", view.stem, str(u), str(v), "--op", "extract",
-                            "--name", "click", "--backend", "cpu"], capture_output=True, text=True)
+        r = subprocess.run(
+            [
+                script("gsseg"),
+                "edit",
+                str(run),
+                "--click",
+                view.stem,
+                str(u),
+                str(v),
+                "--op",
+                "extract",
+                "--name",
+                "click",
+                "--backend",
+                "cpu",
+            ],
+            capture_output=True,
+            text=True,
+        )
         assert r.returncode == 0, r.stderr
         assert json.loads((run / "edits" / "click" / "edit.json").read_text())["object_id"] == label
         # "Remove" in the panel: the object's pixels change in the next frames
@@ -383,7 +456,6 @@ def test_relabelling_keeps_the_3d_regularisation_of_the_labels_shown(segmented, 
     session = ViewerSession(load_run(run), scene_dir=small_scene.root, backend="cpu")
     assert (session.segmentation.smooth, session.segmentation.fill) == (8, True)
     session.relabel("prior", 1.5)
-    expected = segment_run(run, small_scene.root, options=replace(options, gamma_p=1.5), backend="cpu",
-                           progress=False)
+    expected = segment_run(run, small_scene.root, options=replace(options, gamma_p=1.5), backend="cpu", progress=False)
     np.testing.assert_array_equal(session.segmentation.labels, expected.labels)
     assert (session.segmentation.smooth, session.segmentation.fill) == (8, True)

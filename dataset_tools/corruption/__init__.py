@@ -25,10 +25,10 @@ from dataset_tools.corruption import blobs, proposer
 from dataset_tools.corruption.blobs import PERMUTE_ONLY, BlobModel, corrupt_mask
 from dataset_tools.corruption.ops import coarsen
 from dataset_tools.errors import InputError
-from dataset_tools.names import plain_name
-from dataset_tools.overlap import refuse_overlap, scene_inputs
 from dataset_tools.image_files import encode_png
 from dataset_tools.label_maps import matched_error
+from dataset_tools.names import plain_name
+from dataset_tools.overlap import refuse_overlap, scene_inputs
 from dataset_tools.scene import load_scene
 
 FAMILIES = ("blobs", "proposer")
@@ -72,7 +72,9 @@ def corrupt_scene(
     refuse_overlap(scene_dir / plain_name(out_masks, "--out-masks"), scene_inputs(scene_dir, [masks]))
     scene = load_scene(scene_dir, masks=masks)
     if scene.mask_dir is None:
-        raise InputError(f"{scene_dir / masks}: no masks to corrupt; generate the scene with `python -m dataset_tools synth`.")
+        raise InputError(
+            f"{scene_dir / masks}: no masks to corrupt; generate the scene with `python -m dataset_tools synth`."
+        )
     target = scene_dir / out_masks
     if target.exists() and not overwrite:
         raise InputError(f"{target}: already exists; choose another --out-masks or pass --force.")
@@ -81,16 +83,24 @@ def corrupt_scene(
         params = BlobModel(**{**asdict(blobs.SEVERITIES[severity]), "coarse": coarse})
     else:
         params = proposer.SEVERITIES[severity]
-        labels = sorted({int(l) for _, m in views for l in np.unique(m) if l > 0})
+        labels = sorted({int(label) for _, m in views for label in np.unique(m) if label > 0})
         runs = proposer.plan_runs(labels, len(views), params, np.random.default_rng([seed, RUNS_STREAM]))
     errors = {}
     with atomic_directory(target, overwrite=overwrite) as tmp:
         for k, (view, gt) in enumerate(tqdm(views, desc=f"corrupting ({model}, {severity})", disable=not progress)):
             rng = np.random.default_rng([seed, k])
-            noisy = corrupt_mask(gt, params, rng) if model == "blobs" else proposer.corrupt_view(gt, k, runs, params, rng)
+            noisy = (
+                corrupt_mask(gt, params, rng) if model == "blobs" else proposer.corrupt_view(gt, k, runs, params, rng)
+            )
             write_bytes_atomic(tmp / f"{view.stem}.png", encode_png(noisy))
             errors[view.stem] = matched_error(noisy, gt)
-        report = {"model": model, "severity": severity, "seed": seed, "parameters": asdict(params),
-                  "mean_error": float(np.mean(list(errors.values()))), "error_per_view": errors}
+        report = {
+            "model": model,
+            "severity": severity,
+            "seed": seed,
+            "parameters": asdict(params),
+            "mean_error": float(np.mean(list(errors.values()))),
+            "error_per_view": errors,
+        }
         write_bytes_atomic(tmp / "corruption.json", json.dumps(report, indent=2, sort_keys=True).encode())
     return report

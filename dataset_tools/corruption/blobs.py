@@ -22,8 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dataset_tools.corruption.ops import (area_scale, blob, coarsen, free_ids, jitter, nearest_other, objects,
-                                          permute)
+from dataset_tools.corruption.ops import area_scale, blob, coarsen, free_ids, jitter, nearest_other, objects, permute
 
 
 @dataclass(frozen=True)
@@ -58,8 +57,8 @@ def _merge(ids: np.ndarray, p: float, rng: np.random.Generator) -> np.ndarray:
     if len(objs) < 2:
         return ids
     out = ids.copy()
-    for l in objs[rng.uniform(size=len(objs)) < p]:
-        out[out == l] = nearest_other(ids, int(l))
+    for label in objs[rng.uniform(size=len(objs)) < p]:
+        out[out == label] = nearest_other(ids, int(label))
     return out
 
 
@@ -68,8 +67,8 @@ def _split(ids: np.ndarray, p: float, rng: np.random.Generator) -> np.ndarray:
     free = free_ids(ids)
     yy, xx = np.mgrid[: ids.shape[0], : ids.shape[1]]
     objs = objects(ids)
-    for l in objs[rng.uniform(size=len(objs)) < p]:
-        m = ids == l
+    for label in objs[rng.uniform(size=len(objs)) < p]:
+        m = ids == label
         cy, cx = yy[m].mean(), xx[m].mean()
         a = rng.uniform(0, np.pi)
         side = m & ((xx - cx) * np.cos(a) + (yy - cy) * np.sin(a) > 0)
@@ -102,8 +101,8 @@ def corrupt_mask(ids: np.ndarray, model: BlobModel, rng: np.random.Generator) ->
     out = _merge(out, model.p_merge, rng)
     out = _split(out, model.p_split, rng)
     objs = objects(out)
-    for l in objs[rng.uniform(size=len(objs)) < model.p_miss]:
-        out = np.where(out == l, 0, out).astype(np.uint8)
+    for label in objs[rng.uniform(size=len(objs)) < model.p_miss]:
+        out = np.where(out == label, 0, out).astype(np.uint8)
     out = jitter(out, model.jitter_px * np.sqrt(s), model.jitter_scale_px * np.sqrt(s), rng)
     out = _speckle(out, model.small_blobs, tuple(a * s for a in SMALL_BLOB_PX), rng)
     out = _speckle(out, int(rng.poisson(model.large_blobs)), tuple(a * s for a in LARGE_BLOB_PX), rng)

@@ -26,7 +26,7 @@ def objects(ids: np.ndarray) -> np.ndarray:
 def free_ids(ids: np.ndarray) -> list[int]:
     """IDs 255, 254, ... not present in ``ids``: pop() gives the smallest free one last."""
     used = set(objects(ids).tolist())
-    return [l for l in range(255, 0, -1) if l not in used]
+    return [label for label in range(255, 0, -1) if label not in used]
 
 
 def coarsen(ids: np.ndarray, factor: int) -> np.ndarray:
@@ -35,8 +35,14 @@ def coarsen(ids: np.ndarray, factor: int) -> np.ndarray:
     labels = np.unique(ids)
     small = (max(1, W // factor), max(1, H // factor))
     scores = np.stack(
-        [cv2.resize(cv2.resize((ids == l).astype(np.float32), small, interpolation=cv2.INTER_AREA), (W, H),
-                    interpolation=cv2.INTER_LINEAR) for l in labels]
+        [
+            cv2.resize(
+                cv2.resize((ids == label).astype(np.float32), small, interpolation=cv2.INTER_AREA),
+                (W, H),
+                interpolation=cv2.INTER_LINEAR,
+            )
+            for label in labels
+        ]
     )
     return labels[np.argmax(scores, axis=0)].astype(np.uint8)
 
@@ -52,16 +58,28 @@ def jitter(ids: np.ndarray, amplitude: float, scale: float, rng: np.random.Gener
         f = ndimage.gaussian_filter(rng.normal(size=(H, W)), scale)
         flow.append(f / (f.std() + 1e-12) * amplitude)
     gx, gy = np.meshgrid(np.arange(W, dtype=np.float32), np.arange(H, dtype=np.float32))
-    return cv2.remap(ids, gx + flow[0].astype(np.float32), gy + flow[1].astype(np.float32), cv2.INTER_NEAREST,
-                     borderMode=cv2.BORDER_REPLICATE)
+    return cv2.remap(
+        ids,
+        gx + flow[0].astype(np.float32),
+        gy + flow[1].astype(np.float32),
+        cv2.INTER_NEAREST,
+        borderMode=cv2.BORDER_REPLICATE,
+    )
 
 
-def ellipse(shape: tuple[int, int], center: tuple[float, float], axes: tuple[float, float],
-            angle: float) -> np.ndarray:
+def ellipse(shape: tuple[int, int], center: tuple[float, float], axes: tuple[float, float], angle: float) -> np.ndarray:
     """(H, W) bool filled ellipse; ``center`` (row, col), ``axes`` semi-axes in pixels, ``angle`` in degrees."""
     mask = np.zeros(shape, np.uint8)
-    cv2.ellipse(mask, (int(center[1]), int(center[0])), (max(1, int(round(axes[0]))), max(1, int(round(axes[1])))),
-                float(angle), 0, 360, 1, -1)
+    cv2.ellipse(
+        mask,
+        (int(center[1]), int(center[0])),
+        (max(1, int(round(axes[0]))), max(1, int(round(axes[1])))),
+        float(angle),
+        0,
+        360,
+        1,
+        -1,
+    )
     return mask.astype(bool)
 
 

@@ -24,8 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dataset_tools.corruption.ops import (area_scale, blob, ellipse, free_ids, jitter, nearest_other, objects,
-                                          permute)
+from dataset_tools.corruption.ops import area_scale, blob, ellipse, free_ids, jitter, nearest_other, objects, permute
 
 
 @dataclass(frozen=True)
@@ -46,12 +45,15 @@ class ProposerModel:
 
 
 SEVERITIES: dict[str, ProposerModel] = {
-    "low": ProposerModel(p_parts=0.05, p_merge=0.03, p_miss=0.02, p_shadow=0.1, fragments=0.5, p_bleed=0.1,
-                         bleed_px=1.5, jitter_px=0.5),
-    "medium": ProposerModel(p_parts=0.15, p_merge=0.08, p_miss=0.06, p_shadow=0.25, fragments=1.0, p_bleed=0.25,
-                            bleed_px=2.5, jitter_px=1.0),
-    "high": ProposerModel(p_parts=0.3, p_merge=0.15, p_miss=0.12, p_shadow=0.5, fragments=2.0, p_bleed=0.5,
-                          bleed_px=4.0, jitter_px=2.0),
+    "low": ProposerModel(
+        p_parts=0.05, p_merge=0.03, p_miss=0.02, p_shadow=0.1, fragments=0.5, p_bleed=0.1, bleed_px=1.5, jitter_px=0.5
+    ),
+    "medium": ProposerModel(
+        p_parts=0.15, p_merge=0.08, p_miss=0.06, p_shadow=0.25, fragments=1.0, p_bleed=0.25, bleed_px=2.5, jitter_px=1.0
+    ),
+    "high": ProposerModel(
+        p_parts=0.3, p_merge=0.15, p_miss=0.12, p_shadow=0.5, fragments=2.0, p_bleed=0.5, bleed_px=4.0, jitter_px=2.0
+    ),
 }
 
 
@@ -73,13 +75,25 @@ def plan_runs(labels: list[int], n_views: int, model: ProposerModel, rng: np.ran
     longest = max(1, int(np.ceil(model.run_share * n_views)))
     runs = []
     for label in labels:
-        for kind, p in (("parts", model.p_parts), ("merge", model.p_merge), ("miss", model.p_miss),
-                        ("shadow", model.p_shadow)):
+        for kind, p in (
+            ("parts", model.p_parts),
+            ("merge", model.p_merge),
+            ("miss", model.p_miss),
+            ("shadow", model.p_shadow),
+        ):
             if rng.uniform() < p:
                 start = int(rng.integers(n_views))
                 length = int(rng.integers(1, longest + 1))
-                runs.append(Run(kind, label, start, min(n_views, start + length), float(rng.uniform(0, np.pi)),
-                                int(rng.integers(2, 4))))
+                runs.append(
+                    Run(
+                        kind,
+                        label,
+                        start,
+                        min(n_views, start + length),
+                        float(rng.uniform(0, np.pi)),
+                        int(rng.integers(2, 4)),
+                    )
+                )
     return runs
 
 
@@ -111,13 +125,15 @@ def _bleed(out: np.ndarray, label: int, px: float, rng: np.random.Generator) -> 
     mask = out == label
     shifted = np.zeros_like(mask)
     H, W = mask.shape
-    shifted[max(dy, 0): H + min(dy, 0), max(dx, 0): W + min(dx, 0)] = \
-        mask[max(-dy, 0): H + min(-dy, 0), max(-dx, 0): W + min(-dx, 0)]
+    shifted[max(dy, 0) : H + min(dy, 0), max(dx, 0) : W + min(dx, 0)] = mask[
+        max(-dy, 0) : H + min(-dy, 0), max(-dx, 0) : W + min(-dx, 0)
+    ]
     out[shifted & (out == 0)] = label
 
 
-def corrupt_view(ids: np.ndarray, view: int, runs: list[Run], model: ProposerModel,
-                 rng: np.random.Generator) -> np.ndarray:
+def corrupt_view(
+    ids: np.ndarray, view: int, runs: list[Run], model: ProposerModel, rng: np.random.Generator
+) -> np.ndarray:
     """Corrupt view number ``view`` of a scene whose runs are ``runs``. (H, W) uint8 -> (H, W) uint8."""
     s = area_scale(ids.shape)
     out = ids.copy()

@@ -38,9 +38,9 @@ from tqdm import tqdm
 from dataset_tools.atomic import require_folder_path, write_bytes_atomic
 from dataset_tools.cameras import turned_frames
 from dataset_tools.errors import InputError
+from dataset_tools.image_files import IMAGE_SUFFIXES, write_downsampled
 from dataset_tools.locks import exclusive
 from dataset_tools.overlap import refuse_overlap
-from dataset_tools.image_files import IMAGE_SUFFIXES, write_downsampled
 from dataset_tools.sfm.frames import VIDEO_SUFFIXES, sample_frames
 
 if TYPE_CHECKING:
@@ -83,8 +83,10 @@ class SfmConfig:
         if self.max_image_size < 64:
             raise InputError(f"--max-image-size {self.max_image_size}: give 64 pixels or more.")
         if self.peak_threshold is not None and not 0 < self.peak_threshold < 1:
-            raise InputError(f"--peak-threshold {self.peak_threshold}: give a value between 0 and 1 (COLMAP's "
-                             f"default is {SIFT_PEAK_THRESHOLD:.4f}).")
+            raise InputError(
+                f"--peak-threshold {self.peak_threshold}: give a value between 0 and 1 (COLMAP's "
+                f"default is {SIFT_PEAK_THRESHOLD:.4f})."
+            )
 
 
 @dataclass
@@ -100,9 +102,11 @@ class SfmResult:
         """One sentence on the frames posed on the far side, or None."""
         if not self.flips:
             return None
-        return (f"{', '.join(self.flips)}: turned more than 45 degrees from the frame before, so probably posed on the "
-                "far side of the object (the scene looks alike from two sides); check these cameras, or film with "
-                "texture off the repeated surface in view (docs/sfm.md).")
+        return (
+            f"{', '.join(self.flips)}: turned more than 45 degrees from the frame before, so probably posed on the "
+            "far side of the object (the scene looks alike from two sides); check these cameras, or film with "
+            "texture off the repeated surface in view (docs/sfm.md)."
+        )
 
 
 def _scene_folders(photos: Path) -> set[Path]:
@@ -115,9 +119,13 @@ def _input_images(photos: Path) -> list[str]:
     """The image files of a folder (sub-folders too, but no hidden folder or scene folder),
     relative, sorted; each checked whole."""
     scenes = _scene_folders(photos)
-    names = sorted(str(p.relative_to(photos)) for p in photos.rglob("*") if p.suffix in IMAGE_SUFFIXES
-                   and not any(part.startswith(".") for part in p.relative_to(photos).parts)
-                   and not any(p.is_relative_to(s) for s in scenes))
+    names = sorted(
+        str(p.relative_to(photos))
+        for p in photos.rglob("*")
+        if p.suffix in IMAGE_SUFFIXES
+        and not any(part.startswith(".") for part in p.relative_to(photos).parts)
+        and not any(p.is_relative_to(s) for s in scenes)
+    )
     if not names:
         raise InputError(f"{photos}: holds no JPEG or PNG images; pass a folder of photos or a video file.")
     for name in names:
@@ -159,8 +167,10 @@ def _check_free_space(photos: Path, out: Path, n_images: int) -> None:
     existing = next(p for p in (out, *out.parents) if p.exists())
     free = shutil.disk_usage(existing).free
     if free < need:
-        raise InputError(f"{existing}: {free / 1e9:.2f} GB free, structure from motion needs about "
-                         f"{need / 1e9:.2f} GB; free some disk space or write --out elsewhere.")
+        raise InputError(
+            f"{existing}: {free / 1e9:.2f} GB free, structure from motion needs about "
+            f"{need / 1e9:.2f} GB; free some disk space or write --out elsewhere."
+        )
 
 
 def pixel_scale(side: int) -> float:
@@ -190,10 +200,13 @@ def incremental_options(scale: float, seed: int, threads: int) -> pycolmap.Incre
     import pycolmap
 
     options = pycolmap.IncrementalPipelineOptions(random_seed=seed, num_threads=threads)
-    for owner, name in ((options.mapper, "init_max_error"), (options.mapper, "abs_pose_max_error"),
-                        (options.mapper, "filter_max_reproj_error"),
-                        (options.triangulation, "complete_max_reproj_error"),
-                        (options.triangulation, "merge_max_reproj_error")):
+    for owner, name in (
+        (options.mapper, "init_max_error"),
+        (options.mapper, "abs_pose_max_error"),
+        (options.mapper, "filter_max_reproj_error"),
+        (options.triangulation, "complete_max_reproj_error"),
+        (options.triangulation, "merge_max_reproj_error"),
+    ):
         setattr(owner, name, getattr(owner, name) * scale)
     return options
 
@@ -226,7 +239,7 @@ class _Steps:
         """Whether ``step`` finished with these options; if not, it and every later step are forgotten."""
         if self.done.get(step, {}).get("options") == options:
             return True
-        for later in STEPS[STEPS.index(step):]:
+        for later in STEPS[STEPS.index(step) :]:
             self.done.pop(later, None)
         return False
 
@@ -235,8 +248,9 @@ class _Steps:
         write_bytes_atomic(self.path, (json.dumps(self.done, indent=2) + "\n").encode())
 
 
-def run_sfm(photos: Path | str, out: Path | str, cfg: SfmConfig = SfmConfig(), *, overwrite: bool = False,
-            progress: bool = True) -> SfmResult:
+def run_sfm(
+    photos: Path | str, out: Path | str, cfg: SfmConfig = SfmConfig(), *, overwrite: bool = False, progress: bool = True
+) -> SfmResult:
     """Make a scene folder at ``out`` from a folder of photos or a video file ``photos``."""
     import pycolmap  # after the image libraries: importing it first breaks PNG writes
 
@@ -264,8 +278,9 @@ def run_sfm(photos: Path | str, out: Path | str, cfg: SfmConfig = SfmConfig(), *
         raise
 
 
-def _run_sfm_locked(pycolmap, photos: Path, out: Path, work: Path, video: bool, cfg: SfmConfig, overwrite: bool,
-                    progress: bool) -> SfmResult:
+def _run_sfm_locked(
+    pycolmap, photos: Path, out: Path, work: Path, video: bool, cfg: SfmConfig, overwrite: bool, progress: bool
+) -> SfmResult:
     start = time.perf_counter()
     steps = _Steps(work)
     pycolmap.logging.minloglevel = 2  # warnings and errors only; progress is shown here
@@ -278,8 +293,11 @@ def _run_sfm_locked(pycolmap, photos: Path, out: Path, work: Path, video: bool, 
     # 1. images
     found = None if video else _input_images(photos)
     _check_free_space(photos, out, cfg.frames if video else len(found))
-    options = {"source": str(photos.resolve()), "frames": cfg.frames if video else None,
-               "content": content_digest([photos] if video else [photos / n for n in found])}
+    options = {
+        "source": str(photos.resolve()),
+        "frames": cfg.frames if video else None,
+        "content": content_digest([photos] if video else [photos / n for n in found]),
+    }
     image_dir = work / "frames" if video else photos
     if not steps.finished("images", options):
         shutil.rmtree(work / "frames", ignore_errors=True)
@@ -295,28 +313,45 @@ def _run_sfm_locked(pycolmap, photos: Path, out: Path, work: Path, video: bool, 
     single = video if cfg.single_camera is None else cfg.single_camera
     mixed = len(sizes) > 1
     if mixed and single:
-        raise InputError(f"{photos}: the images have {len(sizes)} sizes ({', '.join(f'{w}x{h}' for w, h in sizes)}) "
-                         "and one camera cannot fit them; resize them to one size or let each size have its camera.")
+        raise InputError(
+            f"{photos}: the images have {len(sizes)} sizes ({', '.join(f'{w}x{h}' for w, h in sizes)}) "
+            "and one camera cannot fit them; resize them to one size or let each size have its camera."
+        )
     with Image.open(image_dir / names[0]) as im:
         side = min(max(im.size), cfg.max_image_size)
     peak = cfg.peak_threshold or sift_peak_threshold(side)
-    options = {"camera_model": cfg.camera_model, "single_camera": single, "max_image_size": cfg.max_image_size,
-               "peak_threshold": peak, "deterministic": cfg.deterministic, "camera_per_image": mixed}
+    options = {
+        "camera_model": cfg.camera_model,
+        "single_camera": single,
+        "max_image_size": cfg.max_image_size,
+        "peak_threshold": peak,
+        "deterministic": cfg.deterministic,
+        "camera_per_image": mixed,
+    }
     if not steps.finished("features", options):
         database.unlink(missing_ok=True)
-        extraction = pycolmap.FeatureExtractionOptions(max_image_size=cfg.max_image_size, use_gpu=False,
-                                                       num_threads=threads)
+        extraction = pycolmap.FeatureExtractionOptions(
+            max_image_size=cfg.max_image_size, use_gpu=False, num_threads=threads
+        )
         extraction.sift.peak_threshold = peak
-        pycolmap.extract_features(database, image_dir, image_names=names,
-                                  camera_mode=_camera_mode(pycolmap, single, mixed),
-                                  reader_options=pycolmap.ImageReaderOptions(camera_model=cfg.camera_model),
-                                  extraction_options=extraction, device=pycolmap.Device.cpu)
+        pycolmap.extract_features(
+            database,
+            image_dir,
+            image_names=names,
+            camera_mode=_camera_mode(pycolmap, single, mixed),
+            reader_options=pycolmap.ImageReaderOptions(camera_model=cfg.camera_model),
+            extraction_options=extraction,
+            device=pycolmap.Device.cpu,
+        )
         steps.record("features", options)
     bar.update(1)
 
     # 3. matches
-    matcher = cfg.matcher if cfg.matcher != "auto" else (
-        "sequential" if video or len(names) > EXHAUSTIVE_UP_TO else "exhaustive")
+    matcher = (
+        cfg.matcher
+        if cfg.matcher != "auto"
+        else ("sequential" if video or len(names) > EXHAUSTIVE_UP_TO else "exhaustive")
+    )
     options = {"matcher": matcher, "overlap": cfg.overlap, "keyframes": cfg.keyframes, "seed": cfg.seed}
     if not steps.finished("matches", options):
         _rebuild_database_without_matches(pycolmap, database)
@@ -324,14 +359,18 @@ def _run_sfm_locked(pycolmap, photos: Path, out: Path, work: Path, video: bool, 
         verification = pycolmap.TwoViewGeometryOptions()
         verification.ransac.random_seed = cfg.seed
         if matcher == "exhaustive":
-            pycolmap.match_exhaustive(database, matching_options=matching, verification_options=verification,
-                                      device=pycolmap.Device.cpu)
+            pycolmap.match_exhaustive(
+                database, matching_options=matching, verification_options=verification, device=pycolmap.Device.cpu
+            )
         else:
             _pairs_file(names, cfg, work / "pairs.txt")
-            pycolmap.match_image_pairs(database, matching_options=matching,
-                                       pairing_options=pycolmap.ImportedPairingOptions(
-                                           match_list_path=str(work / "pairs.txt")),
-                                       verification_options=verification, device=pycolmap.Device.cpu)
+            pycolmap.match_image_pairs(
+                database,
+                matching_options=matching,
+                pairing_options=pycolmap.ImportedPairingOptions(match_list_path=str(work / "pairs.txt")),
+                verification_options=verification,
+                device=pycolmap.Device.cpu,
+            )
         steps.record("matches", options)
     bar.update(1)
 
@@ -342,26 +381,41 @@ def _run_sfm_locked(pycolmap, photos: Path, out: Path, work: Path, video: bool, 
         shutil.rmtree(work / "sparse", ignore_errors=True)
         (work / "sparse").mkdir()
         if cfg.mapper == "incremental":
-            models = pycolmap.incremental_mapping(database, image_dir, work / "sparse",
-                                                  incremental_options(scale, cfg.seed, threads))
+            models = pycolmap.incremental_mapping(
+                database, image_dir, work / "sparse", incremental_options(scale, cfg.seed, threads)
+            )
         else:
-            models = pycolmap.global_mapping(database, image_dir, work / "sparse",
-                                             pycolmap.GlobalPipelineOptions(random_seed=cfg.seed, num_threads=threads))
+            models = pycolmap.global_mapping(
+                database,
+                image_dir,
+                work / "sparse",
+                pycolmap.GlobalPipelineOptions(random_seed=cfg.seed, num_threads=threads),
+            )
         sizes = {int(k): m.num_reg_images() for k, m in models.items()}
         if not sizes:
-            raise InputError(f"{photos}: no two images could be matched into a model; the photos need more overlap "
-                             "(take them 10-20 degrees apart around the object, with texture in view).")
+            raise InputError(
+                f"{photos}: no two images could be matched into a model; the photos need more overlap "
+                "(take them 10-20 degrees apart around the object, with texture in view)."
+            )
         best = max(sizes, key=lambda k: (sizes[k], -k))
         registered = sizes[best]
         if registered < max(3, MIN_REGISTERED_SHARE * len(names)):
-            raise InputError(f"{photos}: {registered} of {len(names)} images registered; the photos need more overlap "
-                             "(take them 10-20 degrees apart around the object, with texture in view).")
+            raise InputError(
+                f"{photos}: {registered} of {len(names)} images registered; the photos need more overlap "
+                "(take them 10-20 degrees apart around the object, with texture in view)."
+            )
         model = models[best]
         poses = {image.name: image.cam_from_world().matrix() for image in model.images.values() if image.has_pose}
-        steps.record("mapping", options, model=str(best), registered=registered, other_models=sorted(
-            (s for k, s in sizes.items() if k != best), reverse=True), points=model.num_points3D(),
+        steps.record(
+            "mapping",
+            options,
+            model=str(best),
+            registered=registered,
+            other_models=sorted((s for k, s in sizes.items() if k != best), reverse=True),
+            points=model.num_points3D(),
             mean_reprojection_error=model.compute_mean_reprojection_error(),
-            flips=turned_frames(poses, names) if video else [])
+            flips=turned_frames(poses, names) if video else [],
+        )
     mapped = steps.done["mapping"]
     bar.update(1)
 
@@ -369,18 +423,36 @@ def _run_sfm_locked(pycolmap, photos: Path, out: Path, work: Path, video: bool, 
     options = {"model": mapped["model"]}
     if not steps.finished("undistort", options):
         shutil.rmtree(work / "undistorted", ignore_errors=True)
-        pycolmap.undistort_images(work / "undistorted", work / "sparse" / mapped["model"], image_dir,
-                                  output_type="COLMAP")
+        pycolmap.undistort_images(
+            work / "undistorted", work / "sparse" / mapped["model"], image_dir, output_type="COLMAP"
+        )
         steps.record("undistort", options)
     bar.update(1)
 
-    _write_scene(work, out, {"sfm": {**asdict(cfg), "matcher_used": matcher, "source": str(photos.resolve()),
-                                     "images": len(names), **{k: v for k, v in mapped.items() if k != "options"}}},
-                 overwrite)
+    _write_scene(
+        work,
+        out,
+        {
+            "sfm": {
+                **asdict(cfg),
+                "matcher_used": matcher,
+                "source": str(photos.resolve()),
+                "images": len(names),
+                **{k: v for k, v in mapped.items() if k != "options"},
+            }
+        },
+        overwrite,
+    )
     bar.update(1)
     bar.close()
-    return SfmResult(out, len(names), mapped["registered"], time.perf_counter() - start, mapped["other_models"],
-                     mapped.get("flips", []))
+    return SfmResult(
+        out,
+        len(names),
+        mapped["registered"],
+        time.perf_counter() - start,
+        mapped["other_models"],
+        mapped.get("flips", []),
+    )
 
 
 def _camera_mode(pycolmap, single: bool, mixed: bool) -> pycolmap.CameraMode:

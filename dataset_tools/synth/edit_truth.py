@@ -58,8 +58,10 @@ def scene_config(scene_dir: Path) -> SynthConfig:
     try:
         return SynthConfig(**json.loads(meta_path.read_text())["provenance"]["config"])
     except (OSError, ValueError, KeyError) as e:
-        raise InputError(f"{meta_path}: not a synthetic scene of `python -m dataset_tools synth` ({e}); "
-                         "edit ground truth exists for synthetic scenes only.") from None
+        raise InputError(
+            f"{meta_path}: not a synthetic scene of `python -m dataset_tools synth` ({e}); "
+            "edit ground truth exists for synthetic scenes only."
+        ) from None
 
 
 def scene_layout(scene_dir: Path) -> Layout:
@@ -76,8 +78,9 @@ def _alone(layout: Layout, object_id: int) -> Layout:
     return replace(layout, objects=[o for o in layout.objects if o.id == object_id], background=[])
 
 
-def edit_truth(layout: Layout, object_id: int, view: View, seers: list[tuple[View, np.ndarray]],
-               supersample: int = 2) -> EditTruth:
+def edit_truth(
+    layout: Layout, object_id: int, view: View, seers: list[tuple[View, np.ndarray]], supersample: int = 2
+) -> EditTruth:
     """The truth of editing ``object_id`` in ``view``.
 
     Args:
@@ -93,8 +96,9 @@ def edit_truth(layout: Layout, object_id: int, view: View, seers: list[tuple[Vie
     seen = _seen_by(behind, covered, seers) | (covered & ~np.isfinite(depth_behind.ravel()))  # sky: the environment
     silhouette = ids == object_id
     H, W = full_ids.shape
-    return EditTruth(without, alone, silhouette, seen.reshape(H, W),
-                     _seen_by(surface, silhouette.ravel(), seers).reshape(H, W))
+    return EditTruth(
+        without, alone, silhouette, seen.reshape(H, W), _seen_by(surface, silhouette.ravel(), seers).reshape(H, W)
+    )
 
 
 def _seen_by(points: np.ndarray, pixels: np.ndarray, seers: list[tuple[View, np.ndarray]]) -> np.ndarray:
@@ -108,8 +112,14 @@ def _seen_by(points: np.ndarray, pixels: np.ndarray, seers: list[tuple[View, np.
     return out
 
 
-def write_edit_truth(scene_dir: Path | str, *, images: str = "images", split: str = "test",
-                     overwrite: bool = False, progress: bool = True) -> Path:
+def write_edit_truth(
+    scene_dir: Path | str,
+    *,
+    images: str = "images",
+    split: str = "test",
+    overwrite: bool = False,
+    progress: bool = True,
+) -> Path:
     """Write ``scene_dir/edit_truth/<k>/<item>/<stem>.png``, each item of :class:`EditTruth`,
     for every object k and every view of ``split``, at the size of the ``images`` copy (an ``images_N``
     copy is the full views area-averaged, so its truth takes N times the generator's samples
@@ -143,7 +153,11 @@ def read_edit_truth(scene_dir: Path | str, object_id: int, stem: str) -> EditTru
     if not (base / "without" / f"{stem}.png").is_file():
         return None
     if not (base / "silhouette_seen" / f"{stem}.png").is_file():
-        raise InputError(f"{base.parent}: written by an older version (no silhouette_seen/); write it again with "
-                         "--force.")
-    return EditTruth(read_image(base / "without" / f"{stem}.png"), read_image(base / "alone" / f"{stem}.png"),
-                     *(read_mask(base / name / f"{stem}.png") > 0 for name in ("silhouette", "seen", "silhouette_seen")))
+        raise InputError(
+            f"{base.parent}: written by an older version (no silhouette_seen/); write it again with --force."
+        )
+    return EditTruth(
+        read_image(base / "without" / f"{stem}.png"),
+        read_image(base / "alone" / f"{stem}.png"),
+        *(read_mask(base / name / f"{stem}.png") > 0 for name in ("silhouette", "seen", "silhouette_seen")),
+    )

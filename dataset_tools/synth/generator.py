@@ -43,7 +43,9 @@ class SynthConfig:
 
     def validate(self) -> None:
         if not 1 <= self.objects <= MAX_OBJECTS:
-            raise InputError(f"--objects {self.objects}: a scene holds 1..{MAX_OBJECTS} objects (8-bit masks); choose fewer.")
+            raise InputError(
+                f"--objects {self.objects}: a scene holds 1..{MAX_OBJECTS} objects (8-bit masks); choose fewer."
+            )
         if self.views < 2:
             raise InputError(f"--views {self.views}: at least 2 views are needed for SfM tracks.")
         if not 16 <= self.res <= 4096:
@@ -99,7 +101,7 @@ def _object_color(k: int, offset: float) -> tuple[tuple[float, ...], tuple[float
 def make_layout(cfg: SynthConfig, rng: np.random.Generator) -> Layout:
     """Place ``cfg.objects`` non-overlapping primitives standing on the ground plane."""
     scale = min(1.0, np.sqrt(6 / cfg.objects))
-    extent = 1.3 * np.sqrt(max(cfg.objects, 6) / 6) * scale ** 0.5
+    extent = 1.3 * np.sqrt(max(cfg.objects, 6) / 6) * scale**0.5
     depth = 0.6 * extent if cfg.path == "forward" else extent
     hue_offset = rng.uniform()
     placed: list[tuple[float, float, float]] = []
@@ -128,19 +130,26 @@ def make_layout(cfg: SynthConfig, rng: np.random.Generator) -> Layout:
         pattern = str(rng.choice(["checker", "stripes", "waves", "plain"]))
         axis = rng.normal(size=3)
         texture = Texture(
-            pattern, color_a, color_b, origin=(x, y, 0.0), scale=size * rng.uniform(0.35, 0.7),
+            pattern,
+            color_a,
+            color_b,
+            origin=(x, y, 0.0),
+            scale=size * rng.uniform(0.35, 0.7),
             axis=tuple(axis / np.linalg.norm(axis)),
         )
         objects.append(SceneObject(k, kind, shape, texture))
     ground = (
         Plane((0.0, 0.0, 1.0), 0.0),
         Texture("checker", (0.72, 0.68, 0.6), (0.45, 0.42, 0.38), scale=0.5, fade=4 * extent)
-        if cfg.ground == "checker" else Texture("speckle", (0.78, 0.72, 0.62), (0.3, 0.27, 0.24), scale=0.25),
+        if cfg.ground == "checker"
+        else Texture("speckle", (0.78, 0.72, 0.62), (0.3, 0.27, 0.24), scale=0.25),
     )
     background = [ground]
     if cfg.wall if cfg.wall is not None else cfg.path == "forward":
         wall = Plane((0.0, -1.0, 0.0), -(depth + 1.0))
-        background.append((wall, Texture("stripes", (0.62, 0.66, 0.7), (0.5, 0.55, 0.6), scale=0.35, axis=(1.0, 0.0, 0.3))))
+        background.append(
+            (wall, Texture("stripes", (0.62, 0.66, 0.7), (0.5, 0.55, 0.6), scale=0.35, axis=(1.0, 0.0, 0.3)))
+        )
     max_h = max(o.bounding_sphere[0][2] + o.bounding_sphere[1] for o in objects)
     return Layout(objects, background, np.array([0.0, 0.0, 0.3 * max_h]), extent)
 
@@ -184,8 +193,9 @@ def object_ids(layout: Layout, hits: Hits) -> np.ndarray:
     return np.where(hits.surface >= 0, ids_of_surface[np.maximum(hits.surface, 0)], 0)
 
 
-def shade(layout: Layout, origin: np.ndarray, d: np.ndarray, hits: Hits,
-          sky: tuple[float, float, float] | None = None) -> np.ndarray:
+def shade(
+    layout: Layout, origin: np.ndarray, d: np.ndarray, hits: Hits, sky: tuple[float, float, float] | None = None
+) -> np.ndarray:
     """Colour of every ray in [0, 1], (N, 3): albedo times ambient + Lambert, or the sky (a
     gradient by elevation, or the flat colour ``sky``)."""
     textures = [tex for _, tex in layout.background] + [ob.texture for ob in layout.objects]
@@ -214,7 +224,10 @@ def _rays(cam: PinholeCamera, pose: np.ndarray, du: float, dv: float) -> tuple[n
 
 
 def render_view(
-    layout: Layout, cam: PinholeCamera, pose: np.ndarray, supersample: int = 2,
+    layout: Layout,
+    cam: PinholeCamera,
+    pose: np.ndarray,
+    supersample: int = 2,
     sky: tuple[float, float, float] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Ray-cast one view (the sky a flat ``sky`` colour when given).

@@ -77,7 +77,11 @@ class Texture:
         elif self.pattern == "speckle":
             w = 0.5 + 1.6 * (value_noise(q) - 0.5)
         elif self.pattern == "waves":
-            w = 0.5 + 0.25 * np.sin(2.1 * q[:, 0] + 1.3 * np.sin(1.7 * q[:, 2])) + 0.25 * np.sin(1.9 * q[:, 1] - 0.7 * q[:, 2])
+            w = (
+                0.5
+                + 0.25 * np.sin(2.1 * q[:, 0] + 1.3 * np.sin(1.7 * q[:, 2]))
+                + 0.25 * np.sin(1.9 * q[:, 1] - 0.7 * q[:, 2])
+            )
         else:
             w = np.zeros(len(points))
         if self.fade > 0:

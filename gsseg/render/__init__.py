@@ -98,10 +98,18 @@ def render(
     raster = backend.rasterize(g.means, g.quats, g.scales, g.opacities, values, cam_from_world, camera)
     features = raster.image[..., 3:]
     if with_features and not fused:
-        features = backend.rasterize(g.means.detach(), g.quats.detach(), g.scales.detach(), g.opacities.detach(),
-                                     g.obj_feat, cam_from_world, camera).image
+        features = backend.rasterize(
+            g.means.detach(),
+            g.quats.detach(),
+            g.scales.detach(),
+            g.opacities.detach(),
+            g.obj_feat,
+            cam_from_world,
+            camera,
+        ).image
     rgb = raster.image[..., :3]
     if background is not None:
         rgb = rgb + (1 - raster.alpha[..., None]) * background.to(rgb)
-    return RenderOutput(rgb=rgb, features=features, alpha=raster.alpha, depth=raster.depth,
-                        means2d=raster.means2d, radii=raster.radii)
+    return RenderOutput(
+        rgb=rgb, features=features, alpha=raster.alpha, depth=raster.depth, means2d=raster.means2d, radii=raster.radii
+    )

@@ -68,15 +68,31 @@ class Backend:
     def available(self) -> bool:
         return True
 
-    def rasterize(self, means: torch.Tensor, quats: torch.Tensor, scales: torch.Tensor, opacities: torch.Tensor,
-                  values: torch.Tensor, cam_from_world: torch.Tensor, camera: PinholeCamera) -> Raster:
+    def rasterize(
+        self,
+        means: torch.Tensor,
+        quats: torch.Tensor,
+        scales: torch.Tensor,
+        opacities: torch.Tensor,
+        values: torch.Tensor,
+        cam_from_world: torch.Tensor,
+        camera: PinholeCamera,
+    ) -> Raster:
         """Project and blend N Gaussians (means (N, 3), quats (N, 4), scales (N, 3),
         opacities (N,)) carrying ``values`` (N, C) into ``camera``; differentiable."""
         raise NotImplementedError
 
-    def contributions(self, means: torch.Tensor, quats: torch.Tensor, scales: torch.Tensor,
-                      opacities: torch.Tensor, cam_from_world: torch.Tensor, camera: PinholeCamera,
-                      rows: np.ndarray, n_rows: int) -> torch.Tensor:
+    def contributions(
+        self,
+        means: torch.Tensor,
+        quats: torch.Tensor,
+        scales: torch.Tensor,
+        opacities: torch.Tensor,
+        cam_from_world: torch.Tensor,
+        camera: PinholeCamera,
+        rows: np.ndarray,
+        n_rows: int,
+    ) -> torch.Tensor:
         """(n_rows, N) float32 on the CPU: each Gaussian's alpha_i T_i summed over the pixels
         whose ``rows`` entry (an (H, W) int array) is r; pixels with row -1 count nowhere.
 
@@ -104,9 +120,16 @@ class _Projecting(Backend):
         proj = project_gaussians(means, quats, scales, cam_from_world, camera, opacities)
         if proj.means2d.requires_grad:
             proj.means2d.retain_grad()
-        image, alpha = self.blend(proj.means2d, proj.conics, opacities,
-                                  torch.cat([values, proj.depths[:, None]], dim=1), proj.depths, proj.radii,
-                                  camera.width, camera.height)
+        image, alpha = self.blend(
+            proj.means2d,
+            proj.conics,
+            opacities,
+            torch.cat([values, proj.depths[:, None]], dim=1),
+            proj.depths,
+            proj.radii,
+            camera.width,
+            camera.height,
+        )
         return Raster(image[..., :-1], alpha, image[..., -1], proj.means2d, proj.radii)
 
 
@@ -124,9 +147,17 @@ class CpuBackend(_Projecting):
         proj = project_gaussians(means, quats, scales, cam_from_world, camera, opacities)
         offsets, ids = bin_tiles(proj.means2d, proj.radii, proj.depths, camera.width, camera.height)
         arrays = [as_float32_array(x) for x in (proj.means2d, proj.conics, opacities)]
-        out = cpu_kernels.accumulate_weights(*arrays, offsets, ids, camera.width, camera.height, TILE_SIZE,
-                                             np.ascontiguousarray(rows, dtype=np.int32), n_rows,
-                                             numba.get_num_threads())
+        out = cpu_kernels.accumulate_weights(
+            *arrays,
+            offsets,
+            ids,
+            camera.width,
+            camera.height,
+            TILE_SIZE,
+            np.ascontiguousarray(rows, dtype=np.int32),
+            n_rows,
+            numba.get_num_threads(),
+        )
         return torch.from_numpy(out)
 
 
@@ -151,8 +182,7 @@ class GsplatBackend(Backend):
         return gsplat_available()
 
     def rasterize(self, means, quats, scales, opacities, values, cam_from_world, camera):
-        image, alpha, means2d, radii = rasterize_gsplat(means, quats, scales, opacities, values, cam_from_world,
-                                                        camera)
+        image, alpha, means2d, radii = rasterize_gsplat(means, quats, scales, opacities, values, cam_from_world, camera)
         return Raster(image[..., :-1], alpha, image[..., -1], means2d, radii)
 
 

@@ -68,12 +68,14 @@ class Contributions:
             with np.load(path, allow_pickle=False) as f:
                 return cls(labels=f["labels"], weights=torch.from_numpy(f["weights"]), model=str(f["model"]))
         except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as e:
-            raise InputError(f"{path}: damaged contribution cache ({e}); delete it and run `gsseg segment` "
-                             "again.") from None
+            raise InputError(
+                f"{path}: damaged contribution cache ({e}); delete it and run `gsseg segment` again."
+            ) from None
 
 
-def contribution_matrix(gaussians: Gaussians, views: Sequence[Masked], *, backend: str | Backend = "cpu",
-                        progress: bool = True) -> Contributions:
+def contribution_matrix(
+    gaussians: Gaussians, views: Sequence[Masked], *, backend: str | Backend = "cpu", progress: bool = True
+) -> Contributions:
     """Sum alpha * T per Gaussian and mask label over ``views``.
 
     ``cpu`` accumulates in a numba forward pass; ``torch`` and ``gsplat`` obtain the same sums
@@ -89,6 +91,7 @@ def contribution_matrix(gaussians: Gaussians, views: Sequence[Masked], *, backen
     total = torch.zeros(len(labels), len(g))
     for view in tqdm(views, desc="contributions", unit="view", disable=not progress, leave=False):
         pose = torch.as_tensor(view.cam_from_world, dtype=torch.float32, device=backend.device)
-        total += backend.contributions(g.means, g.quats, g.scales, g.opacities, pose, view.camera,
-                                       rows[view.load_mask()], len(labels))
+        total += backend.contributions(
+            g.means, g.quats, g.scales, g.opacities, pose, view.camera, rows[view.load_mask()], len(labels)
+        )
     return Contributions(labels=labels.astype(np.uint8), weights=total)

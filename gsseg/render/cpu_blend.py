@@ -15,8 +15,9 @@ def as_float32_array(x: torch.Tensor) -> np.ndarray:
     return np.ascontiguousarray(x.detach().cpu().numpy(), dtype=np.float32)
 
 
-def bin_tiles(means2d: torch.Tensor, radii: torch.Tensor, depths: torch.Tensor,
-              width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
+def bin_tiles(
+    means2d: torch.Tensor, radii: torch.Tensor, depths: torch.Tensor, width: int, height: int
+) -> tuple[np.ndarray, np.ndarray]:
     """Per-tile Gaussian lists sorted front to back: offsets (T + 1,), ids (M,)."""
     rects = tile_rects(means2d, radii, width, height).numpy()
     order = np.argsort(depths.detach().cpu().numpy(), kind="stable")
@@ -38,14 +39,28 @@ class _BlendCPU(torch.autograd.Function):
     @staticmethod
     def backward(ctx, grad_image, grad_alpha):
         grads = cpu_kernels.blend_backward(
-            *ctx.arrays, *ctx.tiles, *ctx.size, TILE_SIZE, *ctx.state,
-            as_float32_array(grad_image), as_float32_array(grad_alpha), numba.get_num_threads())
+            *ctx.arrays,
+            *ctx.tiles,
+            *ctx.size,
+            TILE_SIZE,
+            *ctx.state,
+            as_float32_array(grad_image),
+            as_float32_array(grad_alpha),
+            numba.get_num_threads(),
+        )
         g_means, g_conics, g_opac, g_feat = (torch.from_numpy(g).to(ctx.dtype) for g in grads)
         return g_means, g_conics, g_opac, g_feat, None, None, None, None
 
 
-def blend_cpu(means2d: torch.Tensor, conics: torch.Tensor, opacities: torch.Tensor,
-              features: torch.Tensor, depths: torch.Tensor, radii: torch.Tensor,
-              width: int, height: int) -> tuple[torch.Tensor, torch.Tensor]:
+def blend_cpu(
+    means2d: torch.Tensor,
+    conics: torch.Tensor,
+    opacities: torch.Tensor,
+    features: torch.Tensor,
+    depths: torch.Tensor,
+    radii: torch.Tensor,
+    width: int,
+    height: int,
+) -> tuple[torch.Tensor, torch.Tensor]:
     """Same contract as :func:`gsseg.render.torch_blend.blend_torch`, computed by numba."""
     return _BlendCPU.apply(means2d, conics, opacities, features, depths, radii, width, height)

@@ -36,8 +36,9 @@ _FAST = {"reassoc", "contract", "nsz"}
 
 
 @numba.njit(cache=True)
-def bin_gaussians(rects: np.ndarray, order: np.ndarray, n_tiles_x: int, n_tiles_y: int
-                  ) -> tuple[np.ndarray, np.ndarray]:
+def bin_gaussians(
+    rects: np.ndarray, order: np.ndarray, n_tiles_x: int, n_tiles_y: int
+) -> tuple[np.ndarray, np.ndarray]:
     """Lists of Gaussians per tile, front to back.
 
     Args:
@@ -74,8 +75,12 @@ def exp_f32(x):
     r = x - k * _LN2
     p = f32(1.0) + r * (f32(1.0) + r * (_C2 + r * (_C3 + r * (_C4 + r * (_C5 + r * _C6)))))
     m = -np.int32(k)
-    s = ((f32(0.5) if m & 1 else f32(1.0)) * (f32(0.25) if m & 2 else f32(1.0))
-         * (f32(1.0 / 16) if m & 4 else f32(1.0)) * (f32(1.0 / 256) if m & 8 else f32(1.0)))
+    s = (
+        (f32(0.5) if m & 1 else f32(1.0))
+        * (f32(0.25) if m & 2 else f32(1.0))
+        * (f32(1.0 / 16) if m & 4 else f32(1.0))
+        * (f32(1.0 / 256) if m & 8 else f32(1.0))
+    )
     return p * s
 
 
@@ -300,8 +305,22 @@ def blend_forward(means2d, conics, opacities, features, offsets, ids, width, hei
 
 
 @numba.njit(parallel=True, cache=True)
-def blend_backward(means2d, conics, opacities, features, offsets, ids, width, height, tile,
-                   final_t, n_contrib, grad_image, grad_alpha, n_workers):
+def blend_backward(
+    means2d,
+    conics,
+    opacities,
+    features,
+    offsets,
+    ids,
+    width,
+    height,
+    tile,
+    final_t,
+    n_contrib,
+    grad_image,
+    grad_alpha,
+    n_workers,
+):
     """Gradients of a loss with respect to means2d (N, 2), conics (N, 3), opacities (N,)
     and features (N, C), given its gradients grad_image (H, W, C) and grad_alpha (H, W).
 
@@ -365,8 +384,7 @@ def blend_backward(means2d, conics, opacities, features, offsets, ids, width, he
 
 
 @numba.njit(parallel=True, cache=True)
-def accumulate_weights(means2d, conics, opacities, offsets, ids, width, height, tile, rows, n_rows,
-                       n_workers):
+def accumulate_weights(means2d, conics, opacities, offsets, ids, width, height, tile, rows, n_rows, n_workers):
     """Blending weights summed per Gaussian and pixel class: out[r, g] = sum over the pixels
     with rows[y, x] == r of alpha_g T_g (rows < 0 are ignored). One forward pass, no colour.
 
@@ -424,7 +442,9 @@ def compiled_on_disk() -> bool:
     and its backward pass), so that the first step of a process loads them instead of
     compiling them (about half a minute). True when numba's cache cannot be inspected."""
     try:
-        return all(k.signatures or Path(k._cache._cache_file._index_path).is_file()
-                   for k in (bin_gaussians, blend_forward, blend_backward))
+        return all(
+            k.signatures or Path(k._cache._cache_file._index_path).is_file()
+            for k in (bin_gaussians, blend_forward, blend_backward)
+        )
     except AttributeError:  # another numba's internals
         return True

@@ -53,10 +53,21 @@ def rasterize_gsplat(
     viewmat[:3] = cam_from_world[:3].to(device=device, dtype=means.dtype)
     K = torch.as_tensor(camera.K, dtype=means.dtype, device=device)
     image, alpha, meta = rasterization(
-        means=means, quats=quats, scales=scales, opacities=opacities, colors=features,
-        viewmats=viewmat[None], Ks=K[None], width=camera.width, height=camera.height,
-        near_plane=camera.near, eps2d=EPS_2D, tile_size=TILE_SIZE, render_mode="RGB+D",
-        packed=False, rasterize_mode="classic",
+        means=means,
+        quats=quats,
+        scales=scales,
+        opacities=opacities,
+        colors=features,
+        viewmats=viewmat[None],
+        Ks=K[None],
+        width=camera.width,
+        height=camera.height,
+        near_plane=camera.near,
+        eps2d=EPS_2D,
+        tile_size=TILE_SIZE,
+        render_mode="RGB+D",
+        packed=False,
+        rasterize_mode="classic",
     )
     means2d = meta["means2d"]
     if means2d.requires_grad:

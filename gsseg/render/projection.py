@@ -38,11 +38,20 @@ class Projection:
 def quat_to_rotmat(quats: torch.Tensor) -> torch.Tensor:
     """(N, 4) quaternions (w, x, y, z), any norm -> (N, 3, 3) rotation matrices."""
     w, x, y, z = torch.nn.functional.normalize(quats, dim=-1).unbind(-1)
-    return torch.stack([
-        1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
-        2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
-        2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y),
-    ], dim=-1).reshape(-1, 3, 3)
+    return torch.stack(
+        [
+            1 - 2 * (y * y + z * z),
+            2 * (x * y - w * z),
+            2 * (x * z + w * y),
+            2 * (x * y + w * z),
+            1 - 2 * (x * x + z * z),
+            2 * (y * z - w * x),
+            2 * (x * z - w * y),
+            2 * (y * z + w * x),
+            1 - 2 * (x * x + y * y),
+        ],
+        dim=-1,
+    ).reshape(-1, 3, 3)
 
 
 def covariances(quats: torch.Tensor, scales: torch.Tensor) -> torch.Tensor:
@@ -103,14 +112,19 @@ def project_gaussians(
             # alpha = o exp(-d^2 / 2) >= ALPHA_MIN  <=>  d^2 <= 2 log(o / ALPHA_MIN)
             extent = torch.sqrt(torch.clamp(2 * torch.log(opacities.detach() / ALPHA_MIN), 0.0, 9.0))
         radii = torch.ceil(extent * torch.sqrt(lambda_max))
-        on_screen = ((means2d[:, 0] + radii > 0) & (means2d[:, 0] - radii < camera.width)
-                     & (means2d[:, 1] + radii > 0) & (means2d[:, 1] - radii < camera.height))
+        on_screen = (
+            (means2d[:, 0] + radii > 0)
+            & (means2d[:, 0] - radii < camera.width)
+            & (means2d[:, 1] + radii > 0)
+            & (means2d[:, 1] - radii < camera.height)
+        )
         radii = torch.where(valid & on_screen & (radii > 0), radii, torch.zeros_like(radii)).to(torch.int32)
     return Projection(means2d=means2d, conics=conics, depths=p[:, 2], radii=radii)
 
 
-def tile_rects(means2d: torch.Tensor, radii: torch.Tensor, width: int, height: int,
-               tile: int = TILE_SIZE) -> torch.Tensor:
+def tile_rects(
+    means2d: torch.Tensor, radii: torch.Tensor, width: int, height: int, tile: int = TILE_SIZE
+) -> torch.Tensor:
     """(N, 4) int32 tile ranges [x0, y0, x1, y1) that each footprint overlaps (empty when
     radius is 0). Both blending backends bin Gaussians with exactly these ranges."""
     tiles_x, tiles_y = -(-width // tile), -(-height // tile)

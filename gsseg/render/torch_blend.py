@@ -47,8 +47,11 @@ def blend_torch(
                 continue
             y0, x0 = ty * TILE_SIZE, tx * TILE_SIZE
             y1, x1 = min(y0 + TILE_SIZE, height), min(x0 + TILE_SIZE, width)
-            py, px = torch.meshgrid(torch.arange(y0, y1, dtype=means2d.dtype) + 0.5,
-                                    torch.arange(x0, x1, dtype=means2d.dtype) + 0.5, indexing="ij")
+            py, px = torch.meshgrid(
+                torch.arange(y0, y1, dtype=means2d.dtype) + 0.5,
+                torch.arange(x0, x1, dtype=means2d.dtype) + 0.5,
+                indexing="ij",
+            )
             dx = means2d[ids, 0][None] - px.reshape(-1, 1)  # (P, n)
             dy = means2d[ids, 1][None] - py.reshape(-1, 1)
             a, b, c = conics[ids].unbind(-1)

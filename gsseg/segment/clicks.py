@@ -45,8 +45,14 @@ def _check_points(points: np.ndarray, name: str) -> np.ndarray:
     return points
 
 
-def select_by_points(means: np.ndarray, features: np.ndarray, labels: np.ndarray, positives: np.ndarray,
-                     negatives: np.ndarray | None = None, k: int = 20) -> np.ndarray:
+def select_by_points(
+    means: np.ndarray,
+    features: np.ndarray,
+    labels: np.ndarray,
+    positives: np.ndarray,
+    negatives: np.ndarray | None = None,
+    k: int = 20,
+) -> np.ndarray:
     """The Gaussians selected by positive and negative 3D points.
 
     Args:
@@ -82,8 +88,7 @@ def select_by_points(means: np.ndarray, features: np.ndarray, labels: np.ndarray
     return selected
 
 
-def split_by_graph(means: np.ndarray, features: np.ndarray, positives: np.ndarray, negatives: np.ndarray
-                   ) -> np.ndarray:
+def split_by_graph(means: np.ndarray, features: np.ndarray, positives: np.ndarray, negatives: np.ndarray) -> np.ndarray:
     """(M,) bool: which of M Gaussians lie nearer a positive point than a negative one along
     their nearest-neighbour graph (:data:`GRAPH_NEIGHBOURS`), edges weighted by position plus
     feature distance, each over its median. Gaussians no click reaches through the graph
@@ -107,8 +112,9 @@ def split_by_graph(means: np.ndarray, features: np.ndarray, positives: np.ndarra
     sign_of: dict[int, bool] = {}
     for seed, sign in zip(seeds, positive):  # a Gaussian near clicks of both kinds stays
         sign_of[seed] = sign_of.get(seed, False) or sign
-    distance, _, source = dijkstra(graph, directed=False, indices=sorted(sign_of), min_only=True,
-                                   return_predecessors=True)
+    distance, _, source = dijkstra(
+        graph, directed=False, indices=sorted(sign_of), min_only=True, return_predecessors=True
+    )
     reached = np.isfinite(distance)
     keep = np.array([sign_of.get(int(s), True) for s in source], bool)
     if not reached.all():

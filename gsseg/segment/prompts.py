@@ -25,8 +25,10 @@ def object_at_point(means: np.ndarray, labels: np.ndarray, point: np.ndarray, k:
     lo, hi = means.min(0), means.max(0)
     pad = 0.05 * np.linalg.norm(hi - lo)
     if np.any(point < lo - pad) or np.any(point > hi + pad):
-        raise InputError(f"point {point.tolist()} lies outside the scene bounds {np.round(lo, 3).tolist()} .. "
-                         f"{np.round(hi, 3).tolist()}; pick a point on an object.")
+        raise InputError(
+            f"point {point.tolist()} lies outside the scene bounds {np.round(lo, 3).tolist()} .. "
+            f"{np.round(hi, 3).tolist()}; pick a point on an object."
+        )
     _, nearest = cKDTree(means).query(point, k=min(k, len(means)))
     values, counts = np.unique(labels[np.atleast_1d(nearest)], return_counts=True)
     return int(values[counts.argmax()])
@@ -36,22 +38,34 @@ def pick_object(means: np.ndarray, labels: np.ndarray, point: np.ndarray, k: int
     """The object ``object_at_point`` finds, refusing a point on the background (label 0)."""
     object_id = object_at_point(means, labels, point, k)
     if object_id == 0:
-        raise InputError(f"the point {np.round(point, 3).tolist()} lies on the background (label 0); "
-                         "pick a point on an object.")
+        raise InputError(
+            f"the point {np.round(point, 3).tolist()} lies on the background (label 0); pick a point on an object."
+        )
     return object_id
 
 
 @torch.no_grad()
-def point_from_click(gaussians: Gaussians, camera: PinholeCamera, cam_from_world: np.ndarray,
-                     u: float, v: float, *, backend: str | Backend = "cpu") -> np.ndarray:
+def point_from_click(
+    gaussians: Gaussians,
+    camera: PinholeCamera,
+    cam_from_world: np.ndarray,
+    u: float,
+    v: float,
+    *,
+    backend: str | Backend = "cpu",
+) -> np.ndarray:
     """The 3D point seen at pixel (u, v) of a view: its rendered depth (alpha-normalised) lifted
     through the camera. (3,) float64 world coordinates."""
     if not (0 <= u < camera.width and 0 <= v < camera.height):
         raise InputError(f"click ({u}, {v}) is outside the {camera.width}x{camera.height} view; click inside it.")
     backend = get_backend(backend)
-    out = render(gaussians.to(backend.device), camera,
-                 torch.as_tensor(cam_from_world, dtype=torch.float32, device=backend.device),
-                 with_features=False, backend=backend)
+    out = render(
+        gaussians.to(backend.device),
+        camera,
+        torch.as_tensor(cam_from_world, dtype=torch.float32, device=backend.device),
+        with_features=False,
+        backend=backend,
+    )
     row, col = int(v), int(u)
     alpha = float(out.alpha[row, col])
     if alpha < 0.5:

@@ -13,7 +13,6 @@ breaks near-ties. Gaussians no view observed (column sum 0) keep their prior lab
 from __future__ import annotations
 
 import zipfile
-
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -56,14 +55,20 @@ class Segmentation:
         """(N,) bool Gaussians of object ``obj``."""
         hit = np.flatnonzero(self.objects == obj)
         if not len(hit):
-            raise InputError(f"object {obj} is not among the segmented objects {self.objects.tolist()}; "
-                             "pick one of them.")
+            raise InputError(
+                f"object {obj} is not among the segmented objects {self.objects.tolist()}; pick one of them."
+            )
         return self.selections[hit[0]]
 
     def settings(self) -> dict:
         """How the labels were chosen (method, mode, gamma_p, smooth, fill), as edits record it."""
-        return {"method": self.method, "mode": self.mode, "gamma_p": self.gamma_p, "smooth": self.smooth,
-                "fill": self.fill}
+        return {
+            "method": self.method,
+            "mode": self.mode,
+            "gamma_p": self.gamma_p,
+            "smooth": self.smooth,
+            "fill": self.fill,
+        }
 
     def subset(self, keep: np.ndarray) -> Segmentation:
         """The labels and selections of the Gaussians where (N,) bool ``keep`` is true."""
@@ -73,9 +78,19 @@ class Segmentation:
         import io
 
         buf = io.BytesIO()
-        np.savez_compressed(buf, labels=self.labels, objects=self.objects, selections=self.selections,
-                            method=self.method, mode=self.mode, gamma_p=self.gamma_p, model=self.model,
-                            smooth=self.smooth, fill=self.fill, gaussians=len(self.labels))
+        np.savez_compressed(
+            buf,
+            labels=self.labels,
+            objects=self.objects,
+            selections=self.selections,
+            method=self.method,
+            mode=self.mode,
+            gamma_p=self.gamma_p,
+            model=self.model,
+            smooth=self.smooth,
+            fill=self.fill,
+            gaussians=len(self.labels),
+        )
         write_bytes_atomic(Path(path), buf.getvalue())
 
     @classmethod
@@ -84,11 +99,17 @@ class Segmentation:
             raise InputError(f"{path} does not exist; run `gsseg segment` on the run first.")
         try:
             with np.load(path, allow_pickle=False) as f:
-                return cls(labels=f["labels"], objects=f["objects"], selections=f["selections"],
-                           method=str(f["method"]), mode=str(f["mode"]), gamma_p=float(f["gamma_p"]),
-                           model=str(f["model"]) if "model" in f else "",
-                           smooth=int(f["smooth"]) if "smooth" in f else 0,
-                           fill=bool(f["fill"]) if "fill" in f else False)
+                return cls(
+                    labels=f["labels"],
+                    objects=f["objects"],
+                    selections=f["selections"],
+                    method=str(f["method"]),
+                    mode=str(f["mode"]),
+                    gamma_p=float(f["gamma_p"]),
+                    model=str(f["model"]) if "model" in f else "",
+                    smooth=int(f["smooth"]) if "smooth" in f else 0,
+                    fill=bool(f["fill"]) if "fill" in f else False,
+                )
         except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as e:
             raise InputError(f"{path}: damaged labels ({e}); run `gsseg segment` on the run again.") from None
 
@@ -185,5 +206,11 @@ def reassign(
             labels = torch.where(last > 0, obj_ids[(last - 1).clamp_min(0)], 0)
         else:
             labels = torch.zeros(n, dtype=torch.int64)
-    return Segmentation(labels=labels.numpy().astype(np.uint8), objects=objects,
-                        selections=selections.numpy(), method=method, mode=mode, gamma_p=gamma_p)
+    return Segmentation(
+        labels=labels.numpy().astype(np.uint8),
+        objects=objects,
+        selections=selections.numpy(),
+        method=method,
+        mode=mode,
+        gamma_p=gamma_p,
+    )

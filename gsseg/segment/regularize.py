@@ -24,8 +24,11 @@ from scipy.spatial import cKDTree
 from gsseg.render.contributions import Contributions
 from gsseg.segment.reassign import Segmentation, normalize
 
-DIRECTIONS = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]]
-                      + [[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], float)
+DIRECTIONS = np.array(
+    [[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]]
+    + [[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)],
+    float,
+)
 DIRECTIONS /= np.linalg.norm(DIRECTIONS, axis=1, keepdims=True)
 
 
@@ -45,12 +48,17 @@ def weak_evidence(contributions: Contributions, *, min_share: float = 0.05, marg
 def _relabelled(segmentation: Segmentation, labels: np.ndarray, **applied) -> Segmentation:
     """``segmentation`` with new (N,) ``labels``, its selections made from them, and the
     regularisation ``applied`` recorded."""
-    return replace(segmentation, labels=labels.astype(np.uint8),
-                   selections=labels[None, :] == segmentation.objects[:, None], **applied)
+    return replace(
+        segmentation,
+        labels=labels.astype(np.uint8),
+        selections=labels[None, :] == segmentation.objects[:, None],
+        **applied,
+    )
 
 
-def smooth_weak_labels(segmentation: Segmentation, means: np.ndarray, opacities: np.ndarray, weak: np.ndarray,
-                       k: int = 16) -> Segmentation:
+def smooth_weak_labels(
+    segmentation: Segmentation, means: np.ndarray, opacities: np.ndarray, weak: np.ndarray, k: int = 16
+) -> Segmentation:
     """Weak Gaussians (``weak`` (N,) bool) take the opacity-weighted label majority of their
     ``k`` nearest Gaussians with strong evidence (N, 3 ``means``; (N,) ``opacities``). Labels
     of strong Gaussians never change."""
@@ -62,14 +70,18 @@ def smooth_weak_labels(segmentation: Segmentation, means: np.ndarray, opacities:
     nearest = strong[np.atleast_2d(nearest.T).T]  # (T, k) indices into all Gaussians
     labels = segmentation.labels.copy()
     votes = np.zeros((len(targets), 256))
-    np.add.at(votes, (np.repeat(np.arange(len(targets)), nearest.shape[1]), labels[nearest].ravel()),
-              opacities[nearest].ravel())
+    np.add.at(
+        votes,
+        (np.repeat(np.arange(len(targets)), nearest.shape[1]), labels[nearest].ravel()),
+        opacities[nearest].ravel(),
+    )
     labels[targets] = votes.argmax(1)
     return _relabelled(segmentation, labels, smooth=k)
 
 
-def fill_interiors(segmentation: Segmentation, means: np.ndarray, share: float = 0.85,
-                   steps: int = 8, extent_quantile: float = 0.01) -> Segmentation:
+def fill_interiors(
+    segmentation: Segmentation, means: np.ndarray, share: float = 0.85, steps: int = 8, extent_quantile: float = 0.01
+) -> Segmentation:
     """Gaussians that one object's Gaussians enclose from at least ``share`` of the 14
     directions join that object (interiors no view sees, rims along its surface, and what
     stands inside a hollow).

@@ -40,8 +40,15 @@ class LabelOptions:
             raise InputError("--smooth and --fill-interiors relabel Gaussians one label each; use --mode multi.")
 
 
-def mask_contributions(run: Run, scene_dir: Path | str | None = None, *, masks: str | None = None,
-                       split: str = "train", backend: str | Backend = "cpu", progress: bool = True) -> Contributions:
+def mask_contributions(
+    run: Run,
+    scene_dir: Path | str | None = None,
+    *,
+    masks: str | None = None,
+    split: str = "train",
+    backend: str | Backend = "cpu",
+    progress: bool = True,
+) -> Contributions:
     """The contribution matrix of a loaded run over the masks of ``split`` (``masks``: the
     folder, by default the one the run was trained on; no labels where no view of ``split`` has
     a mask)."""
@@ -54,21 +61,37 @@ def mask_contributions(run: Run, scene_dir: Path | str | None = None, *, masks: 
 def label_gaussians(run: Run, contributions: Contributions, options: LabelOptions = LabelOptions()) -> Segmentation:
     """Every Gaussian's label from the contribution matrix and the run's classifier."""
     prior_labels, prior_probs = classifier_prior(run.gaussians.obj_feat, run.classifier)
-    result = reassign(contributions, prior_labels, prior_probs, method=options.method, mode=options.mode,
-                      gamma_p=options.gamma_p, slack=options.slack)
+    result = reassign(
+        contributions,
+        prior_labels,
+        prior_probs,
+        method=options.method,
+        mode=options.mode,
+        gamma_p=options.gamma_p,
+        slack=options.slack,
+    )
     means = run.gaussians.means.numpy()
     if options.smooth and len(contributions.labels):
-        result = smooth_weak_labels(result, means, run.gaussians.opacities.detach().numpy(),
-                                    weak_evidence(contributions), k=options.smooth)
+        result = smooth_weak_labels(
+            result, means, run.gaussians.opacities.detach().numpy(), weak_evidence(contributions), k=options.smooth
+        )
     if options.fill:
         result = fill_interiors(result, means)
     result.model = run.fingerprint
     return result
 
 
-def segment_run(run_dir: Path | str, scene_dir: Path | str | None = None, *, options: LabelOptions = LabelOptions(),
-                masks: str | None = None, split: str = "train", backend: str | Backend = "auto",
-                other_scene: bool = False, progress: bool = True) -> Segmentation:
+def segment_run(
+    run_dir: Path | str,
+    scene_dir: Path | str | None = None,
+    *,
+    options: LabelOptions = LabelOptions(),
+    masks: str | None = None,
+    split: str = "train",
+    backend: str | Backend = "auto",
+    other_scene: bool = False,
+    progress: bool = True,
+) -> Segmentation:
     """Label every Gaussian of a run from the masks of ``split`` (the training views by
     default; ``masks``: the folder, by default the one the run was trained on) and the run's
     classifier; write ``RUN/labels.npz`` and the contribution matrix they were chosen from,
@@ -84,8 +107,10 @@ def segment_run(run_dir: Path | str, scene_dir: Path | str | None = None, *, opt
         options = replace(options, gamma_p=0.0)
     contributions = mask_contributions(run, scene_dir, masks=masks, split=split, backend=backend, progress=progress)
     if not len(contributions.labels) and options.method != "classifier":
-        raise InputError(f"{Path(scene_dir or run.record.scene) / masks} holds no masks for the {split} views; "
-                         "build them with `hqmask build` or use --method classifier.")
+        raise InputError(
+            f"{Path(scene_dir or run.record.scene) / masks} holds no masks for the {split} views; "
+            "build them with `hqmask build` or use --method classifier."
+        )
     result = label_gaussians(run, contributions, options)
     with run.folder.lock():
         result.save(run.folder.labels)

@@ -4,7 +4,6 @@ shorter CPU default."""
 from __future__ import annotations
 
 import math
-
 from dataclasses import asdict, dataclass, field, fields, replace
 
 from dataset_tools.errors import InputError
@@ -34,14 +33,30 @@ class Schedule:
 
 SCHEDULES = {
     # 3D-GS and the paper: 30k iterations, densification 500..15k every 100, opacity reset every 3k.
-    "gpu": Schedule(iters=30_000, densify_from=500, densify_until=15_000, densify_every=100,
-                    opacity_reset_every=3_000, sh_increase_every=1_000, checkpoint_every=5_000,
-                    max_gaussians=6_000_000, object_loss_pixels=0),
+    "gpu": Schedule(
+        iters=30_000,
+        densify_from=500,
+        densify_until=15_000,
+        densify_every=100,
+        opacity_reset_every=3_000,
+        sh_increase_every=1_000,
+        checkpoint_every=5_000,
+        max_gaussians=6_000_000,
+        object_loss_pixels=0,
+    ),
     # The same shape compressed ~10x for a laptop-class CPU; one opacity reset mid-densification;
     # the cross-entropy on a random 16k pixels of each view (an unbiased estimate of the full one).
-    "cpu": Schedule(iters=3_000, densify_from=200, densify_until=2_000, densify_every=100,
-                    opacity_reset_every=1_000, sh_increase_every=500, checkpoint_every=500,
-                    max_gaussians=150_000, object_loss_pixels=16_384),
+    "cpu": Schedule(
+        iters=3_000,
+        densify_from=200,
+        densify_until=2_000,
+        densify_every=100,
+        opacity_reset_every=1_000,
+        sh_increase_every=500,
+        checkpoint_every=500,
+        max_gaussians=150_000,
+        object_loss_pixels=16_384,
+    ),
 }
 
 
@@ -127,8 +142,11 @@ class TrainConfig:
         if self.iters is None or self.iters == base.iters:
             return base
         k = self.iters / base.iters
-        scaled = {f.name: max(1, round(getattr(base, f.name) * k)) for f in fields(Schedule)
-                  if f.name not in ("iters", "max_gaussians", "object_loss_pixels")}
+        scaled = {
+            f.name: max(1, round(getattr(base, f.name) * k))
+            for f in fields(Schedule)
+            if f.name not in ("iters", "max_gaussians", "object_loss_pixels")
+        }
         # Gradient statistics need a few views between densification steps.
         scaled["densify_every"] = max(scaled["densify_every"], min(10, base.densify_every))
         scaled["opacity_reset_every"] = max(scaled["opacity_reset_every"], base.opacity_reset_every)
@@ -172,15 +190,27 @@ class RunRecord:
     scene_fingerprint: dict | None = None
 
     def to_json(self) -> dict:
-        return {**self.config.to_json(), "scene": self.scene, "backend_used": self.backend_used,
-                "extent": self.extent, "near_plane": self.near_plane, "train_views": list(self.train_views),
-                "scene_fingerprint": self.scene_fingerprint}
+        return {
+            **self.config.to_json(),
+            "scene": self.scene,
+            "backend_used": self.backend_used,
+            "extent": self.extent,
+            "near_plane": self.near_plane,
+            "train_views": list(self.train_views),
+            "scene_fingerprint": self.scene_fingerprint,
+        }
 
     @classmethod
     def from_json(cls, data: dict) -> RunRecord:
-        return cls(config=TrainConfig.from_json(data), scene=data["scene"], backend_used=data["backend_used"],
-                   extent=float(data["extent"]), near_plane=data.get("near_plane"),
-                   train_views=tuple(data.get("train_views", ())), scene_fingerprint=data.get("scene_fingerprint"))
+        return cls(
+            config=TrainConfig.from_json(data),
+            scene=data["scene"],
+            backend_used=data["backend_used"],
+            extent=float(data["extent"]),
+            near_plane=data.get("near_plane"),
+            train_views=tuple(data.get("train_views", ())),
+            scene_fingerprint=data.get("scene_fingerprint"),
+        )
 
 
 def scene_difference(record: RunRecord, scene: Scene) -> str | None:

@@ -14,8 +14,13 @@ def photometric_loss(rendered: torch.Tensor, target: torch.Tensor, lambda_dssim:
     return (1 - lambda_dssim) * (rendered - target).abs().mean() + lambda_dssim * (1 - ssim)
 
 
-def object_loss(features: torch.Tensor, mask: torch.Tensor, classifier: torch.nn.Linear,
-                pixels: int = 0, generator: torch.Generator | None = None) -> torch.Tensor:
+def object_loss(
+    features: torch.Tensor,
+    mask: torch.Tensor,
+    classifier: torch.nn.Linear,
+    pixels: int = 0,
+    generator: torch.Generator | None = None,
+) -> torch.Tensor:
     """Mean cross-entropy of the classifier on rendered features (H, W, F) against IDs (H, W),
     over every pixel, or over ``pixels`` pixels drawn without replacement when 0 < pixels < H W."""
     features, mask = features.reshape(-1, features.shape[-1]), mask.reshape(-1)
@@ -31,8 +36,14 @@ def psnr(rendered: torch.Tensor, target: torch.Tensor) -> float:
     return float("inf") if mse == 0 else -10.0 * torch.log10(torch.tensor(mse)).item()
 
 
-def knn_identity_loss(means: torch.Tensor, obj_feat: torch.Tensor, classifier: torch.nn.Linear, samples: int,
-                      k: int, generator: torch.Generator | None = None) -> torch.Tensor:
+def knn_identity_loss(
+    means: torch.Tensor,
+    obj_feat: torch.Tensor,
+    classifier: torch.nn.Linear,
+    samples: int,
+    k: int,
+    generator: torch.Generator | None = None,
+) -> torch.Tensor:
     """Gaussian Grouping's 3D identity term: the mean KL divergence between the class
     distribution of ``samples`` Gaussians drawn at random and that of each of their ``k``
     nearest Gaussians in 3D (means (N, 3), obj_feat (N, F)). Neighbours agree on their object."""

@@ -14,8 +14,10 @@ class GaussianOptimizer:
 
     def __init__(self, gaussians: Gaussians, lr: LearningRates, extent: float):
         self.params = {k: torch.nn.Parameter(v.detach().clone()) for k, v in gaussians.tensors().items()}
-        groups = [{"params": [p], "name": k, "lr": getattr(lr, k) * (extent if k == "means" else 1.0)}
-                  for k, p in self.params.items()]
+        groups = [
+            {"params": [p], "name": k, "lr": getattr(lr, k) * (extent if k == "means" else 1.0)}
+            for k, p in self.params.items()
+        ]
         self.adam = torch.optim.Adam(groups, lr=0.0, eps=1e-15)
 
     @property
@@ -54,8 +56,11 @@ class GaussianOptimizer:
     def append(self, new: Gaussians) -> None:
         """Append Gaussians; their Adam moments start at zero."""
         extra = new.tensors()
-        self._rebuild(lambda name, t, is_state: torch.cat(
-            [t, torch.zeros_like(extra[name]) if is_state else extra[name].detach().to(t)]))
+        self._rebuild(
+            lambda name, t, is_state: torch.cat(
+                [t, torch.zeros_like(extra[name]) if is_state else extra[name].detach().to(t)]
+            )
+        )
 
     def reset(self, name: str, values: torch.Tensor) -> None:
         """Overwrite one field and zero its moments (the 3D-GS opacity reset)."""

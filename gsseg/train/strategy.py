@@ -51,8 +51,9 @@ class DensifyOptions:
     max_gaussians: int
 
 
-def densify_and_prune(opt: GaussianOptimizer, stats: DensifyStats, options: DensifyOptions,
-                      prune_large: bool, generator: torch.Generator) -> None:
+def densify_and_prune(
+    opt: GaussianOptimizer, stats: DensifyStats, options: DensifyOptions, prune_large: bool, generator: torch.Generator
+) -> None:
     """One densification step; ``prune_large`` also removes Gaussians over 20 px on screen or
     wider than 10% of the scene (3D-GS does that after the first opacity reset)."""
     g = opt.gaussians.detach()
@@ -76,8 +77,12 @@ def densify_and_prune(opt: GaussianOptimizer, stats: DensifyStats, options: Dens
         children = Gaussians(**{k: torch.cat([v, v]) for k, v in s.tensors().items()})
         children.means = (s.means + offsets).reshape(-1, 3)
         children.log_scales = torch.log(s.scales / 1.6).repeat(2, 1)
-        grown = Gaussians(**{k: torch.cat([a, b]) for (k, a), b in
-                             zip(g.select(clone).tensors().items(), children.tensors().values())})
+        grown = Gaussians(
+            **{
+                k: torch.cat([a, b])
+                for (k, a), b in zip(g.select(clone).tensors().items(), children.tensors().values())
+            }
+        )
     else:
         grown = g.select(clone)
     opt.append(grown)

@@ -72,11 +72,15 @@ class _State:
     history: list[dict]
 
     def state_dict(self) -> dict:
-        return {"step": self.step, "gaussians": self.gaussians.state_dict(),
-                "classifier": self.classifier.state_dict(),
-                "environment": self.environment.state_dict() if self.environment is not None else None,
-                "classifier_adam": self.small_adam.state_dict(), "densify": self.strategy.state_dict(),
-                "history": self.history}
+        return {
+            "step": self.step,
+            "gaussians": self.gaussians.state_dict(),
+            "classifier": self.classifier.state_dict(),
+            "environment": self.environment.state_dict() if self.environment is not None else None,
+            "classifier_adam": self.small_adam.state_dict(),
+            "densify": self.strategy.state_dict(),
+            "history": self.history,
+        }
 
     def load_state_dict(self, ckpt: dict) -> None:
         self.gaussians.load_state_dict(ckpt["gaussians"])
@@ -118,8 +122,11 @@ def _environment(cfg: TrainConfig, views: list[View]) -> Environment | None:
         return None
     if not cfg.environment_profile:
         return Environment(cfg.environment_degree)
-    return Environment(cfg.environment_degree, up=mean_up([v.cam_from_world for v in views]),
-                       bins=profile_bins(max(max(v.camera.fx, v.camera.fy) for v in views)))
+    return Environment(
+        cfg.environment_degree,
+        up=mean_up([v.cam_from_world for v in views]),
+        bins=profile_bins(max(max(v.camera.fx, v.camera.fy) for v in views)),
+    )
 
 
 def _saved_config(folder: RunFolder) -> TrainConfig:
@@ -127,8 +134,10 @@ def _saved_config(folder: RunFolder) -> TrainConfig:
     try:
         return TrainConfig.from_json(json.loads(folder.config.read_text()))
     except (ValueError, KeyError, TypeError, AttributeError) as e:
-        raise InputError(f"{folder.config}: damaged run file ({type(e).__name__}); restore it, or start the run "
-                         "again in a new folder.") from None
+        raise InputError(
+            f"{folder.config}: damaged run file ({type(e).__name__}); restore it, or start the run "
+            "again in a new folder."
+        ) from None
 
 
 def _asked_options(cfg: TrainConfig, given: Collection[str] | None) -> set[str]:
@@ -145,18 +154,23 @@ def _resumed_config(saved: TrainConfig, cfg: TrainConfig, asked: set[str], folde
     grow (the schedule then stretches to it)."""
     for name in sorted(asked - {"iters"}):
         if getattr(cfg, name) != getattr(saved, name):
-            raise InputError(f"{folder.config}: the run was trained with {name} = {getattr(saved, name)!r}, not "
-                             f"{getattr(cfg, name)!r}; leave the option out to resume, or start a new run elsewhere.")
+            raise InputError(
+                f"{folder.config}: the run was trained with {name} = {getattr(saved, name)!r}, not "
+                f"{getattr(cfg, name)!r}; leave the option out to resume, or start a new run elsewhere."
+            )
     if "iters" not in asked or cfg.iters is None or cfg.iters == saved.timing.iters:
         return saved
     if cfg.iters < saved.timing.iters:
-        raise InputError(f"{folder.config}: the run was trained towards {saved.timing.iters} iterations; a resume may "
-                         f"only lengthen it, not shorten it to {cfg.iters}.")
+        raise InputError(
+            f"{folder.config}: the run was trained towards {saved.timing.iters} iterations; a resume may "
+            f"only lengthen it, not shorten it to {cfg.iters}."
+        )
     return replace(saved, iters=cfg.iters)
 
 
-def _settled_config(folder: RunFolder, cfg: TrainConfig, resume: bool,
-                    given: Collection[str] | None) -> tuple[TrainConfig, bool]:
+def _settled_config(
+    folder: RunFolder, cfg: TrainConfig, resume: bool, given: Collection[str] | None
+) -> tuple[TrainConfig, bool]:
     """The config to train with and whether to resume: the saved one when resuming (where
     :func:`_resumed_config` allows). A folder whose start never reached a checkpoint is
     started afresh either way."""
@@ -179,11 +193,14 @@ def _latest_good_checkpoint(folder: RunFolder, device: str) -> dict:
             ckpt = torch.load(path, map_location=device, weights_only=True)
         except Exception as e:  # a truncated or foreign file: torch raises several types
             if k + 1 < len(candidates):
-                warnings.warn(f"{path}: damaged checkpoint ({type(e).__name__}); resuming from {candidates[k + 1].name}.",
-                              stacklevel=2)
+                warnings.warn(
+                    f"{path}: damaged checkpoint ({type(e).__name__}); resuming from {candidates[k + 1].name}.",
+                    stacklevel=2,
+                )
                 continue
-            raise InputError(f"{path}: damaged checkpoint and none older to fall back on; start the run again "
-                             "in a new --out.") from None
+            raise InputError(
+                f"{path}: damaged checkpoint and none older to fall back on; start the run again in a new --out."
+            ) from None
         return ckpt
     raise InputError(f"{folder.root} holds no checkpoint to resume; start it without --resume.")
 
@@ -198,8 +215,11 @@ def _new_state(scene: Scene, cfg: TrainConfig, train_views: list[View], extent: 
     groups = [{"params": list(classifier.parameters()), "lr": cfg.lr.classifier}]
     if environment is not None:
         groups.append({"params": list(environment.parameters()), "lr": cfg.lr.environment})
-    strategy = DensifyStrategy(timing, DensifyOptions(cfg.densify_grad_threshold, cfg.percent_dense,
-                                                      cfg.prune_opacity, extent, timing.max_gaussians), cfg.seed)
+    strategy = DensifyStrategy(
+        timing,
+        DensifyOptions(cfg.densify_grad_threshold, cfg.percent_dense, cfg.prune_opacity, extent, timing.max_gaussians),
+        cfg.seed,
+    )
     strategy.start(len(gaussians), device)
     return _State(0, gaussians, classifier, environment, torch.optim.Adam(groups, eps=1e-15), strategy, [])
 
@@ -218,8 +238,9 @@ def _export(folder: RunFolder, state: _State) -> None:
     write_torch(folder.classifier, {k: v.cpu() for k, v in state.classifier.state_dict().items()})
     if state.environment is not None:
         write_torch(folder.environment, {k: v.cpu() for k, v in state.environment.state_dict().items()})
-    write_json(folder.metrics, {"train": {"steps": state.step, "gaussians": len(state.gaussians),
-                                          "history": state.history}})
+    write_json(
+        folder.metrics, {"train": {"steps": state.step, "gaussians": len(state.gaussians), "history": state.history}}
+    )
 
 
 def _train_step(state: _State, view: TrainView, cfg: TrainConfig, backend: Backend, step: int) -> dict:
@@ -229,8 +250,15 @@ def _train_step(state: _State, view: TrainView, cfg: TrainConfig, backend: Backe
     timing = cfg.timing
     state.gaussians.set_lr("means", _means_lr(step, cfg, timing.iters, state.strategy.options.extent))
     generator = torch.Generator(backend.device).manual_seed(cfg.seed * 7919 + step)
-    losses, out = _loss_and_backward(state, view, cfg, backend, min(cfg.sh_degree, step // timing.sh_increase_every),
-                                     timing.object_loss_pixels, generator)
+    losses, out = _loss_and_backward(
+        state,
+        view,
+        cfg,
+        backend,
+        min(cfg.sh_degree, step // timing.sh_increase_every),
+        timing.object_loss_pixels,
+        generator,
+    )
     if not math.isfinite(losses["loss"]):
         return losses
     state.strategy.after_backward(step, out, view.camera.width, view.camera.height)
@@ -241,29 +269,56 @@ def _train_step(state: _State, view: TrainView, cfg: TrainConfig, backend: Backe
     return losses
 
 
-def _loss_and_backward(state: _State, view: TrainView, cfg: TrainConfig, backend: Backend, sh_degree: int,
-                       obj_pixels: int, generator: torch.Generator) -> tuple[dict, RenderOutput]:
+def _loss_and_backward(
+    state: _State,
+    view: TrainView,
+    cfg: TrainConfig,
+    backend: Backend,
+    sh_degree: int,
+    obj_pixels: int,
+    generator: torch.Generator,
+) -> tuple[dict, RenderOutput]:
     """Render one view, compute the loss and back-propagate it (unless it is not finite)."""
     use_mask = view.mask is not None and cfg.gamma_obj != 0
-    out = render(state.gaussians.gaussians, view.camera, view.cam_from_world, sh_degree=sh_degree,
-                 background=background_image(state.environment, view.camera, view.cam_from_world),
-                 with_features=use_mask, feature_geometry_grad=cfg.geometry_from_masks, backend=backend)
+    out = render(
+        state.gaussians.gaussians,
+        view.camera,
+        view.cam_from_world,
+        sh_degree=sh_degree,
+        background=background_image(state.environment, view.camera, view.cam_from_world),
+        with_features=use_mask,
+        feature_geometry_grad=cfg.geometry_from_masks,
+        backend=backend,
+    )
     rgb_loss = photometric_loss(out.rgb, view.image, cfg.lambda_dssim)
-    obj = (object_loss(out.features, view.mask, state.classifier, obj_pixels, generator) if use_mask
-           else torch.zeros((), device=rgb_loss.device))
+    obj = (
+        object_loss(out.features, view.mask, state.classifier, obj_pixels, generator)
+        if use_mask
+        else torch.zeros((), device=rgb_loss.device)
+    )
     loss = rgb_loss + cfg.gamma_obj * obj
     if cfg.knn_reg > 0:
         g = state.gaussians.gaussians
-        loss = loss + cfg.knn_reg * knn_identity_loss(g.means, g.obj_feat, state.classifier, cfg.knn_samples,
-                                                      cfg.knn_k, generator)
+        loss = loss + cfg.knn_reg * knn_identity_loss(
+            g.means, g.obj_feat, state.classifier, cfg.knn_samples, cfg.knn_k, generator
+        )
     if torch.isfinite(loss):
         loss.backward()
     return {"loss": loss.item(), "rgb": rgb_loss.item(), "obj": obj.item(), "psnr": psnr(out.rgb, view.image)}, out
 
 
-def train(scene_dir: Path | str, run: Path | str, cfg: TrainConfig, *, resume: bool = False,
-          given: Collection[str] | None = None, stop_after: int | None = None, other_scene: bool = False,
-          cache_views: str = "auto", progress: bool = True) -> TrainResult:
+def train(
+    scene_dir: Path | str,
+    run: Path | str,
+    cfg: TrainConfig,
+    *,
+    resume: bool = False,
+    given: Collection[str] | None = None,
+    stop_after: int | None = None,
+    other_scene: bool = False,
+    cache_views: str = "auto",
+    progress: bool = True,
+) -> TrainResult:
     """Train 3D-GS with object features on a scene folder and write the run folder.
 
     Args:
@@ -293,40 +348,67 @@ def train(scene_dir: Path | str, run: Path | str, cfg: TrainConfig, *, resume: b
     try:
         with folder.lock():
             cfg, restore = _settled_config(folder, cfg, resume, given)
-            return _train_locked(folder, Path(scene_dir), cfg, restore, stop_after, other_scene, cache_views,
-                                 progress)
+            return _train_locked(folder, Path(scene_dir), cfg, restore, stop_after, other_scene, cache_views, progress)
     except BaseException:
         if created and not folder.config.exists():  # a start that wrote nothing leaves nothing
             shutil.rmtree(folder.root, ignore_errors=True)
         raise
 
 
-def _train_locked(folder: RunFolder, scene_dir: Path, cfg: TrainConfig, restore: bool, stop_after: int | None,
-                  other_scene: bool, cache_views: str, progress: bool) -> TrainResult:
+def _train_locked(
+    folder: RunFolder,
+    scene_dir: Path,
+    cfg: TrainConfig,
+    restore: bool,
+    stop_after: int | None,
+    other_scene: bool,
+    cache_views: str,
+    progress: bool,
+) -> TrainResult:
     backend = get_backend(cfg.backend)
     scene = load_scene(scene_dir, images=cfg.images, masks=cfg.masks)
     if cfg.masks is not None and scene.mask_dir is None:
-        raise InputError(f"{scene_dir / cfg.masks}: mask folder not found; build masks with `hqmask build` "
-                         "or train on colour alone with --masks none.")
+        raise InputError(
+            f"{scene_dir / cfg.masks}: mask folder not found; build masks with `hqmask build` "
+            "or train on colour alone with --masks none."
+        )
     if restore and not other_scene:
         difference = scene_difference(RunRecord.from_json(json.loads(folder.config.read_text())), scene)
         if difference is not None:
-            raise InputError(f"{scene_dir}: not the scene {folder.root} was trained on ({difference}); pass that "
-                             "scene, or --allow-other-scene to continue on this one.")
+            raise InputError(
+                f"{scene_dir}: not the scene {folder.root} was trained on ({difference}); pass that "
+                "scene, or --allow-other-scene to continue on this one."
+            )
     train_views = scene.split("train")
     if not train_views:
-        raise InputError(f"{scene_dir}: every view is a test view, none is left to train on; list fewer views "
-                         "under split.test in scene.json.")
+        raise InputError(
+            f"{scene_dir}: every view is a test view, none is left to train on; list fewer views "
+            "under split.test in scene.json."
+        )
     extent = camera_extent(scene.views)
-    views = TrainViews(train_views, lambda step: _view_at(step, len(train_views), cfg.seed), mode=cache_views,
-                       device=backend.device, progress=progress)
+    views = TrainViews(
+        train_views,
+        lambda step: _view_at(step, len(train_views), cfg.seed),
+        mode=cache_views,
+        device=backend.device,
+        progress=progress,
+    )
     try:
         state = _new_state(scene, cfg, train_views, extent, backend.device)
         if restore:
             state.load_state_dict(_latest_good_checkpoint(folder, backend.device))
-        write_json(folder.config, RunRecord(cfg, str(scene_dir.resolve()), backend.name, extent,
-                                            scene.views[0].camera.near, views.names,
-                                            scene_fingerprint(scene)).to_json())
+        write_json(
+            folder.config,
+            RunRecord(
+                cfg,
+                str(scene_dir.resolve()),
+                backend.name,
+                extent,
+                scene.views[0].camera.near,
+                views.names,
+                scene_fingerprint(scene),
+            ).to_json(),
+        )
         return _loop(folder, state, views, cfg, backend, stop_after, progress)
     finally:
         views.close()
@@ -343,19 +425,36 @@ def _warm_up(backend: Backend, progress: bool) -> None:
     xyz = np.array([[0.0, 0.0, 2.0], [0.2, 0.0, 2.5], [0.0, 0.2, 3.0], [-0.2, 0.0, 2.2]])
     tiny = gaussians_from_points(xyz, np.full((4, 3), 128, np.uint8), initial_opacity=0.5)
     tiny = Gaussians(**{k: v.clone().requires_grad_(True) for k, v in tiny.tensors().items()})
-    out = render(tiny, PinholeCamera(16, 16, 16.0, 16.0, 8.0, 8.0), torch.eye(4)[:3], with_features=True,
-                 feature_geometry_grad=False, backend=backend)
+    out = render(
+        tiny,
+        PinholeCamera(16, 16, 16.0, 16.0, 8.0, 8.0),
+        torch.eye(4)[:3],
+        with_features=True,
+        feature_geometry_grad=False,
+        backend=backend,
+    )
     (out.rgb.sum() + out.features.sum()).backward()
 
 
-def _loop(folder: RunFolder, state: _State, views: TrainViews, cfg: TrainConfig, backend: Backend,
-          stop_after: int | None, progress: bool) -> TrainResult:
+def _loop(
+    folder: RunFolder,
+    state: _State,
+    views: TrainViews,
+    cfg: TrainConfig,
+    backend: Backend,
+    stop_after: int | None,
+    progress: bool,
+) -> TrainResult:
     timing = cfg.timing
     _warm_up(backend, progress)
     last = min(timing.iters, stop_after) if stop_after is not None else timing.iters
     start_time = time.perf_counter()
-    with stop_requests() as stop, tqdm(total=timing.iters, initial=state.step, desc="training", unit="it",
-                                       disable=not progress, dynamic_ncols=True) as bar:
+    with (
+        stop_requests() as stop,
+        tqdm(
+            total=timing.iters, initial=state.step, desc="training", unit="it", disable=not progress, dynamic_ncols=True
+        ) as bar,
+    ):
         while state.step < last:
             step = state.step + 1
             losses = _train_step(state, views.at_step(step), cfg, backend, step)
@@ -364,7 +463,8 @@ def _loop(folder: RunFolder, state: _State, views: TrainViews, cfg: TrainConfig,
                 raise TrainingDiverged(
                     f"training diverged at step {step} (loss {losses['loss']}); "
                     + (f"the last good checkpoint is {kept[-1]}; " if kept else "no checkpoint was written yet; ")
-                    + "lower the learning rates and --resume, or start again.")
+                    + "lower the learning rates and --resume, or start again."
+                )
             state.step = step
             if step % LOG_EVERY == 0 or step == timing.iters:
                 state.history.append({"step": step, **losses, "gaussians": len(state.gaussians)})
@@ -374,10 +474,17 @@ def _loop(folder: RunFolder, state: _State, views: TrainViews, cfg: TrainConfig,
                 path = _save_checkpoint(folder, state)
             if stop.requested and step < last:
                 bar.close()
-                raise Interrupted(f"{stop.signal_name} at step {step} of {timing.iters}: checkpoint {path} written; "
-                                  f"continue with `gsseg train SCENE --out {folder.root} --resume`.")
+                raise Interrupted(
+                    f"{stop.signal_name} at step {step} of {timing.iters}: checkpoint {path} written; "
+                    f"continue with `gsseg train SCENE --out {folder.root} --resume`."
+                )
     finished = state.step >= timing.iters
     if finished:
         _export(folder, state)
-    return TrainResult(run=folder.root, step=state.step, num_gaussians=len(state.gaussians),
-                       seconds=time.perf_counter() - start_time, finished=finished)
+    return TrainResult(
+        run=folder.root,
+        step=state.step,
+        num_gaussians=len(state.gaussians),
+        seconds=time.perf_counter() - start_time,
+        finished=finished,
+    )

@@ -52,11 +52,11 @@ class _Pixels:
     def moved_into(self, store: np.ndarray, offset: int) -> _Pixels:
         """The same pixels as views of ``store`` from ``offset`` (4 bytes a pixel: colour, then IDs)."""
         h, w = self.image.shape[:2]
-        image = store[offset: offset + 3 * h * w].reshape(h, w, 3)
+        image = store[offset : offset + 3 * h * w].reshape(h, w, 3)
         image[:] = self.image
         mask = None
         if self.mask is not None:
-            mask = store[offset + 3 * h * w: offset + 4 * h * w].reshape(h, w)
+            mask = store[offset + 3 * h * w : offset + 4 * h * w].reshape(h, w)
             mask[:] = self.mask
         return _Pixels(image, mask)
 
@@ -93,8 +93,16 @@ class TrainViews:
     refused before the first step.
     """
 
-    def __init__(self, views: list[View], schedule: Callable[[int], int], *, mode: str = "auto",
-                 device: str = "cpu", prefetch: int = 3, progress: bool = True) -> None:
+    def __init__(
+        self,
+        views: list[View],
+        schedule: Callable[[int], int],
+        *,
+        mode: str = "auto",
+        device: str = "cpu",
+        prefetch: int = 3,
+        progress: bool = True,
+    ) -> None:
         self.views = views
         self.schedule = schedule
         self.mode = resolve_cache_mode(mode, views)

@@ -26,7 +26,6 @@ from gsseg.run import load_run
 from gsseg.segment.reassign import METHODS
 from gsseg.viewer.session import ViewCamera, ViewerSession, browser_camera
 
-
 RESOLVE_TIMEOUT_S = 5.0
 
 
@@ -39,8 +38,10 @@ def resolve_host(host: str, timeout: float = RESOLVE_TIMEOUT_S) -> str:
     lookup.join(timeout)
     if not found or isinstance(found[0], OSError):
         why = f"{found[0].strerror or found[0]}" if found else f"no answer in {timeout:.0f} s"
-        raise InputError(f"cannot serve on {host} ({why}); pass an address of this machine with --host, "
-                         "such as 127.0.0.1 or 0.0.0.0.")
+        raise InputError(
+            f"cannot serve on {host} ({why}); pass an address of this machine with --host, "
+            "such as 127.0.0.1 or 0.0.0.0."
+        )
     return found[0]
 
 
@@ -59,8 +60,10 @@ def require_free_port(host: str, port: int) -> None:
         try:
             s.bind((address, port))
         except OSError as e:
-            raise InputError(f"cannot serve on {host}:{port} ({e.strerror}); pass another --port or --host, or stop "
-                             "the program that uses it.") from None
+            raise InputError(
+                f"cannot serve on {host}:{port} ({e.strerror}); pass another --port or --host, or stop "
+                "the program that uses it."
+            ) from None
 
 
 class Viewer:
@@ -73,8 +76,9 @@ class Viewer:
             stretched by the browser.
     """
 
-    def __init__(self, session: ViewerSession, *, host: str = "127.0.0.1", port: int = 8080,
-                 max_size: int = 640) -> None:
+    def __init__(
+        self, session: ViewerSession, *, host: str = "127.0.0.1", port: int = 8080, max_size: int = 640
+    ) -> None:
         import viser
 
         require_free_port(host, port)
@@ -129,16 +133,24 @@ class Viewer:
     def client_view(self, client) -> ViewCamera:
         """The pinhole view of a browser's current camera."""
         cam = client.camera
-        return browser_camera(cam.wxyz, cam.position, cam.fov, cam.image_width, cam.image_height,
-                              max_size=self.max_size, near=self.session.scene.views[0].camera.near)
+        return browser_camera(
+            cam.wxyz,
+            cam.position,
+            cam.fov,
+            cam.image_width,
+            cam.image_height,
+            max_size=self.max_size,
+            near=self.session.scene.views[0].camera.near,
+        )
 
     # --- browser tabs ---------------------------------------------------------------------
 
     def _connect(self, client) -> None:
         dirty = self._dirty[client.client_id] = threading.Event()
         client.camera.on_update(lambda _: dirty.set())
-        threading.Thread(target=self._render_loop, args=(client, dirty), daemon=True,
-                         name=f"render-{client.client_id}").start()
+        threading.Thread(
+            target=self._render_loop, args=(client, dirty), daemon=True, name=f"render-{client.client_id}"
+        ).start()
         self.go_to(self._view.value, [client])
 
     def _render_loop(self, client, dirty: threading.Event) -> None:
@@ -180,10 +192,17 @@ class Viewer:
         self._frustums = []
         for view, centre in zip(self.views, centres):
             wxyz = Rotation.from_matrix(view.cam_from_world[:3, :3].T).as_quat(scalar_first=True)
-            self._frustums.append(self.server.scene.add_camera_frustum(
-                f"/cameras/{view.stem}", fov=float(2 * np.arctan(view.camera.height / 2 / view.camera.fy)),
-                aspect=view.camera.width / view.camera.height, scale=scale, wxyz=wxyz, position=centre,
-                color=(90, 90, 90)))
+            self._frustums.append(
+                self.server.scene.add_camera_frustum(
+                    f"/cameras/{view.stem}",
+                    fov=float(2 * np.arctan(view.camera.height / 2 / view.camera.fy)),
+                    aspect=view.camera.width / view.camera.height,
+                    scale=scale,
+                    wxyz=wxyz,
+                    position=centre,
+                    color=(90, 90, 90),
+                )
+            )
 
     def _add_panel(self) -> None:
         gui, session = self.server.gui, self.session
@@ -201,8 +220,10 @@ class Viewer:
 
     def _add_edit_controls(self, off: bool) -> None:
         gui, session = self.server.gui, self.session
-        buttons = {op: gui.add_button(label, disabled=off)
-                   for op, label in (("remove", "Remove"), ("extract", "Extract"), ("recolor", "Recolour"))}
+        buttons = {
+            op: gui.add_button(label, disabled=off)
+            for op, label in (("remove", "Remove"), ("extract", "Extract"), ("recolor", "Recolour"))
+        }
         colour = gui.add_rgb("Colour", (230, 60, 60), disabled=off)
         undo = gui.add_button("Undo", disabled=off)
         name = gui.add_text("Edit name", "viewer", disabled=off)
@@ -274,8 +295,10 @@ class Viewer:
     def _header_text(self) -> str:
         """The run, the Gaussians shown now (after the edits) and the backend."""
         shown = len(self.session.current()[0])
-        return (f"**{html.escape(str(self.session.run.root))}**: {shown:,} Gaussians, rendered by the "
-                f"`{self.session.backend.name}` backend.")
+        return (
+            f"**{html.escape(str(self.session.run.root))}**: {shown:,} Gaussians, rendered by the "
+            f"`{self.session.backend.name}` backend."
+        )
 
     def _changed(self) -> None:
         self._header.content = self._header_text()
@@ -292,12 +315,23 @@ class Viewer:
         palette = label_palette()
         cells = "".join(
             f"<tr><td>{o}</td><td><span style='display:inline-block;width:1em;height:1em;"
-            f"background:rgb{tuple(int(c) for c in palette[o])}'></span></td><td>{n:,}</td></tr>" for o, n in rows)
+            f"background:rgb{tuple(int(c) for c in palette[o])}'></span></td><td>{n:,}</td></tr>"
+            for o, n in rows
+        )
         return f"<table><tr><th>ID</th><th></th><th>Gaussians</th></tr>{cells}</table>"
 
 
-def serve(run_dir: Path | str, *, scene_dir: Path | str | None = None, host: str = "127.0.0.1", port: int = 8080,
-          max_size: int = 640, backend: str = "auto", other_scene: bool = False, on_ready=print) -> None:
+def serve(
+    run_dir: Path | str,
+    *,
+    scene_dir: Path | str | None = None,
+    host: str = "127.0.0.1",
+    port: int = 8080,
+    max_size: int = 640,
+    backend: str = "auto",
+    other_scene: bool = False,
+    on_ready=print,
+) -> None:
     """Serve a run until Ctrl-C or SIGTERM; ``on_ready`` is called with a line saying where;
     ``other_scene``: show it on a scene other than the run's."""
     # A frame queued for a tab that closed meanwhile is dropped; viser warns of it with a source line.

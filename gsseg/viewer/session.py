@@ -39,8 +39,9 @@ class ViewCamera:
     cam_from_world: np.ndarray
 
 
-def browser_camera(wxyz: np.ndarray, position: np.ndarray, fov_y: float, width: int, height: int, *,
-                   max_size: int, near: float) -> ViewCamera:
+def browser_camera(
+    wxyz: np.ndarray, position: np.ndarray, fov_y: float, width: int, height: int, *, max_size: int, near: float
+) -> ViewCamera:
     """The pinhole view of viser's camera, at most ``max_size`` pixels on its long side.
 
     Args:
@@ -78,8 +79,15 @@ class ViewerSession:
     model is shown but ``segments_missing`` says how to make labels and selection is off.
     """
 
-    def __init__(self, run: Run, *, scene_dir: Path | str | None = None, masks: str | None = None,
-                 backend: str = "auto", k: int = 20) -> None:
+    def __init__(
+        self,
+        run: Run,
+        *,
+        scene_dir: Path | str | None = None,
+        masks: str | None = None,
+        backend: str = "auto",
+        k: int = 20,
+    ) -> None:
         self.run = run
         self.scene_dir = scene_dir
         self.masks = masks or run.masks
@@ -101,8 +109,10 @@ class ViewerSession:
         """The sentence shown while there are no labels, None once there are."""
         if self.segmentation is not None:
             return None
-        return (f"{self.run.folder.labels} does not exist: segments are off. Run `gsseg segment {self.run.root}` "
-                "and open the viewer again to select and edit objects.")
+        return (
+            f"{self.run.folder.labels} does not exist: segments are off. Run `gsseg segment {self.run.root}` "
+            "and open the viewer again to select and edit objects."
+        )
 
     def current(self) -> tuple[Gaussians, Segmentation | None]:
         """The model after every edit step, and its labels (None without labels)."""
@@ -150,8 +160,14 @@ class ViewerSession:
             self.clicks.append((point, mode == "add"))
             positives = np.stack([p for p, positive in self.clicks if positive])
             negatives = [p for p, positive in self.clicks if not positive]
-            self._click_selection = select_by_points(g.means.numpy(), g.obj_feat.detach().numpy(), seg.labels,
-                                                     positives, np.stack(negatives) if negatives else None, self.k)
+            self._click_selection = select_by_points(
+                g.means.numpy(),
+                g.obj_feat.detach().numpy(),
+                seg.labels,
+                positives,
+                np.stack(negatives) if negatives else None,
+                self.k,
+            )
             self.selected = None
             return None
 
@@ -175,8 +191,12 @@ class ViewerSession:
             selection = self.selection()
             if selection is None:
                 raise InputError("select an object first: click on it in the scene.")
-            step = EditStep(op, self.selected, None if color is None else tuple(int(c) for c in color),
-                            None if self.selected is not None else selection.copy())
+            step = EditStep(
+                op,
+                self.selected,
+                None if color is None else tuple(int(c) for c in color),
+                None if self.selected is not None else selection.copy(),
+            )
             self.steps.append(step)
             self._current = None
             if op == "remove":
@@ -201,8 +221,9 @@ class ViewerSession:
         when absent), with the 3D regularisations of the labels shown. The seconds the
         reassignment took, the matrix aside."""
         shown = self.segmentation
-        options = LabelOptions(method=method, gamma_p=gamma_p, smooth=shown.smooth if shown else 0,
-                               fill=shown.fill if shown else False)
+        options = LabelOptions(
+            method=method, gamma_p=gamma_p, smooth=shown.smooth if shown else 0, fill=shown.fill if shown else False
+        )
         contributions = self.contributions()
         start = time.perf_counter()
         segmentation = label_gaussians(self.run, contributions, options)
@@ -224,11 +245,14 @@ class ViewerSession:
                 if cached is not None and cached.model == self.run.fingerprint:
                     self._contributions = cached
                 else:
-                    computed = mask_contributions(self.run, self.scene_dir, masks=self.masks,
-                                                  backend=self.backend, progress=False)
+                    computed = mask_contributions(
+                        self.run, self.scene_dir, masks=self.masks, backend=self.backend, progress=False
+                    )
                     if not len(computed.labels):
-                        raise InputError(f"the run's scene holds no {self.masks} masks to relabel from; build them "
-                                         "with `hqmask build`.")
+                        raise InputError(
+                            f"the run's scene holds no {self.masks} masks to relabel from; build them "
+                            "with `hqmask build`."
+                        )
                     with self.run.folder.lock():
                         computed.save(path)
                     self._contributions = computed
@@ -251,12 +275,30 @@ class ViewerSession:
             raise InputError("nothing to save: remove, extract or recolour an object first.")
         g, _ = self.current()
         seg = self.segmentation
-        record = {"steps": [{"op": s.op, "object_id": s.object_id, "color": s.color,
-                             **({} if s.selection is None else {"selected_gaussians": int(s.selection.sum())})}
-                            for s in steps],
-                  "labels": seg.settings(), "gaussians": len(g)}
-        return write_edit(self.run, g, self.run.folder.edit(name), record, scene=self.scene, split=split,
-                          backend=self.backend, overwrite=overwrite, progress=False)
+        record = {
+            "steps": [
+                {
+                    "op": s.op,
+                    "object_id": s.object_id,
+                    "color": s.color,
+                    **({} if s.selection is None else {"selected_gaussians": int(s.selection.sum())}),
+                }
+                for s in steps
+            ],
+            "labels": seg.settings(),
+            "gaussians": len(g),
+        }
+        return write_edit(
+            self.run,
+            g,
+            self.run.folder.edit(name),
+            record,
+            scene=self.scene,
+            split=split,
+            backend=self.backend,
+            overwrite=overwrite,
+            progress=False,
+        )
 
 
 def _painted(g: Gaussians, seg: Segmentation, by_label: bool, selected: np.ndarray | None) -> Gaussians:

@@ -84,8 +84,9 @@ def triangulate(sightings: list[Sighting], rounds: int = 3) -> Anchor | None:
             return None
         sizes = np.array([np.sqrt(s.area / np.pi) * d / s.focal for s, d in zip(sightings, depths)])
         radius = float(np.median(sizes))
-        off = np.array([np.linalg.norm((point - s.origin) - ((point - s.origin) @ s.direction) * s.direction)
-                        for s in sightings])
+        off = np.array(
+            [np.linalg.norm((point - s.origin) - ((point - s.origin) @ s.direction) * s.direction) for s in sightings]
+        )
         weights = prior / (1.0 + (off / max(radius, 1e-12)) ** 2)
     return Anchor(point, radius, spread)
 

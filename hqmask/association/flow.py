@@ -115,12 +115,12 @@ def _two_opt(order: list[int], cost: np.ndarray) -> list[int]:
         improved = False
         for i in range(n - 1):
             a, b = tour[i], tour[i + 1]
-            c, d = tour[i + 2:], np.roll(tour, -1)[i + 2:]
+            c, d = tour[i + 2 :], np.roll(tour, -1)[i + 2 :]
             gain = full[a, b] + full[c, d] - full[a, c] - full[b, d]
             best = int(np.argmax(gain))
             if gain[best] > 1e-12:
                 j = i + 2 + best
-                tour[i + 1: j + 1] = tour[i + 1: j + 1][::-1]
+                tour[i + 1 : j + 1] = tour[i + 1 : j + 1][::-1]
                 improved = True
     k = int(np.flatnonzero(tour == n)[0])
     return [int(x) for x in np.roll(tour, -k)[1:]]
@@ -229,9 +229,15 @@ class _Pass:
         for j, t in enumerate(ids):
             inter[:, j] = np.bincount(seg[self.tracks[t].mask > 0], minlength=n + 1)
         area = np.bincount(seg.ravel(), minlength=n + 1).astype(float)
-        return _ViewMatch(seg, area, _color_histograms(self.images[v], seg, n), ids, inter,
-                          np.array([float(np.count_nonzero(self.tracks[t].mask)) for t in ids]),
-                          self._allowed(v, seg, area, ids))
+        return _ViewMatch(
+            seg,
+            area,
+            _color_histograms(self.images[v], seg, n),
+            ids,
+            inter,
+            np.array([float(np.count_nonzero(self.tracks[t].mask)) for t in ids]),
+            self._allowed(v, seg, area, ids),
+        )
 
     def _allowed(self, v: int, seg: np.ndarray, area: np.ndarray, ids: list[int]) -> np.ndarray:
         """(n, T) bool: where segment ``i + 1`` agrees with the poses of track ``ids[j]``: near
@@ -242,12 +248,16 @@ class _Pass:
             return allowed
         rows, cols = np.indices(seg.shape)
         count = np.maximum(area[1:], 1)
-        center = np.stack([np.bincount(seg.ravel(), rows.ravel(), n + 1)[1:] / count,
-                           np.bincount(seg.ravel(), cols.ravel(), n + 1)[1:] / count], 1)
+        center = np.stack(
+            [
+                np.bincount(seg.ravel(), rows.ravel(), n + 1)[1:] / count,
+                np.bincount(seg.ravel(), cols.ravel(), n + 1)[1:] / count,
+            ],
+            1,
+        )
         radius = np.sqrt(count / np.pi)
         view = self.views[v]
-        here = [sighting(v, seg == i + 1, view.camera, view.cam_from_world) if area[i + 1] else None
-                for i in range(n)]
+        here = [sighting(v, seg == i + 1, view.camera, view.cam_from_world) if area[i + 1] else None for i in range(n)]
         for j, t in enumerate(ids):
             anchor = self.anchors.get(t)
             if anchor is None:
@@ -259,8 +269,9 @@ class _Pass:
             if x[2] <= 0:
                 allowed[:, j] = False
                 continue
-            pixel = np.array([view.camera.fy * x[1] / x[2] + view.camera.cy,
-                              view.camera.fx * x[0] / x[2] + view.camera.cx])
+            pixel = np.array(
+                [view.camera.fy * x[1] / x[2] + view.camera.cy, view.camera.fx * x[0] / x[2] + view.camera.cx]
+            )
             allowed[:, j] = np.linalg.norm(center + 0.5 - pixel, axis=1) <= self.options.gate * radius
         return allowed
 
@@ -273,8 +284,8 @@ class _Pass:
         for r, c in zip(*linear_sum_assignment(-iou)):
             if iou[r, c] >= o.min_iou:
                 assign[local[r]] = ids[c]
-        matched = {int(assign[l]) for l in local if assign[l] >= 0}
-        left = [r for r, l in enumerate(local) if assign[l] < 0 and view.area[l] > 0]
+        matched = {int(assign[local_id]) for local_id in local if assign[local_id] >= 0}
+        left = [r for r, local_id in enumerate(local) if assign[local_id] < 0 and view.area[local_id] > 0]
         free = [j for j, t in enumerate(ids) if t not in matched]
         if left and free:
             # colours shared between each leftover segment and each free track
@@ -295,21 +306,21 @@ class _Pass:
                         matched.add(ids[free[cols[c]]])
         inside = {}
         for r in left:
-            l = local[r]
-            share = view.inter[l] / view.area[l]
+            local_id = local[r]
+            share = view.inter[local_id] / view.area[local_id]
             j = int(np.argmax(share))
-            if assign[l] < 0 and share[j] >= o.contain and ids[j] in matched and view.allowed[r, j]:
-                inside[int(l)] = ids[j]
+            if assign[local_id] < 0 and share[j] >= o.contain and ids[j] in matched and view.allowed[r, j]:
+                inside[int(local_id)] = ids[j]
         return inside
 
     def _new_tracks(self, view: _ViewMatch, assign: np.ndarray, inside: dict[int, int]) -> None:
         """Step 4: every segment left unmatched starts a track; a piece born inside a matched
         track counts as one view showing the two as one."""
-        for l in range(1, len(view.area)):
-            if assign[l] < 0 and view.area[l] > 0:
-                assign[l] = self.next_id
-                if l in inside:
-                    self.together[(inside[l], self.next_id)] += 1
+        for local_id in range(1, len(view.area)):
+            if assign[local_id] < 0 and view.area[local_id] > 0:
+                assign[local_id] = self.next_id
+                if local_id in inside:
+                    self.together[(inside[local_id], self.next_id)] += 1
                 self.next_id += 1
 
     def _note_holders(self, view: _ViewMatch, assign: np.ndarray) -> None:
@@ -319,13 +330,13 @@ class _Pass:
             return
         here = {int(a) for a in assign[1:] if a >= 0}
         share = view.inter[1:] / np.maximum(view.track_area[None], 1)
-        for r, l in enumerate(range(1, len(view.area))):
-            if assign[l] < 0:
+        for r, local_id in enumerate(range(1, len(view.area))):
+            if assign[local_id] < 0:
                 continue
             for j in np.flatnonzero((share[r] >= self.options.contain) & view.allowed[r]):
                 t = view.track_ids[j]
                 if t not in here and self.tracks[t].age == 0:
-                    self.together[(min(t, int(assign[l])), max(t, int(assign[l])))] += 1
+                    self.together[(min(t, int(assign[local_id])), max(t, int(assign[local_id])))] += 1
 
     def _remember(self, v: int, view: _ViewMatch, assign: np.ndarray) -> None:
         """Step 5: matched tracks take this view's masks and colours; the others age and are
@@ -337,8 +348,9 @@ class _Pass:
             colors = view.hist[mine].sum(0)
             mask = np.isin(view.segments, mine)
             self.tracks[t] = _Track(mask.astype(np.uint8), colors / max(colors.sum(), 1.0))
-            self.sightings.setdefault(t, []).append(sighting(v, mask, self.views[v].camera,
-                                                             self.views[v].cam_from_world))
+            self.sightings.setdefault(t, []).append(
+                sighting(v, mask, self.views[v].camera, self.views[v].cam_from_world)
+            )
             self.anchors[t] = triangulate(self.sightings[t])
         for t in [t for t, tr in self.tracks.items() if tr.age > self.options.memory]:
             del self.tracks[t]
@@ -358,8 +370,9 @@ class _Pass:
         return [np.where(a >= 0, final[np.maximum(a, 0)], -1) for a in track_of]
 
 
-def _merge_passes(forward: list[np.ndarray], backward: list[np.ndarray], segments: list[np.ndarray],
-                  consensus: float) -> list[np.ndarray]:
+def _merge_passes(
+    forward: list[np.ndarray], backward: list[np.ndarray], segments: list[np.ndarray], consensus: float
+) -> list[np.ndarray]:
     """Bidirectional consensus: forward and backward tracks sharing at least ``consensus`` of
     the smaller one's pixels are one object, largest overlap first, never two segments of one
     view in one object. Returns per view the (n_v + 1,) merged track of each local segment."""
@@ -409,8 +422,9 @@ class _TrackViews:
         return hits / len(self.masks)
 
 
-def _track_views(tracks_of: list[np.ndarray], segments: list[np.ndarray], images: list[np.ndarray],
-                 views: list[CameraPose]) -> dict[int, _TrackViews]:
+def _track_views(
+    tracks_of: list[np.ndarray], segments: list[np.ndarray], images: list[np.ndarray], views: list[CameraPose]
+) -> dict[int, _TrackViews]:
     found: dict[int, _TrackViews] = {}
     for v, (g, seg) in enumerate(zip(tracks_of, segments)):
         hist = _color_histograms(images[v], seg, len(g) - 1)
@@ -422,8 +436,9 @@ def _track_views(tracks_of: list[np.ndarray], segments: list[np.ndarray], images
             entry.colors += colors / max(colors.sum(), 1.0)
     for entry in found.values():
         entry.colors /= len(entry.masks)
-        entry.anchor = triangulate([sighting(v, m, views[v].camera, views[v].cam_from_world)
-                                    for v, m in entry.masks.items()])
+        entry.anchor = triangulate(
+            [sighting(v, m, views[v].camera, views[v].cam_from_world) for v, m in entry.masks.items()]
+        )
     return found
 
 
@@ -441,15 +456,20 @@ def _touch(a: np.ndarray, b: np.ndarray) -> bool:
     return bool(np.any(grown & b))
 
 
-def _join_by_anchors(tracks_of: list[np.ndarray], segments: list[np.ndarray], images: list[np.ndarray],
-                     views: list[CameraPose], options: FlowOptions) -> list[np.ndarray]:
+def _join_by_anchors(
+    tracks_of: list[np.ndarray],
+    segments: list[np.ndarray],
+    images: list[np.ndarray],
+    views: list[CameraPose],
+    options: FlowOptions,
+) -> list[np.ndarray]:
     """Tracks of one object that the flow could not link, joined by their anchors (see the
     module docstring). Returns per view the (n_v + 1,) joined track of each local segment."""
     tracks = _track_views(tracks_of, segments, images, views)
     ids = sorted(tracks)
     pairs = []
     for i, a in enumerate(ids):
-        for b in ids[i + 1:]:
+        for b in ids[i + 1 :]:
             ta, tb = tracks[a], tracks[b]
             if ta.anchor is None and tb.anchor is None:
                 continue
@@ -458,8 +478,10 @@ def _join_by_anchors(tracks_of: list[np.ndarray], segments: list[np.ndarray], im
                 continue
             if ta.anchor is not None and tb.anchor is not None:
                 gap = np.linalg.norm(ta.anchor.point - tb.anchor.point) / max(ta.anchor.radius, tb.anchor.radius)
-                if gap <= 1.0 and min(tb.holds(ta.anchor.point, views), ta.holds(tb.anchor.point, views)) \
-                        >= options.anchor_inside:
+                if (
+                    gap <= 1.0
+                    and min(tb.holds(ta.anchor.point, views), ta.holds(tb.anchor.point, views)) >= options.anchor_inside
+                ):
                     pairs.append((gap, len(shared), a, b))
                 continue
             seen_once, anchored = (ta, tb) if ta.anchor is None else (tb, ta)

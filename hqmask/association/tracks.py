@@ -43,8 +43,9 @@ def _segment_of_points(view: View, seg: np.ndarray, n_points: int) -> np.ndarray
     return out
 
 
-def _split_by_points(view: View, region: np.ndarray, pts: np.ndarray, objs: np.ndarray,
-                     ratio: float, min_points: int) -> list[tuple[int, np.ndarray]]:
+def _split_by_points(
+    view: View, region: np.ndarray, pts: np.ndarray, objs: np.ndarray, ratio: float, min_points: int
+) -> list[tuple[int, np.ndarray]]:
     """[(object, pixel mask)] partitioning ``region`` by the object (-2: background) of the
     nearest SfM point when it has two or more parts; else []. An object is a part when it
     holds ``ratio`` of the segment's object points, background when it holds ``ratio`` of all
@@ -139,8 +140,15 @@ def associate_tracks(
     """
     centers = np.stack([v.center for v in views])
     order = pose_order(centers, np.stack([v.cam_from_world[2, :3] for v in views]))
-    ids = _associate([views[k] for k in order], [segments[k] for k in order], n_points, link_ratio=link_ratio,
-                     min_shared=min_shared, split_ratio=split_ratio, background_vote=background_vote)
+    ids = _associate(
+        [views[k] for k in order],
+        [segments[k] for k in order],
+        n_points,
+        link_ratio=link_ratio,
+        min_shared=min_shared,
+        split_ratio=split_ratio,
+        background_vote=background_vote,
+    )
     out: list[np.ndarray] = [np.empty(0)] * len(views)
     for k, m in zip(order, ids):
         out[k] = m
@@ -190,9 +198,14 @@ class _Graph:
         shared = sparse.triu(incidence @ incidence.T, k=1).tocoo()
         seen_by = (incidence @ visible.T).toarray()  # (nodes, views): points of a node seen in a view
         x, y, count = shared.row, shared.col, shared.data
-        keep = ((self.view_of[x] != self.view_of[y]) & ~self.is_background[x] & ~self.is_background[y]
-                & (count >= min_shared) & (count >= link_ratio * seen_by[x, self.view_of[y]])
-                & (count >= link_ratio * seen_by[y, self.view_of[x]]))
+        keep = (
+            (self.view_of[x] != self.view_of[y])
+            & ~self.is_background[x]
+            & ~self.is_background[y]
+            & (count >= min_shared)
+            & (count >= link_ratio * seen_by[x, self.view_of[y]])
+            & (count >= link_ratio * seen_by[y, self.view_of[x]])
+        )
         return [(int(c), int(a), int(b)) for c, a, b in zip(count[keep], x[keep], y[keep])]
 
 
@@ -200,7 +213,7 @@ def _core_objects(graph: _Graph, links: list[tuple[int, int, int]]) -> tuple[np.
     """Step 2: links taken strongest first into a union-find that never holds two segments of
     one view. Returns each node's root (N,) and whether it belongs to a core object (N,)."""
     union = ViewExclusiveUnion([{int(v)} for v in graph.view_of])
-    for _, x, y in sorted(links, key=lambda l: (-l[0], l[1], l[2])):
+    for _, x, y in sorted(links, key=lambda link: (-link[0], link[1], link[2])):
         union.union(x, y)
     root = union.roots()
     members = defaultdict(int)
@@ -238,8 +251,16 @@ def _point_objects(graph: _Graph, obj_of_node: np.ndarray, background_vote: floa
     return {p: max(c.items(), key=lambda kv: (kv[1], -kv[0]))[0] for p, c in votes.items()}
 
 
-def _label_view(view: View, seg: np.ndarray, v: int, graph: _Graph, obj_of_node: np.ndarray,
-                point_obj: dict[int, int], split_ratio: float, min_shared: int) -> tuple[np.ndarray, np.ndarray]:
+def _label_view(
+    view: View,
+    seg: np.ndarray,
+    v: int,
+    graph: _Graph,
+    obj_of_node: np.ndarray,
+    point_obj: dict[int, int],
+    split_ratio: float,
+    min_shared: int,
+) -> tuple[np.ndarray, np.ndarray]:
     """Steps 4-5 for one view: the global object of each local segment, after splitting the
     segments whose points belong to several objects. Returns the (possibly split) segment
     map and the (n + 1,) objects of its segments (-1: background)."""
@@ -283,6 +304,8 @@ def _associate(
     root, core = _core_objects(graph, graph.links(link_ratio, min_shared))
     obj_of_node = _join_pieces(graph, root, core)
     point_obj = _point_objects(graph, obj_of_node, background_vote)
-    labelled = [_label_view(view, seg, v, graph, obj_of_node, point_obj, split_ratio, min_shared)
-                for v, (view, seg) in enumerate(zip(views, segments))]
+    labelled = [
+        _label_view(view, seg, v, graph, obj_of_node, point_obj, split_ratio, min_shared)
+        for v, (view, seg) in enumerate(zip(views, segments))
+    ]
     return compact_ids([g for _, g in labelled], [seg for seg, _ in labelled])

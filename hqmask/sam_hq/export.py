@@ -20,8 +20,8 @@ import torch
 from torch import nn
 
 from dataset_tools.atomic import atomic_directory
-from dataset_tools.overlap import refuse_overlap
 from dataset_tools.errors import InputError
+from dataset_tools.overlap import refuse_overlap
 from hqmask.sam_hq.model import DECODER, DECODER_OUTPUTS, ENCODER, ENCODER_OUTPUTS, MODEL_JSON, ModelInfo
 
 MODEL_TYPES = ("vit_tiny", "vit_b", "vit_l", "vit_h")
@@ -40,17 +40,32 @@ class StackedEncoder(nn.Module):
         return embeddings, torch.stack(list(interm))
 
 
-def _export(module: nn.Module, inputs: dict[str, torch.Tensor], outputs: tuple[str, ...], path: Path, opset: int,
-            dynamic_axes: dict[str, dict[int, str]]) -> None:
+def _export(
+    module: nn.Module,
+    inputs: dict[str, torch.Tensor],
+    outputs: tuple[str, ...],
+    path: Path,
+    opset: int,
+    dynamic_axes: dict[str, dict[int, str]],
+) -> None:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         torch.onnx.export(
-            module, tuple(inputs.values()), str(path), input_names=list(inputs), output_names=list(outputs),
-            opset_version=opset, do_constant_folding=True, dynamic_axes=dynamic_axes, dynamo=False,
+            module,
+            tuple(inputs.values()),
+            str(path),
+            input_names=list(inputs),
+            output_names=list(outputs),
+            opset_version=opset,
+            do_constant_folding=True,
+            dynamic_axes=dynamic_axes,
+            dynamo=False,
         )
 
 
-def _decoder_inputs(embeddings: torch.Tensor, interm: torch.Tensor, prompts: int, image_size: int) -> dict[str, torch.Tensor]:
+def _decoder_inputs(
+    embeddings: torch.Tensor, interm: torch.Tensor, prompts: int, image_size: int
+) -> dict[str, torch.Tensor]:
     g = torch.Generator().manual_seed(0)
     return {
         "image_embeddings": embeddings,
@@ -81,7 +96,9 @@ def _batch_matches_single(path: Path, inputs: dict[str, torch.Tensor]) -> bool:
     return True
 
 
-def export_modules(encoder: nn.Module, decoder: nn.Module, info: ModelInfo, out_dir: Path | str, *, overwrite: bool = False) -> Path:
+def export_modules(
+    encoder: nn.Module, decoder: nn.Module, info: ModelInfo, out_dir: Path | str, *, overwrite: bool = False
+) -> Path:
     """Export a SAM-HQ-shaped encoder/decoder pair to ``out_dir`` (written atomically).
 
     Args:
@@ -102,9 +119,13 @@ def export_modules(encoder: nn.Module, decoder: nn.Module, info: ModelInfo, out_
         dynamic = {"point_coords": {0: "prompts", 1: "num_points"}, "point_labels": {0: "prompts", 1: "num_points"}}
         _export(decoder, inputs, DECODER_OUTPUTS, tmp / DECODER, info.opset, dynamic)
         if not _batch_matches_single(tmp / DECODER, inputs):
-            warnings.warn("the decoder does not trace to a batched graph; exported for one prompt per call", stacklevel=2)
+            warnings.warn(
+                "the decoder does not trace to a batched graph; exported for one prompt per call", stacklevel=2
+            )
             single = _decoder_inputs(embeddings, interm, 1, info.image_size)
-            _export(decoder, single, DECODER_OUTPUTS, tmp / DECODER, info.opset, {k: {1: "num_points"} for k in dynamic})
+            _export(
+                decoder, single, DECODER_OUTPUTS, tmp / DECODER, info.opset, {k: {1: "num_points"} for k in dynamic}
+            )
         info.save(tmp / MODEL_JSON)
     return out_dir
 

@@ -127,7 +127,11 @@ class AutomaticMaskGenerator:
                 continue
             full = np.zeros((n, H, W), bool)
             full[:, y0:y1, x0:x1] = masks[keep]
-            kept.append(GeneratedMasks(full, iou[keep], stability[keep], boxes[keep], batch[keep] + offset[:2], np.tile(crop, (n, 1))))
+            kept.append(
+                GeneratedMasks(
+                    full, iou[keep], stability[keep], boxes[keep], batch[keep] + offset[:2], np.tile(crop, (n, 1))
+                )
+            )
         out = GeneratedMasks.concat(kept, H, W)
         return out.take(box_nms(out.boxes, out.predicted_iou, cfg.box_nms_thresh)) if len(out) else out
 

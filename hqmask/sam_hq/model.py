@@ -26,7 +26,13 @@ ENCODER, DECODER, MODEL_JSON = "encoder.onnx", "decoder.onnx", "model.json"
 ENCODER_INPUTS = ("image",)
 ENCODER_OUTPUTS = ("image_embeddings", "interm_embeddings")
 DECODER_INPUTS = (
-    "image_embeddings", "interm_embeddings", "point_coords", "point_labels", "mask_input", "has_mask_input", "orig_im_size",
+    "image_embeddings",
+    "interm_embeddings",
+    "point_coords",
+    "point_labels",
+    "mask_input",
+    "has_mask_input",
+    "orig_im_size",
 )
 DECODER_OUTPUTS = ("masks", "iou_predictions", "low_res_masks")
 EXPORT_HINT = (
@@ -59,10 +65,16 @@ class ModelInfo:
             info = cls(**fields)
         except (json.JSONDecodeError, TypeError, UnicodeDecodeError) as e:
             raise InputError(f"{path}: not a SAM-HQ model.json ({e}); {EXPORT_HINT}.") from None
-        if not isinstance(info.image_size, int) or info.image_size < 16 or len(info.pixel_std) != 3 \
-                or min(info.pixel_std) <= 0:
-            raise InputError(f"{path}: image_size must be an integer of 16 or more and pixel_std three positive "
-                             f"numbers (got {info.image_size}, {info.pixel_std}); {EXPORT_HINT}.")
+        if (
+            not isinstance(info.image_size, int)
+            or info.image_size < 16
+            or len(info.pixel_std) != 3
+            or min(info.pixel_std) <= 0
+        ):
+            raise InputError(
+                f"{path}: image_size must be an integer of 16 or more and pixel_std three positive "
+                f"numbers (got {info.image_size}, {info.pixel_std}); {EXPORT_HINT}."
+            )
         return info
 
 
@@ -102,7 +114,9 @@ def _providers(device: str) -> list[str]:
         raise InputError(f"device {device!r}: use one of {', '.join(DEVICES)}.")
     cuda = "CUDAExecutionProvider" in ort.get_available_providers()
     if device == "cuda" and not cuda:
-        raise InputError("device cuda: this onnxruntime has no CUDA provider; install onnxruntime-gpu or use device cpu.")
+        raise InputError(
+            "device cuda: this onnxruntime has no CUDA provider; install onnxruntime-gpu or use device cpu."
+        )
     return ["CUDAExecutionProvider", "CPUExecutionProvider"] if cuda and device != "cpu" else ["CPUExecutionProvider"]
 
 
@@ -127,7 +141,9 @@ class SamHQ:
             the model, and reused.
     """
 
-    def __init__(self, model_dir: Path | str, *, device: str = "auto", threads: int = 0, cache_dir: Path | str | None = None):
+    def __init__(
+        self, model_dir: Path | str, *, device: str = "auto", threads: int = 0, cache_dir: Path | str | None = None
+    ):
         import onnxruntime as ort
 
         self.model_dir = Path(model_dir)
@@ -142,11 +158,37 @@ class SamHQ:
         options.intra_op_num_threads = threads
         options.log_severity_level = 3
         self.providers = _providers(device)
-        self.encoder, self.decoder = (_session(self.model_dir / name, options, self.providers) for name in (ENCODER, DECODER))
-        _check_names(self.model_dir / ENCODER, "encoder inputs", [i.name for i in self.encoder.get_inputs()], ENCODER_INPUTS, True)
-        _check_names(self.model_dir / ENCODER, "encoder outputs", [o.name for o in self.encoder.get_outputs()], ENCODER_OUTPUTS, False)
-        _check_names(self.model_dir / DECODER, "decoder inputs", [i.name for i in self.decoder.get_inputs()], DECODER_INPUTS, True)
-        _check_names(self.model_dir / DECODER, "decoder outputs", [o.name for o in self.decoder.get_outputs()], DECODER_OUTPUTS, False)
+        self.encoder, self.decoder = (
+            _session(self.model_dir / name, options, self.providers) for name in (ENCODER, DECODER)
+        )
+        _check_names(
+            self.model_dir / ENCODER,
+            "encoder inputs",
+            [i.name for i in self.encoder.get_inputs()],
+            ENCODER_INPUTS,
+            True,
+        )
+        _check_names(
+            self.model_dir / ENCODER,
+            "encoder outputs",
+            [o.name for o in self.encoder.get_outputs()],
+            ENCODER_OUTPUTS,
+            False,
+        )
+        _check_names(
+            self.model_dir / DECODER,
+            "decoder inputs",
+            [i.name for i in self.decoder.get_inputs()],
+            DECODER_INPUTS,
+            True,
+        )
+        _check_names(
+            self.model_dir / DECODER,
+            "decoder outputs",
+            [o.name for o in self.decoder.get_outputs()],
+            DECODER_OUTPUTS,
+            False,
+        )
         coords = next(i for i in self.decoder.get_inputs() if i.name == "point_coords")
         self.batched = not isinstance(coords.shape[0], int)
         self.cache_dir = None if cache_dir is None else Path(cache_dir)
@@ -204,7 +246,9 @@ class SamHQ:
         step = max(len(coords), 1) if self.batched else 1
         parts = []
         for i in range(0, len(coords), step):
-            feed = dict(fixed, point_coords=coords[i : i + step], point_labels=np.asarray(labels[i : i + step], np.float32))
+            feed = dict(
+                fixed, point_coords=coords[i : i + step], point_labels=np.asarray(labels[i : i + step], np.float32)
+            )
             parts.append(self.decoder.run(list(DECODER_OUTPUTS), feed))
         masks, iou, low = parts[0] if len(parts) == 1 else (np.concatenate([p[k] for p in parts]) for k in range(3))
         return Prediction(masks[:, 0], iou[:, 0], low[:, 0])
@@ -230,7 +274,9 @@ class SamHQ:
             raise InputError("a SAM-HQ prompt needs points, a box, or both.")
         embedding = image if isinstance(image, ImageEmbedding) else self.encode(image)
         coords = np.zeros((0, 2), np.float32) if points is None else np.asarray(points, np.float32).reshape(-1, 2)
-        point_labels = np.ones(len(coords), np.float32) if labels is None else np.asarray(labels, np.float32).reshape(-1)
+        point_labels = (
+            np.ones(len(coords), np.float32) if labels is None else np.asarray(labels, np.float32).reshape(-1)
+        )
         if len(point_labels) != len(coords):
             raise InputError(f"{len(coords)} prompt points but {len(point_labels)} labels.")
         if box is not None:

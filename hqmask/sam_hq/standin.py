@@ -7,8 +7,8 @@ Encoder: the mean normalised colour of each 16x16 patch, mapped isometrically to
 channels (image_embeddings), and four linear maps of it as the "early ViT features"
 (interm_embeddings, K=4, C=32). Decoder: a prompt's anchor is the mean of its foreground
 points (box corners count half); the mask logits fall with the embedding distance from the
-anchor's embedding (symmetrically about 0), so a point on a uniformly coloured object selects that object; its "predicted IoU" is 1
-minus the mask's share of the padded input frame (large masks are rated low). It
+anchor's embedding (symmetrically about 0), so a point on a uniformly coloured object selects
+that object; its "predicted IoU" is 1 minus the mask's share of the padded input frame (large masks are rated low). It
 follows the official decoder's structure where it matters to the export: the image
 embedding is repeated per prompt, and masks are upscaled to 1024, cropped to the resized
 image and resized to ``orig_im_size`` inside the graph.
@@ -50,7 +50,9 @@ class StandinDecoder(nn.Module):
         super().__init__()
         self.radius, self.sharpness = radius, sharpness
 
-    def forward(self, image_embeddings, interm_embeddings, point_coords, point_labels, mask_input, has_mask_input, orig_im_size):
+    def forward(
+        self, image_embeddings, interm_embeddings, point_coords, point_labels, mask_input, has_mask_input, orig_im_size
+    ):
         weight = (point_labels == 1).float() + 0.5 * ((point_labels == 2) | (point_labels == 3)).float()
         anchor = (point_coords * weight[..., None]).sum(1) / weight.sum(1, keepdim=True).clamp(min=1e-6)
         src = torch.repeat_interleave(image_embeddings, point_coords.shape[0], dim=0)
