@@ -9,6 +9,7 @@ import cv2
 import numpy as np
 
 from dataset_tools.image_files import colorize_labels, write_png
+from dataset_tools.mask_manifest import describe, read_manifest
 from dataset_tools.scene import Scene
 
 
@@ -26,6 +27,7 @@ class SceneSummary:
     mask_dir: str | None
     masked_views: int
     object_ids: list[int]
+    made: str | None = None  # how the masks were made (their manifest), when there are masks
 
     def __str__(self) -> str:
         sizes = [f"{w}x{h}" for w, h in self.resolutions]
@@ -40,6 +42,7 @@ class SceneSummary:
                 + (f"  ({self.undistorted} views undistorted to pinhole)" if self.undistorted else ""),
                 f"points3D     {self.points} (mean track length {self.mean_track_length:.2f})",
                 f"masks        {self.mask_dir or 'none'}: {self.masked_views} of {self.views} views",
+                *([f"made by      {self.made}"] if self.made else []),
                 f"object IDs   {id_text}",
             ]
         )
@@ -68,6 +71,7 @@ def summarize(scene: Scene) -> SceneSummary:
         mask_dir=scene.mask_dir,
         masked_views=masked,
         object_ids=sorted(ids),
+        made=describe(read_manifest(scene.root / scene.mask_dir)) if scene.mask_dir else None,
     )
 
 

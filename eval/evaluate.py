@@ -29,7 +29,7 @@ from eval.edit_scores import summarize_edits
 from eval.lpips import LPIPS
 from eval.metrics import binary_scores, psnr, ssim
 from eval.renders import ViewRenders, render_view
-from gsseg.render import Backend, get_backend
+from gsseg.render import Backend
 from gsseg.run import Run, load_run
 from gsseg.segment.reassign import Segmentation
 
@@ -181,30 +181,3 @@ def evaluate(
         for v in tqdm(views, desc="evaluating", unit="view", disable=not progress)
     ]
     return score_views(renders, run=str(run.root), scene=scene, split=split, lpips=lpips), renders
-
-
-def evaluate_run(
-    run_dir: Path | str,
-    scene_dir: Path | str,
-    *,
-    gt_masks: str | None = "object_mask",
-    split: str = "test",
-    backend: str = "auto",
-    lpips: Path | str | None = None,
-    progress: bool = True,
-) -> tuple[Evaluation, list[ViewRenders]]:
-    """Render the ``split`` views of a segmented run and score them against ``gt_masks``
-    (``None``: image metrics only) and with the LPIPS network file ``lpips`` (``None``: LPIPS
-    is reported as not available). Returns the scores and the renders."""
-    run, segmentation, views = load_inputs(Path(run_dir), Path(scene_dir), gt_masks, split)
-    return evaluate(
-        run,
-        segmentation,
-        views,
-        with_truth=gt_masks is not None,
-        scene=str(scene_dir),
-        split=split,
-        backend=get_backend(backend),
-        lpips=LPIPS(lpips) if lpips is not None else None,
-        progress=progress,
-    )

@@ -73,10 +73,21 @@ class Run:
         return self.record.config
 
     @property
-    def masks(self) -> str:
-        """The mask folder the run was trained on, which votes in ``gsseg segment`` unless told
-        otherwise (``object_mask`` for a run trained on colour alone)."""
-        return self.config.masks or "object_mask"
+    def masks(self) -> str | None:
+        """The mask folder the run was trained on (None: trained on colour alone)."""
+        return self.config.masks
+
+    def voting_masks(self, masks: str | None = None) -> str:
+        """The mask folder that votes in ``gsseg segment``: ``masks``, else the one the run was
+        trained on; a run trained on colour alone has none to fall back to (the scene's
+        ``object_mask`` may be another tool's masks, or a synthetic scene's ground truth)."""
+        chosen = masks or self.config.masks
+        if chosen is None:
+            raise InputError(
+                f"{self.root}: trained on colour alone (--masks none), so no mask folder votes by default; "
+                "name one with --masks."
+            )
+        return chosen
 
     @property
     def images(self) -> str:

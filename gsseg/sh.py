@@ -30,11 +30,6 @@ def rgb_to_sh_dc(rgb: torch.Tensor) -> torch.Tensor:
     return (rgb - 0.5) / C0
 
 
-def sh_dc_to_rgb(dc: torch.Tensor) -> torch.Tensor:
-    """The view-independent colour (..., 3) of DC coefficients (..., 3)."""
-    return dc * C0 + 0.5
-
-
 def sh_basis(degree: int, dirs: torch.Tensor) -> torch.Tensor:
     """The real SH basis functions up to ``degree`` at unit directions, in the order and signs
     of 3D-GS: (N, 3) -> (N, (degree + 1)^2)."""

@@ -27,6 +27,7 @@ from dataset_tools.engine import Engine
 from dataset_tools.errors import InputError
 from dataset_tools.image_files import encode_png, read_mask
 from dataset_tools.locks import exclusive_folder
+from dataset_tools.mask_manifest import MANIFEST, manifest_bytes
 from dataset_tools.names import plain_name
 from dataset_tools.overlap import refuse_overlap, scene_entries, scene_inputs
 from dataset_tools.scene import Scene, View, load_scene
@@ -118,17 +119,19 @@ def _segments(
     make: Callable[[], Proposer],
     cfg: BuildConfig,
     images: list[np.ndarray],
+    depths: tuple[list[np.ndarray], str] | None,
     engine: Engine,
     progress: bool,
 ) -> list[np.ndarray]:
     """Per view, the painted proposals as an (H, W) uint8 segment map, cleaned: read from the
     cache, or proposed on ``engine`` (where each Ray worker makes its proposer once with
-    ``make``) and cached view by view, so that an interrupted build resumes."""
-    depths: list[np.ndarray | None] = [None] * len(scene.views)
+    ``make``) and cached view by view, so that an interrupted build resumes. ``depths``: the
+    views' depth maps and their digest (:func:`read_depths`), or None."""
+    maps: list[np.ndarray | None] = [None] * len(scene.views)
     name = proposer.cache_name
-    if cfg.depth is not None:
-        depths, digest = read_depths(scene, Path(cfg.depth))
-        name = None if name is None else f"{name}-depth-{digest}"
+    if depths is not None:
+        maps = depths[0]
+        name = None if name is None else f"{name}-depth-{depths[1]}"
     cache = None if name is None else scene.root / CACHE / name
     paths = [None if cache is None else cache / f"{view.stem}.png" for view in scene.views]
     segments = {
@@ -138,7 +141,7 @@ def _segments(
     fresh = engine.map_stateful(
         make,
         propose_view,
-        [(images[k], scene.views[k], paths[k], depths[k]) for k in todo],
+        [(images[k], scene.views[k], paths[k], maps[k]) for k in todo],
         local_state=proposer,
         desc=f"proposing ({cfg.proposer})",
         progress=progress,
@@ -234,7 +237,8 @@ def _build_locked(
     if cfg.proposer == "existing" and scene.mask_dir is None:
         raise InputError(f"{scene_dir / cfg.from_masks}: mask folder not found; check --from-masks.")
     images = [v.load_image() for v in tqdm(scene.views, desc="loading images", disable=not progress)]
-    segments = [s.astype(np.int32) for s in _segments(scene, proposer, make, cfg, images, engine, progress)]
+    depths = read_depths(scene, Path(cfg.depth)) if cfg.depth is not None else None
+    segments = [s.astype(np.int32) for s in _segments(scene, proposer, make, cfg, images, depths, engine, progress)]
     associate = association_for(scene, cfg.associate)
     if associate == "flow":
         ids = associate_flow(images, segments, scene.views)
@@ -255,6 +259,7 @@ def _build_locked(
             m = clean_mask(m, cfg.min_area)
             n_objects = max(n_objects, int(m.max()))
             write_bytes_atomic(tmp / f"{view.stem}.png", encode_png(view.to_file_frame(m)))
+        write_bytes_atomic(tmp / MANIFEST, _manifest(cfg, associate, depths))
     if cfg.dataset:
         from dataset_tools.hf_dataset import export_dataset
 
@@ -262,6 +267,23 @@ def _build_locked(
             load_scene(scene_dir, images=cfg.images, masks=cfg.out_masks), Path(cfg.dataset), overwrite=cfg.force
         )
     return BuildResult(out_dir, n_objects, len(scene.views), associate)
+
+
+def _manifest(cfg: BuildConfig, associate: str, depths: tuple[list[np.ndarray], str] | None) -> bytes:
+    """What shaped a built mask folder (:mod:`dataset_tools.mask_manifest`)."""
+    sam = cfg.proposer == "sam-hq"
+    return manifest_bytes(
+        "hqmask build",
+        proposer=cfg.proposer,
+        from_masks=cfg.from_masks,
+        model=cfg.model if sam else None,
+        points_per_side=cfg.points_per_side if sam else None,
+        associate=associate,
+        consensus=cfg.consensus,
+        min_area=cfg.min_area,
+        images=cfg.images,
+        depth=None if depths is None else {"folder": str(Path(cfg.depth).resolve()), "digest": depths[1]},
+    )
 
 
 def clean_scene_masks(
@@ -287,4 +309,5 @@ def clean_scene_masks(
         for f in tqdm(files, desc="cleaning", disable=not progress):
             target = tmp / f.relative_to(src)
             write_bytes_atomic(target, encode_png(clean_mask(read_mask(f), min_area)))
+        write_bytes_atomic(tmp / MANIFEST, manifest_bytes("hqmask clean", from_masks=masks, min_area=min_area))
     return dst

@@ -331,3 +331,21 @@ def test_a_damaged_cache_entry_is_proposed_again(scene_copy):
     for first in sorted((scene_copy / "first").glob("*.png")):
         assert first.read_bytes() == (scene_copy / "second" / first.name).read_bytes()
     assert read_cached_segments(cached[0]) is not None and read_cached_segments(cached[1]) is not None
+
+
+def test_every_mask_folder_says_how_it_was_made(small_scene, scene_copy):
+    from dataset_tools.inspect_scene import summarize
+    from dataset_tools.mask_manifest import read_manifest
+
+    assert read_manifest(small_scene.root / "object_mask")["truth"] is True
+    build_masks(scene_copy, BuildConfig(out_masks="built", consensus=2), progress=False)
+    built = read_manifest(scene_copy / "built")
+    assert built["made_by"] == "hqmask build" and built["format"] == 1
+    assert (built["proposer"], built["associate"], built["consensus"], built["depth"]) == ("graph", "tracks", 2, None)
+    clean_scene_masks(scene_copy, "built", "cleaned", progress=False)
+    assert read_manifest(scene_copy / "cleaned")["from_masks"] == "built"
+    shown = str(summarize(load_scene(scene_copy, masks="built")))
+    assert "made by      hqmask build" in shown and "proposer graph" in shown
+    assert "ground truth (dataset_tools synth)" in str(summarize(load_scene(small_scene.root)))
+    (scene_copy / "cleaned" / "manifest.json").unlink()
+    assert "no manifest" in str(summarize(load_scene(scene_copy, masks="cleaned")))

@@ -229,3 +229,18 @@ def test_segment_votes_with_the_masks_the_run_was_trained_on(segmented, scene_co
     np.testing.assert_array_equal(result.labels, Segmentation.load(segmented / "labels.npz").labels)
     with pytest.raises(InputError, match="object_mask holds no masks"):
         segment_run(run, scene_copy, masks="object_mask", backend="cpu", progress=False)
+
+
+def test_a_run_trained_on_colour_alone_segments_only_with_masks_named(small_scene, tmp_path):
+    """No fallback to the scene's ``object_mask`` (a synthetic scene's ground truth)."""
+    from gsseg.render.contributions import Contributions
+    from gsseg.segment.segment_run import segment_run
+    from gsseg.train import TrainConfig, train
+
+    run = tmp_path / "colour"
+    train(small_scene.root, run, TrainConfig(iters=3, masks=None, backend="cpu"), progress=False)
+    with pytest.raises(InputError, match="trained on colour alone.*--masks"):
+        segment_run(run, small_scene.root, backend="cpu", progress=False)
+    labels = segment_run(run, small_scene.root, masks="object_mask", backend="cpu", progress=False)
+    assert labels.gamma_p == 0.0  # the classifier knows no mask IDs: the prior is left out
+    assert Contributions.load(run / "contributions.npz").masks == "object_mask"

@@ -16,6 +16,7 @@ from dataset_tools.atomic import atomic_directory, write_bytes_atomic
 from dataset_tools.cameras import PinholeCamera
 from dataset_tools.errors import InputError
 from dataset_tools.image_files import encode_png
+from dataset_tools.mask_manifest import MANIFEST, manifest_bytes
 from dataset_tools.scene import llff_test_names
 from dataset_tools.synth import camera_paths
 from dataset_tools.synth.primitives import Box, Cylinder, Plane, Primitive, Sphere
@@ -272,7 +273,8 @@ def observe(
 def generate_scene(cfg: SynthConfig, out: Path | str, *, overwrite: bool = False, progress: bool = True) -> SynthResult:
     """Ray-cast a synthetic scene and write it as a scene folder at ``out``.
 
-    Writes images/*.png, object_mask/*.png (exact IDs: 0 background, 1..K objects),
+    Writes images/*.png, object_mask/*.png (exact IDs: 0 background, 1..K objects; its
+    manifest.json marks them as ground truth),
     sparse/0 (PINHOLE cameras, points3D sampled on visible surfaces, with the tracks of
     every view that sees them) and scene.json (objects, options, LLFF split).
     """
@@ -300,6 +302,7 @@ def generate_scene(cfg: SynthConfig, out: Path | str, *, overwrite: bool = False
             samples.append(pts[pick])
             sample_ids.append(ids.ravel()[pick])
             sample_rgb.append(rgb.reshape(-1, 3)[pick])
+        write_bytes_atomic(tmp / "object_mask" / MANIFEST, manifest_bytes("dataset_tools synth", truth=True))
         xyz, point_ids, point_rgb = np.concatenate(samples), np.concatenate(sample_ids), np.concatenate(sample_rgb)
         obs = [observe(xyz, cam, pose, depth) for pose, depth in zip(poses, depths)]
         n_obs = np.bincount(np.concatenate([rows for rows, _ in obs]), minlength=len(xyz))

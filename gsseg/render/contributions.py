@@ -50,23 +50,28 @@ class MaskedView:
 @dataclass
 class Contributions:
     """labels: (K,) uint8, the mask labels seen in any view, sorted. weights: (K, N) float32.
-    model: the fingerprint of the model they were computed for, "" when unknown."""
+    model: the fingerprint of the model they were computed for, "" when unknown. masks: the
+    mask folder that voted, "" when unknown."""
 
     labels: np.ndarray
     weights: torch.Tensor
     model: str = ""
+    masks: str = ""
 
     def save(self, path: Path) -> None:
-        """Write ``labels``, ``weights`` and ``model`` as an npz file, atomically."""
+        """Write ``labels``, ``weights``, ``model`` and ``masks`` as an npz file, atomically."""
         buf = io.BytesIO()
-        np.savez(buf, labels=self.labels, weights=self.weights.numpy(), model=self.model)
+        np.savez(buf, labels=self.labels, weights=self.weights.numpy(), model=self.model, masks=self.masks)
         write_bytes_atomic(Path(path), buf.getvalue())
 
     @classmethod
     def load(cls, path: Path) -> Contributions:
         try:
             with np.load(path, allow_pickle=False) as f:
-                return cls(labels=f["labels"], weights=torch.from_numpy(f["weights"]), model=str(f["model"]))
+                masks = str(f["masks"]) if "masks" in f else ""
+                return cls(
+                    labels=f["labels"], weights=torch.from_numpy(f["weights"]), model=str(f["model"]), masks=masks
+                )
         except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as e:
             raise InputError(
                 f"{path}: damaged contribution cache ({e}); delete it and run `gsseg segment` again."

@@ -52,14 +52,22 @@ def mask_contributions(
     """The contribution matrix of a loaded run over the masks of ``split`` (``masks``: the
     folder, by default the one the run was trained on; no labels where no view of ``split`` has
     a mask)."""
-    views = [v for v in run.scene(scene_dir, masks=masks or run.masks).split(split) if v.mask_path is not None]
+    masks = run.voting_masks(masks)
+    views = [v for v in run.scene(scene_dir, masks=masks).split(split) if v.mask_path is not None]
     contributions = contribution_matrix(run.gaussians, views, backend=backend, progress=progress)
-    contributions.model = run.fingerprint
+    contributions.model, contributions.masks = run.fingerprint, masks
     return contributions
 
 
 def label_gaussians(run: Run, contributions: Contributions, options: LabelOptions = LabelOptions()) -> Segmentation:
-    """Every Gaussian's label from the contribution matrix and the run's classifier."""
+    """Every Gaussian's label from the contribution matrix and the run's classifier.
+
+    The classifier's classes are the IDs of the masks the run was trained on; another folder
+    (masks rebuilt at the run's depth jumps, ``hqmask build --depth``) numbers its objects
+    anew, so where the contributions come from another folder the prior is left out:
+    ``gamma_p`` is 0 and the labels record it."""
+    if contributions.masks and contributions.masks != run.masks and options.method == "prior":
+        options = replace(options, gamma_p=0.0)
     prior_labels, prior_probs = classifier_prior(run.gaussians.obj_feat, run.classifier)
     result = reassign(
         contributions,
@@ -96,15 +104,9 @@ def segment_run(
     default; ``masks``: the folder, by default the one the run was trained on) and the run's
     classifier; write ``RUN/labels.npz`` and the contribution matrix they were chosen from,
     ``RUN/contributions.npz`` (for relabelling without recomputing it); ``other_scene``: vote
-    with the masks of a scene other than the run's.
-
-    The classifier's classes are the IDs of the masks the run was trained on; another folder
-    (masks rebuilt at the run's depth jumps, ``hqmask build --depth``) numbers its objects
-    anew, so with it the prior is left out: ``gamma_p`` is 0 and the labels record it."""
+    with the masks of a scene other than the run's."""
     run = load_run(run_dir, other_scene=other_scene)
-    masks = masks or run.masks
-    if masks != run.masks and options.method == "prior":
-        options = replace(options, gamma_p=0.0)
+    masks = run.voting_masks(masks)
     contributions = mask_contributions(run, scene_dir, masks=masks, split=split, backend=backend, progress=progress)
     if not len(contributions.labels) and options.method != "classifier":
         raise InputError(
