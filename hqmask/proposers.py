@@ -109,7 +109,10 @@ class GraphProposer:
     at least ``reference_fraction`` of the image. Objects: adjacent foreground regions whose hue
     differs by less than ``hue_degrees`` are joined (two-tone textures stay one object); regions
     under ``min_fraction`` of the image are dropped. With a depth map, regions are cut where
-    the log depth jumps by more than ``depth_jump`` and touch only where it does not.
+    the log depth jumps by more than ``depth_jump`` and touch only where it does not; a region
+    holding near-side jump pixels for ``occluding_share`` of its outline is no background by
+    colour; and an object touching no background off the jumps joins the larger object it
+    shares the longest boundary with (docs/masks.md).
     """
 
     scale: float = 100.0
@@ -124,43 +127,18 @@ class GraphProposer:
     cache_name = "graph"
 
     def propose(self, image: np.ndarray, view: View, depth: np.ndarray | None = None) -> Proposals:
-        from skimage import color, graph, segmentation
-
-        from hqmask.association.common import UnionFind
+        from skimage import color
 
         H, W = image.shape[:2]
         lab = color.rgb2lab(image)
-        min_size = max(20, int(0.0005 * H * W))
-        seg = segmentation.felzenszwalb(image, scale=self.scale, sigma=self.sigma, min_size=min_size)
-        if seg.max() > 0:  # a RAG needs two regions
-            seg = graph.cut_threshold(seg, graph.rag_mean_color(lab, seg), self.merge_threshold)
-        edges = None
-        if depth is not None:
-            edges = occlusion_edges(depth, self.depth_jump)
-            seg = cut_at_edges(seg, edges, min_size)
+        seg, edges = self._regions(image, lab, depth)
         n = int(seg.max()) + 1
         counts = np.bincount(seg.ravel(), minlength=n).astype(float)
-        mean = (
-            np.stack([np.bincount(seg.ravel(), lab[..., c].ravel(), n) for c in range(3)], 1)
-            / np.maximum(counts, 1)[:, None]
-        )
-        border = np.unique(np.concatenate([seg[0], seg[-1], seg[:, 0], seg[:, -1]]))
-        reference = border[counts[border] >= self.reference_fraction * H * W]
-        background = np.zeros(n, bool)
-        background[border] = True
-        if len(reference):
-            alike = np.linalg.norm(mean[:, None] - mean[None, reference], axis=2).min(1) < self.background_distance
-            if depth is not None:  # what stands in front of the scene is no floor tile, whatever its colour
-                alike &= ~_in_front(seg, occluding_pixels(depth, self.depth_jump), self.occluding_share)
-            background |= alike
-        hue = np.degrees(np.arctan2(mean[:, 2], mean[:, 1]))
-        uf = UnionFind(n)
+        mean = np.stack([np.bincount(seg.ravel(), lab[..., c].ravel(), n) for c in range(3)], 1)
+        mean /= np.maximum(counts, 1)[:, None]
+        background = self._background(seg, counts, mean, depth)
         pairs, touches = _touching(seg, edges)
-        for a, b in pairs:
-            if not (background[a] or background[b]) and abs((hue[a] - hue[b] + 180) % 360 - 180) < self.hue_degrees:
-                uf.union(int(a), int(b))
-        obj = uf.roots()
-        obj[background] = -1
+        obj = self._join(mean, background, pairs)
         if edges is not None:
             obj = _join_detached_parts(obj, counts, pairs, touches, min_touch=max(3, int(0.01 * np.sqrt(H * W))))
         objects = obj[seg]
@@ -168,6 +146,50 @@ class GraphProposer:
         labels = labels[areas >= self.min_fraction * H * W]
         masks = objects[None] == labels[:, None, None]
         return Proposals(masks, masks.sum((1, 2)) / (H * W))
+
+    def _regions(self, image: np.ndarray, lab: np.ndarray, depth: np.ndarray | None):
+        """(H, W) region map (Felzenszwalb, merged by colour, cut at the depth jumps) and the
+        (H, W) bool jumps (None without depth)."""
+        from skimage import graph, segmentation
+
+        H, W = image.shape[:2]
+        min_size = max(20, int(0.0005 * H * W))
+        seg = segmentation.felzenszwalb(image, scale=self.scale, sigma=self.sigma, min_size=min_size)
+        if seg.max() > 0:  # a RAG needs two regions
+            seg = graph.cut_threshold(seg, graph.rag_mean_color(lab, seg), self.merge_threshold)
+        if depth is None:
+            return seg, None
+        edges = occlusion_edges(depth, self.depth_jump)
+        return cut_at_edges(seg, edges, min_size), edges
+
+    def _background(self, seg: np.ndarray, counts: np.ndarray, mean: np.ndarray, depth: np.ndarray | None):
+        """(n,) bool: regions touching the image border, and regions coloured like a large one
+        unless the depth puts them in front of the scene."""
+        H, W = seg.shape
+        border = np.unique(np.concatenate([seg[0], seg[-1], seg[:, 0], seg[:, -1]]))
+        reference = border[counts[border] >= self.reference_fraction * H * W]
+        background = np.zeros(len(counts), bool)
+        background[border] = True
+        if len(reference):
+            alike = np.linalg.norm(mean[:, None] - mean[None, reference], axis=2).min(1) < self.background_distance
+            if depth is not None:  # what stands in front of the scene is no floor tile, whatever its colour
+                alike &= ~_in_front(seg, occluding_pixels(depth, self.depth_jump), self.occluding_share)
+            background |= alike
+        return background
+
+    def _join(self, mean: np.ndarray, background: np.ndarray, pairs: np.ndarray) -> np.ndarray:
+        """(n,) each region's object (a region index; -1: background): touching foreground
+        regions of similar hue joined."""
+        from hqmask.association.common import UnionFind
+
+        hue = np.degrees(np.arctan2(mean[:, 2], mean[:, 1]))
+        uf = UnionFind(len(mean))
+        for a, b in pairs:
+            if not (background[a] or background[b]) and abs((hue[a] - hue[b] + 180) % 360 - 180) < self.hue_degrees:
+                uf.union(int(a), int(b))
+        obj = uf.roots()
+        obj[background] = -1
+        return obj
 
 
 class SamHQProposer:
