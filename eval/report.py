@@ -78,11 +78,13 @@ def edit_panels(
 
 def image_row(r: ViewRenders, id_map: dict[int, int], edits: dict[str, list[np.ndarray]], index: int) -> np.ndarray:
     """The panels of one view side by side, 4 px apart: (H, 6W + 20, 3) uint8 (5 panels
-    without ground truth)."""
-    mapping = np.full(256, 255, np.uint8)
-    mapping[0] = 0
-    for label, gt in id_map.items():
-        mapping[label] = gt
+    without ground truth). With ground truth, predicted labels take the colour of the object
+    they were matched to (unmatched ones all the same); without, each label its own colour."""
+    mapping = np.arange(256, dtype=np.uint8)
+    if r.truth is not None:
+        mapping[1:] = 255
+        for label, gt in id_map.items():
+            mapping[label] = gt
     truth = [colorize_labels(r.truth)] if r.truth is not None else []
     panels = [r.image, *truth, colorize_labels(mapping[r.visible])] + [
         edits[op][index] for op in ("remove", "extract", "recolor")

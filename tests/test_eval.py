@@ -345,3 +345,20 @@ def test_paper_tables_plumbing_writes_every_table_and_reuses_its_work(tmp_path):
     again = json.loads((tmp_path / "paper_tables.json").read_text())["scenes"]["orbit-3"]
     assert all(again["training"][k]["train_seconds"] is None for k in TRAINING_MASKS)
     assert again["training"]["exact"]["psnr"] == scene["training"]["exact"]["psnr"]
+
+
+def test_without_truth_the_label_panel_shows_every_object_in_its_own_colour():
+    from eval.renders import ViewRenders
+    from eval.report import image_row
+
+    visible = np.zeros((4, 6), np.uint8)
+    visible[:, 2:4], visible[:, 4:] = 3, 7
+    image = np.zeros((4, 6, 3), np.uint8)
+    row = image_row(
+        ViewRenders("v", image, None, image, visible, {}),
+        {},
+        {op: [image] for op in ("remove", "extract", "recolor")},
+        0,
+    )
+    labels = row[:, 10:16]  # the second panel, after the photo and a 4 px gap
+    assert (labels[:, 2] != labels[:, 4]).any() and (labels[:, 0] == 0).all()
