@@ -26,6 +26,7 @@ from pathlib import Path
 
 from benchmarks import record
 from eval.report import markdown_table
+from gsseg.segment.segment_run import LabelOptions
 from gsseg.train import TrainConfig
 from pipeline.experiment import (
     SceneSpec,
@@ -58,9 +59,10 @@ def run_scene(work: Path, path: str, args: argparse.Namespace, train_seeds: list
             run,
             TrainConfig(iters=args.iters, images=TRAIN_IMAGES, masks="assoc", backend="cpu", seed=train_seed),
         )
-        summaries = segmentation_scores(run, scene, "assoc", SETTINGS)
+        summaries = segmentation_scores(run, scene, "assoc", [LabelOptions(method=m, gamma_p=g) for m, g in SETTINGS])
         row = {_column(m, g): s["visible"]["miou"] for (m, g), s in zip(SETTINGS, summaries)}
-        row[EXACT] = segmentation_scores(run, scene, "object_mask", [("flashsplat", 0.0)])[0]["visible"]["miou"]
+        exact = segmentation_scores(run, scene, "object_mask", [LabelOptions(method="flashsplat", gamma_p=0.0)])
+        row[EXACT] = exact[0]["visible"]["miou"]
         runs[train_seed] = row
         print(path, train_seed, json.dumps(row))
     return runs

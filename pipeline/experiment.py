@@ -6,7 +6,7 @@ experiment resumes:
     corrupt_masks(scene, "noisy", severity="medium", seed=0)
     associate_masks(scene, "noisy", "assoc", associate="tracks")
     train_run(scene, work / "run", TrainConfig(images="images_2", masks="assoc"))
-    summaries = segmentation_scores(work / "run", scene, "assoc", [("prior", 0.2), ("flashsplat", 0.0)])
+    summaries = segmentation_scores(work / "run", scene, "assoc", [LabelOptions(), LabelOptions(method="flashsplat")])
 """
 
 from __future__ import annotations
@@ -29,8 +29,7 @@ from gsseg.render import Backend, to_uint8
 from gsseg.render_views import classify_pixels
 from gsseg.run import load_run
 from gsseg.run_folder import RunFolder
-from gsseg.segment.reassign import classifier_prior, reassign
-from gsseg.segment.segment_run import mask_contributions
+from gsseg.segment.segment_run import LabelOptions, label_gaussians, mask_contributions
 from gsseg.train import TrainConfig, train
 from hqmask.build import BuildConfig, build_masks
 
@@ -137,21 +136,21 @@ def segmentation_scores(
     run_dir: Path,
     scene: Path,
     masks: str,
-    settings: list[tuple[str, float]],
+    settings: list[LabelOptions],
     *,
     truth: str = "object_mask",
     backend: str | Backend = "cpu",
 ) -> list[dict]:
-    """For each (method, gamma_p) of ``settings``: the run's Gaussians labelled from ``masks``
-    (one contribution matrix for every setting), scored on the test views against ``truth``.
-    Returns :meth:`eval.evaluate.Evaluation.summary` of each setting."""
+    """For each of ``settings``: the run's Gaussians labelled from ``masks`` as ``gsseg
+    segment`` labels them (:func:`gsseg.segment.segment_run.label_gaussians`, one contribution
+    matrix for every setting), scored on the test views against ``truth``. Returns
+    :meth:`eval.evaluate.Evaluation.summary` of each setting."""
     run = load_run(run_dir)
     contributions = mask_contributions(run, scene, masks=masks, backend=backend, progress=False)
-    prior_labels, prior_probs = classifier_prior(run.gaussians.obj_feat, run.classifier)
     views = run.scene(scene, masks=truth).split("test")
     out = []
-    for method, gamma_p in settings:
-        segmentation = reassign(contributions, prior_labels, prior_probs, method=method, gamma_p=gamma_p)
+    for options in settings:
+        segmentation = label_gaussians(run, contributions, options)
         evaluation, _ = evaluate(
             run, segmentation, views, with_truth=True, scene=str(scene), split="test", backend=backend, progress=False
         )

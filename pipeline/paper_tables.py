@@ -39,6 +39,7 @@ from dataset_tools.atomic import require_folder_path, write_bytes_atomic
 from dataset_tools.engine import Engine
 from eval.report import markdown_table
 from gsseg.render import Backend, get_backend
+from gsseg.segment.segment_run import LabelOptions
 from gsseg.train import TrainConfig
 from hqmask.build import clean_scene_masks
 from pipeline.experiment import (
@@ -147,20 +148,20 @@ def _training_task(task: _Task) -> dict:
     )
     # The pipeline segments with the masks it trained on; `noisy` ones cannot be voted
     # with (their IDs differ per view), so that run is segmented by its classifier alone.
-    method = ("classifier", 0.0) if task.kind == "noisy" else ("prior", 0.2)
+    method = LabelOptions(method="classifier", gamma_p=0.0) if task.kind == "noisy" else LabelOptions(gamma_p=0.2)
     (summary,) = segmentation_scores(run, scene, MASK_FOLDERS[task.kind], [method], backend=task.backend)
     return {
         "psnr": summary["psnr"],
         "ssim": summary["ssim"],
         "miou": summary["visible"]["miou"],
-        "method": method[0],
+        "method": method.method,
         "train_seconds": seconds,
     }
 
 
 def _methods_task(task: _Task) -> dict:
     """The reassignment methods and the gamma_p ablation on the ``hqmask`` run."""
-    settings = list(METHODS) + [("prior", g) for g in GAMMAS]
+    settings = [LabelOptions(method=m, gamma_p=g) for m, g in METHODS] + [LabelOptions(gamma_p=g) for g in GAMMAS]
     summaries = segmentation_scores(
         task.root / "run_hqmask", task.root / "scene", MASK_FOLDERS["hqmask"], settings, backend=task.backend
     )
