@@ -37,6 +37,7 @@ from hqmask.cleanup import clean_mask
 from hqmask.consensus import multiview_consensus
 from hqmask.depth_prior import depth_from_anchors, depth_from_points
 from hqmask.proposers import Proposer, make_proposer
+from hqmask.support_plane import SupportPlane, support_plane
 
 ASSOCIATIONS = ("auto", "flow", "tracks")
 CACHE = ".hqmask_cache"
@@ -78,11 +79,13 @@ def association_for(scene: Scene, associate: str) -> str:
     return "tracks" if len(scene.points) and any(len(v.point_ids) for v in scene.views) else "flow"
 
 
-def propose_view(proposer: Proposer, job: tuple[np.ndarray, View, Path | None, np.ndarray | None]) -> np.ndarray:
-    """The painted proposals of one (image, view, cache file or None, depth map or None) as an
-    (H, W) uint8 segment map, written to the cache file when there is one."""
-    image, view, cached, depth = job
-    seg = proposer.propose(image, view, depth).paint()
+def propose_view(
+    proposer: Proposer, job: tuple[np.ndarray, View, Path | None, np.ndarray | None, np.ndarray | None]
+) -> np.ndarray:
+    """The painted proposals of one (image, view, cache file or None, depth map or None, height
+    map or None) as an (H, W) uint8 segment map, written to the cache file when there is one."""
+    image, view, cached, depth, height = job
+    seg = proposer.propose(image, view, depth, height).paint()
     if seg.max() > 255:
         raise InputError(f"{view.image_path}: the proposer made {seg.max()} segments, more than 255; raise --min-area.")
     seg = seg.astype(np.uint8)
@@ -98,19 +101,36 @@ def read_cached_segments(path: Path | None) -> np.ndarray | None:
     return seg if seg is not None and seg.ndim == 2 and seg.dtype == np.uint8 else None
 
 
-def read_depths(scene: Scene, folder: Path) -> tuple[list[np.ndarray], str]:
+@dataclass
+class SceneGeometry:
+    """What the mask stage knows of the scene's geometry from a trained run: every view's
+    ``depths`` (H, W), the plane the scene stands on (None where none is found) with every
+    view's ``heights`` above it (None without a plane), and a ``digest`` of them all that names
+    the proposals made with them in the cache."""
+
+    depths: list[np.ndarray]
+    plane: SupportPlane | None
+    heights: list[np.ndarray] | None
+    digest: str
+
+
+def read_geometry(scene: Scene, folder: Path) -> SceneGeometry:
     """Every view's depth map from ``folder/<stem>.npy`` (checked against the view's size), and
-    a digest of them all that names the proposals made with them in the cache."""
+    the support plane of the scene's SfM points with the heights above it."""
     if not folder.is_dir():
         raise InputError(
             f"{folder}: depth folder not found; write it with `gsseg render RUN --what depth "
             "--split all --out DIR` and pass DIR/depth."
         )
     depths = [read_depth(folder / f"{view.stem}.npy", (view.camera.width, view.camera.height)) for view in scene.views]
+    plane = support_plane(scene.points.xyz, np.array([view.center for view in scene.views]))
+    heights = None if plane is None else [plane.heights(v, d) for v, d in zip(scene.views, depths)]
     digest = hashlib.blake2b(digest_size=8)
     for depth in depths:
         digest.update(depth.tobytes())
-    return depths, digest.hexdigest()
+    if plane is not None:
+        digest.update(np.array([*plane.normal, plane.offset, plane.scale]).tobytes())
+    return SceneGeometry(depths, plane, heights, digest.hexdigest())
 
 
 def _segments(
@@ -119,19 +139,18 @@ def _segments(
     make: Callable[[], Proposer],
     cfg: BuildConfig,
     images: list[np.ndarray],
-    depths: tuple[list[np.ndarray], str] | None,
+    geometry: SceneGeometry | None,
     engine: Engine,
     progress: bool,
 ) -> list[np.ndarray]:
     """Per view, the painted proposals as an (H, W) uint8 segment map, cleaned: read from the
     cache, or proposed on ``engine`` (where each Ray worker makes its proposer once with
-    ``make``) and cached view by view, so that an interrupted build resumes. ``depths``: the
-    views' depth maps and their digest (:func:`read_depths`), or None."""
-    maps: list[np.ndarray | None] = [None] * len(scene.views)
+    ``make``) and cached view by view, so that an interrupted build resumes."""
+    none = [None] * len(scene.views)
+    depths, heights = (none, none) if geometry is None else (geometry.depths, geometry.heights or none)
     name = proposer.cache_name
-    if depths is not None:
-        maps = depths[0]
-        name = None if name is None else f"{name}-depth-{depths[1]}"
+    if geometry is not None and name is not None:
+        name = f"{name}-depth-{geometry.digest}"
     cache = None if name is None else scene.root / CACHE / name
     paths = [None if cache is None else cache / f"{view.stem}.png" for view in scene.views]
     segments = {
@@ -141,7 +160,7 @@ def _segments(
     fresh = engine.map_stateful(
         make,
         propose_view,
-        [(images[k], scene.views[k], paths[k], maps[k]) for k in todo],
+        [(images[k], scene.views[k], paths[k], depths[k], heights[k]) for k in todo],
         local_state=proposer,
         desc=f"proposing ({cfg.proposer})",
         progress=progress,
@@ -237,8 +256,8 @@ def _build_locked(
     if cfg.proposer == "existing" and scene.mask_dir is None:
         raise InputError(f"{scene_dir / cfg.from_masks}: mask folder not found; check --from-masks.")
     images = [v.load_image() for v in tqdm(scene.views, desc="loading images", disable=not progress)]
-    depths = read_depths(scene, Path(cfg.depth)) if cfg.depth is not None else None
-    segments = [s.astype(np.int32) for s in _segments(scene, proposer, make, cfg, images, depths, engine, progress)]
+    geometry = read_geometry(scene, Path(cfg.depth)) if cfg.depth is not None else None
+    segments = [s.astype(np.int32) for s in _segments(scene, proposer, make, cfg, images, geometry, engine, progress)]
     associate = association_for(scene, cfg.associate)
     if associate == "flow":
         ids = associate_flow(images, segments, scene.views)
@@ -259,7 +278,7 @@ def _build_locked(
             m = clean_mask(m, cfg.min_area)
             n_objects = max(n_objects, int(m.max()))
             write_bytes_atomic(tmp / f"{view.stem}.png", encode_png(view.to_file_frame(m)))
-        write_bytes_atomic(tmp / MANIFEST, _manifest(cfg, associate, depths))
+        write_bytes_atomic(tmp / MANIFEST, _manifest(cfg, associate, geometry))
     if cfg.dataset:
         from dataset_tools.hf_dataset import export_dataset
 
@@ -269,7 +288,7 @@ def _build_locked(
     return BuildResult(out_dir, n_objects, len(scene.views), associate)
 
 
-def _manifest(cfg: BuildConfig, associate: str, depths: tuple[list[np.ndarray], str] | None) -> bytes:
+def _manifest(cfg: BuildConfig, associate: str, geometry: SceneGeometry | None) -> bytes:
     """What shaped a built mask folder (:mod:`dataset_tools.mask_manifest`)."""
     sam = cfg.proposer == "sam-hq"
     return manifest_bytes(
@@ -282,8 +301,17 @@ def _manifest(cfg: BuildConfig, associate: str, depths: tuple[list[np.ndarray], 
         consensus=cfg.consensus,
         min_area=cfg.min_area,
         images=cfg.images,
-        depth=None if depths is None else {"folder": str(Path(cfg.depth).resolve()), "digest": depths[1]},
+        depth=None if geometry is None else _geometry_record(cfg, geometry),
     )
+
+
+def _geometry_record(cfg: BuildConfig, geometry: SceneGeometry) -> dict:
+    plane = geometry.plane
+    return {
+        "folder": str(Path(cfg.depth).resolve()),
+        "digest": geometry.digest,
+        "support_plane": None if plane is None else {"normal": plane.normal.tolist(), "offset": plane.offset},
+    }
 
 
 def clean_scene_masks(

@@ -32,8 +32,11 @@ class Proposer(Protocol):
     #: on), or None for proposers not worth caching.
     cache_name: str | None
 
-    def propose(self, image: np.ndarray, view: View, depth: np.ndarray | None = None) -> Proposals:
+    def propose(
+        self, image: np.ndarray, view: View, depth: np.ndarray | None = None, height: np.ndarray | None = None
+    ) -> Proposals:
         """Candidate masks for ``image`` (H, W, 3) uint8, the loaded image of ``view``;
-        ``depth`` (H, W), the view's camera depth (0: nothing opaque) where the build has one
-        (a proposer may ignore it)."""
+        ``depth`` (H, W), the view's camera depth (0: nothing opaque), and ``height`` (H, W),
+        each pixel's height above the scene's support plane (NaN: nothing seen), where the
+        build has them (a proposer may ignore them)."""
         ...

@@ -36,7 +36,9 @@ class ExistingMasks:
 
     cache_name = None
 
-    def propose(self, image: np.ndarray, view: View, depth: np.ndarray | None = None) -> Proposals:
+    def propose(
+        self, image: np.ndarray, view: View, depth: np.ndarray | None = None, height: np.ndarray | None = None
+    ) -> Proposals:
         ids = view.load_mask()
         if ids is None:
             return Proposals(np.zeros((0, *image.shape[:2]), bool), np.zeros(0))
@@ -49,6 +51,15 @@ def _in_front(seg: np.ndarray, occluding: np.ndarray, share: float) -> np.ndarra
     n = int(seg.max()) + 1
     outline = ndimage.grey_erosion(seg, size=3) != ndimage.grey_dilation(seg, size=3)
     return np.bincount(seg[occluding], minlength=n) >= share * np.maximum(np.bincount(seg[outline], minlength=n), 1)
+
+
+def _standing(seg: np.ndarray, height: np.ndarray, least: float) -> np.ndarray:
+    """(n,) bool: regions of ``seg`` whose median height above the support plane (``height``
+    (H, W), NaN where nothing is seen) is at least ``least``."""
+    n = int(seg.max()) + 1
+    seen = np.isfinite(height)
+    rise = ndimage.median(np.where(seen, height, 0.0), np.where(seen, seg, -1), np.arange(n))
+    return np.nan_to_num(np.asarray(rise, float), nan=-np.inf) >= least
 
 
 def _touching(seg: np.ndarray, edges: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -124,9 +135,12 @@ class GraphProposer:
     min_fraction: float = 0.002
     depth_jump: float = 0.2
     occluding_share: float = 0.25
+    standing_height: float = 0.25
     cache_name = "graph"
 
-    def propose(self, image: np.ndarray, view: View, depth: np.ndarray | None = None) -> Proposals:
+    def propose(
+        self, image: np.ndarray, view: View, depth: np.ndarray | None = None, height: np.ndarray | None = None
+    ) -> Proposals:
         from skimage import color
 
         H, W = image.shape[:2]
@@ -136,7 +150,7 @@ class GraphProposer:
         counts = np.bincount(seg.ravel(), minlength=n).astype(float)
         mean = np.stack([np.bincount(seg.ravel(), lab[..., c].ravel(), n) for c in range(3)], 1)
         mean /= np.maximum(counts, 1)[:, None]
-        background = self._background(seg, counts, mean, depth)
+        background = self._background(seg, counts, mean, depth, height)
         pairs, touches = _touching(seg, edges)
         obj = self._join(mean, background, pairs)
         if edges is not None:
@@ -162,9 +176,12 @@ class GraphProposer:
         edges = occlusion_edges(depth, self.depth_jump)
         return cut_at_edges(seg, edges, min_size), edges
 
-    def _background(self, seg: np.ndarray, counts: np.ndarray, mean: np.ndarray, depth: np.ndarray | None):
+    def _background(
+        self, seg: np.ndarray, counts: np.ndarray, mean: np.ndarray, depth: np.ndarray | None, height: np.ndarray | None
+    ):
         """(n,) bool: regions touching the image border, and regions coloured like a large one
-        unless the depth puts them in front of the scene."""
+        unless the depth puts them in front of the scene; with heights above the support
+        plane, no region that rises from it."""
         H, W = seg.shape
         border = np.unique(np.concatenate([seg[0], seg[-1], seg[:, 0], seg[:, -1]]))
         reference = border[counts[border] >= self.reference_fraction * H * W]
@@ -175,6 +192,8 @@ class GraphProposer:
             if depth is not None:  # what stands in front of the scene is no floor tile, whatever its colour
                 alike &= ~_in_front(seg, occluding_pixels(depth, self.depth_jump), self.occluding_share)
             background |= alike
+        if height is not None:
+            background &= ~_standing(seg, height, self.standing_height)
         return background
 
     def _join(self, mean: np.ndarray, background: np.ndarray, pairs: np.ndarray) -> np.ndarray:
@@ -201,7 +220,9 @@ class SamHQProposer:
         points = generator.config.points_per_side
         self.cache_name = f"sam-hq-{generator.model.fingerprint}-p{points}"
 
-    def propose(self, image: np.ndarray, view: View, depth: np.ndarray | None = None) -> Proposals:
+    def propose(
+        self, image: np.ndarray, view: View, depth: np.ndarray | None = None, height: np.ndarray | None = None
+    ) -> Proposals:
         return self.generator.generate(image).proposals()
 
 

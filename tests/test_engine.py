@@ -76,7 +76,7 @@ def test_one_scene_has_its_views_proposed_by_ray_workers_as_here(ray_engine, sma
         build_masks(scenes[name], BuildConfig(out_masks="built"), engine=engine, progress=False)
     for folder in ("built", f"{CACHE}/graph"):  # the masks, and the proposals the workers cached
         names = sorted(p.name for p in (scenes["local"] / folder).iterdir())
-        assert len(names) == len(list((small_scene.root / "images").iterdir()))
+        assert len([n for n in names if n.endswith(".png")]) == len(list((small_scene.root / "images").iterdir()))
         match, mismatch, errors = filecmp.cmpfiles(
             scenes["local"] / folder, scenes["ray"] / folder, names, shallow=False
         )
@@ -87,6 +87,6 @@ def test_one_scene_has_its_views_proposed_by_ray_workers_as_here(ray_engine, sma
         ray_engine.map_stateful(
             functools.partial(make_proposer, "sam-hq", str(tmp_path / "no-model")),
             propose_view,
-            [(view.load_image(), view, None)],
+            [(view.load_image(), view, None, None, None)],
             progress=False,
         )

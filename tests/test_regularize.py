@@ -78,3 +78,17 @@ def test_the_regularisation_applied_is_saved_with_the_labels(tmp_path):
     loaded = Segmentation.load(tmp_path / "labels.npz")
     assert (loaded.smooth, loaded.fill) == (4, True)
     np.testing.assert_array_equal(loaded.selections, seg.selections)
+
+
+def test_fill_never_takes_another_objects_gaussians():
+    """Object 2 inside a hollow sphere of object 1 (a statue inside the ring of trees around
+    it) keeps its label; the background beside it inside the sphere joins object 1."""
+    rng = np.random.default_rng(2)
+    shell = _sphere(3000, 1.0, rng)
+    inner = _sphere(300, 0.2, rng)
+    loose = _sphere(50, 1.0, rng) * 0.6
+    means = np.concatenate([shell, inner, loose])
+    labels = np.concatenate([np.ones(len(shell)), np.full(len(inner), 2), np.zeros(len(loose))])
+    out = fill_interiors(_segmentation(labels), means).labels
+    assert (out[len(shell) : len(shell) + len(inner)] == 2).all()
+    assert (out[len(shell) + len(inner) :] == 1).mean() > 0.9

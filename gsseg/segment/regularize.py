@@ -82,9 +82,10 @@ def smooth_weak_labels(
 def fill_interiors(
     segmentation: Segmentation, means: np.ndarray, share: float = 0.85, steps: int = 8, extent_quantile: float = 0.01
 ) -> Segmentation:
-    """Gaussians that one object's Gaussians enclose from at least ``share`` of the 14
-    directions join that object (interiors no view sees, rims along its surface, and what
-    stands inside a hollow).
+    """Background Gaussians that one object's Gaussians enclose from at least ``share`` of the
+    14 directions join that object (interiors no view sees, rims along its surface). Another
+    object's Gaussians are never taken: a statue stands inside the ring of trees and façades
+    around it, which is no hollow of theirs.
 
     The object's extent is the box between the ``extent_quantile`` and 1 - ``extent_quantile``
     quantiles of its Gaussians' positions, so that a few stray Gaussians given its label far
@@ -100,7 +101,7 @@ def fill_interiors(
         lo, hi = np.quantile(means[own], [extent_quantile, 1 - extent_quantile], axis=0)
         size = float(np.linalg.norm(hi - lo))
         step = size / steps
-        inside_box = np.all((means >= lo - step) & (means <= hi + step), axis=1) & ~own
+        inside_box = np.all((means >= lo - step) & (means <= hi + step), axis=1) & (labels == 0)
         candidates = np.flatnonzero(inside_box)
         if not len(candidates) or size == 0:
             continue
