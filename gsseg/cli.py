@@ -190,21 +190,31 @@ def segment(run: Path, scene: Path, masks: str, backend: str, other_scene: bool,
     click.echo(f"wrote {run / 'labels.npz'}: {len(result.labels)} Gaussians; per object {counts}")
 
 
+def _click_options(click_help: str, exclude_help: str):
+    """``--click`` and ``--exclude-click`` (VIEW U V, each repeatable), with their helps."""
+
+    def decorate(command):
+        exclude = click.option("--exclude-click", type=(str, float, float), multiple=True, help=exclude_help)
+        return click.option("--click", "click_", type=(str, float, float), multiple=True, help=click_help)(
+            exclude(command)
+        )
+
+    return decorate
+
+
+def _clicks(click_: tuple, exclude_click: tuple) -> list:
+    """The :class:`gsseg.segment.clicks.Click` list of ``--click`` and ``--exclude-click``."""
+    from gsseg.segment.clicks import Click
+
+    return [Click(v, u, w) for v, u, w in click_] + [Click(v, u, w, positive=False) for v, u, w in exclude_click]
+
+
 @cli.command()
 @click.argument("run", type=click.Path(path_type=Path))
 @click.option("--point", type=float, nargs=3, default=None, help="X Y Z of a point on the object.")
-@click.option(
-    "--click",
-    "click_",
-    type=(str, float, float),
-    multiple=True,
-    help="VIEW U V: a pixel of a view on the object; repeat it to join objects (the parts of one).",
-)
-@click.option(
-    "--exclude-click",
-    type=(str, float, float),
-    multiple=True,
-    help="VIEW U V: a pixel on what must not be selected; inside the selection it splits it.",
+@_click_options(
+    "VIEW U V: a pixel of a view on the object; repeat it to join objects (the parts of one).",
+    "VIEW U V: a pixel on what must not be selected; inside the selection it splits it.",
 )
 @click.option("--object-id", type=int, default=None, help="The object's label.")
 @click.option("--op", type=click.Choice(["remove", "extract", "recolor"]), required=True)
@@ -220,9 +230,8 @@ def segment(run: Path, scene: Path, masks: str, backend: str, other_scene: bool,
 def edit(run: Path, point, click_, exclude_click, scene, force: bool, **options) -> None:
     """Select an object by a 3D point, clicks or its ID; remove, extract or recolour it."""
     from gsseg.edits import edit_run
-    from gsseg.segment.clicks import Click
 
-    clicks = [Click(v, u, w) for v, u, w in click_] + [Click(v, u, w, positive=False) for v, u, w in exclude_click]
+    clicks = _clicks(click_, exclude_click)
     out = edit_run(run, point=point or None, clicks=clicks, scene_dir=scene, overwrite=force, **options)
     click.echo(f"wrote {out}")
 
@@ -273,18 +282,9 @@ def _object_option(ctx: click.Context, param: click.Parameter, value: str | None
     help="Export this object's Gaussians alone: its number in labels.npz, or 'background'.",
 )
 @click.option("--point", type=float, nargs=3, default=None, help="Export the object under X Y Z alone.")
-@click.option(
-    "--click",
-    "click_",
-    type=(str, float, float),
-    multiple=True,
-    help="VIEW U V: export the object clicked alone; repeat to join objects (as gsseg edit).",
-)
-@click.option(
-    "--exclude-click",
-    type=(str, float, float),
-    multiple=True,
-    help="VIEW U V: split the clicked selection there (as gsseg edit).",
+@_click_options(
+    "VIEW U V: export the object clicked alone; repeat to join objects (as gsseg edit).",
+    "VIEW U V: split the clicked selection there (as gsseg edit).",
 )
 @click.option("--scene", default=None, type=click.Path(path_type=Path), help="The run's scene, where it moved.")
 @click.option(
@@ -315,9 +315,8 @@ def export(
 ) -> None:
     """Write RUN's model, or one object or clicked selection of it, for other 3D-GS viewers."""
     from gsseg.export import export_run
-    from gsseg.segment.clicks import Click
 
-    clicks = [Click(v, u, w) for v, u, w in click_] + [Click(v, u, w, positive=False) for v, u, w in exclude_click]
+    clicks = _clicks(click_, exclude_click)
     path = export_run(
         run,
         out,
