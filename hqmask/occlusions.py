@@ -8,6 +8,8 @@ colour joins and geometry separates comes out as two objects.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import cv2
 import numpy as np
 from scipy import ndimage
@@ -22,23 +24,36 @@ def log_depth(depth: np.ndarray) -> np.ndarray:
     return np.log(np.where(seen, depth, far)).astype(np.float32)
 
 
-def occlusion_edges(depth: np.ndarray, jump: float) -> np.ndarray:
-    """Pixels on a depth jump.
+@dataclass(frozen=True)
+class DepthJumps:
+    """Where a view's depth jumps: ``edges`` (H, W) bool, the pixels on a jump; ``near`` (H, W)
+    bool, those on its near side whose far side is a surface, not the sky (where something
+    stands in front of the scene)."""
 
-    A pixel is on an edge when the log depths of its 3x3 neighbourhood (after a 5x5 median,
+    edges: np.ndarray
+    near: np.ndarray
+
+
+def depth_jumps(depth: np.ndarray, jump: float) -> DepthJumps:
+    """The jumps of a view's depth.
+
+    A pixel is on a jump when the log depths of its 3x3 neighbourhood (after a 5x5 median,
     which removes single-pixel speckle of the render) span more than ``jump``: a jump of
     e^jump - 1 (22% at the default 0.2 of :class:`hqmask.proposers.GraphProposer`) spread
     over up to 2 pixels, as the alpha-blended depth of a render smears an occluding contour.
+    It is on the near side when its own log depth lies within ``jump / 2`` of the
+    neighbourhood's least.
 
     Args:
         depth: (H, W) camera depth, 0 where nothing is opaque.
         jump: the smallest log-depth step that counts as an occlusion.
-    Returns:
-        (H, W) bool.
     """
     z = cv2.medianBlur(log_depth(depth), 5)
     kernel = np.ones((3, 3), np.uint8)
-    return (cv2.dilate(z, kernel) - cv2.erode(z, kernel)) > jump
+    low, high = cv2.erode(z, kernel), cv2.dilate(z, kernel)
+    edges = (high - low) > jump
+    beside_sky = cv2.dilate((depth <= 0).astype(np.uint8), kernel) > 0
+    return DepthJumps(edges, edges & (z - low < jump / 2) & ~beside_sky)
 
 
 def cut_at_edges(segments: np.ndarray, edges: np.ndarray, min_size: int) -> np.ndarray:
@@ -51,14 +66,14 @@ def cut_at_edges(segments: np.ndarray, edges: np.ndarray, min_size: int) -> np.n
 
     Args:
         segments: (H, W) int region map.
-        edges: (H, W) bool, from :func:`occlusion_edges`.
+        edges: (H, W) bool, :attr:`DepthJumps.edges`.
         min_size: the smallest part, in pixels, that becomes a region.
     Returns:
         (H, W) int64 region map, regions numbered from 0.
     """
     _, seg = np.unique(segments, return_inverse=True)
     seg = seg.reshape(segments.shape)
-    out = seg.astype(np.int64) * 0
+    out = np.zeros(seg.shape, np.int64)
     next_label = 0
     for region, where in enumerate(ndimage.find_objects(seg + 1)):
         inside = seg[where] == region
@@ -77,14 +92,3 @@ def cut_at_edges(segments: np.ndarray, edges: np.ndarray, min_size: int) -> np.n
         out[where][inside] = renumber[owner[inside]]
         next_label += len(large)
     return out
-
-
-def occluding_pixels(depth: np.ndarray, jump: float) -> np.ndarray:
-    """Pixels on the near side of a depth jump whose far side is a surface, not the sky: where
-    something stands in front of the scene. (H, W) bool; ``depth`` and ``jump`` as in
-    :func:`occlusion_edges`."""
-    z = cv2.medianBlur(log_depth(depth), 5)
-    kernel = np.ones((3, 3), np.uint8)
-    low, high = cv2.erode(z, kernel), cv2.dilate(z, kernel)
-    beside_sky = cv2.dilate((depth <= 0).astype(np.uint8), kernel) > 0
-    return (high - low > jump) & (z - low < jump / 2) & ~beside_sky

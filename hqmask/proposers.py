@@ -21,7 +21,7 @@ from scipy import ndimage
 
 from dataset_tools.errors import InputError
 from dataset_tools.scene import View
-from hqmask.occlusions import cut_at_edges, occluding_pixels, occlusion_edges
+from hqmask.occlusions import DepthJumps, cut_at_edges, depth_jumps
 from hqmask.proposals import Proposals, Proposer
 
 
@@ -145,15 +145,16 @@ class GraphProposer:
 
         H, W = image.shape[:2]
         lab = color.rgb2lab(image)
-        seg, edges = self._regions(image, lab, depth)
+        jumps = None if depth is None else depth_jumps(depth, self.depth_jump)
+        seg = self._regions(image, lab, jumps)
         n = int(seg.max()) + 1
         counts = np.bincount(seg.ravel(), minlength=n).astype(float)
         mean = np.stack([np.bincount(seg.ravel(), lab[..., c].ravel(), n) for c in range(3)], 1)
         mean /= np.maximum(counts, 1)[:, None]
-        background = self._background(seg, counts, mean, depth, height)
-        pairs, touches = _touching(seg, edges)
+        background = self._background(seg, counts, mean, jumps, height)
+        pairs, touches = _touching(seg, None if jumps is None else jumps.edges)
         obj = self._join(mean, background, pairs)
-        if edges is not None:
+        if jumps is not None:
             obj = _join_detached_parts(obj, counts, pairs, touches, min_touch=max(3, int(0.01 * np.sqrt(H * W))))
         objects = obj[seg]
         labels, areas = np.unique(objects[objects >= 0], return_counts=True)
@@ -161,9 +162,8 @@ class GraphProposer:
         masks = objects[None] == labels[:, None, None]
         return Proposals(masks, masks.sum((1, 2)) / (H * W))
 
-    def _regions(self, image: np.ndarray, lab: np.ndarray, depth: np.ndarray | None):
-        """(H, W) region map (Felzenszwalb, merged by colour, cut at the depth jumps) and the
-        (H, W) bool jumps (None without depth)."""
+    def _regions(self, image: np.ndarray, lab: np.ndarray, jumps: DepthJumps | None) -> np.ndarray:
+        """(H, W) region map: Felzenszwalb, merged by colour, cut at the depth ``jumps``."""
         from skimage import graph, segmentation
 
         H, W = image.shape[:2]
@@ -171,14 +171,16 @@ class GraphProposer:
         seg = segmentation.felzenszwalb(image, scale=self.scale, sigma=self.sigma, min_size=min_size)
         if seg.max() > 0:  # a RAG needs two regions
             seg = graph.cut_threshold(seg, graph.rag_mean_color(lab, seg), self.merge_threshold)
-        if depth is None:
-            return seg, None
-        edges = occlusion_edges(depth, self.depth_jump)
-        return cut_at_edges(seg, edges, min_size), edges
+        return seg if jumps is None else cut_at_edges(seg, jumps.edges, min_size)
 
     def _background(
-        self, seg: np.ndarray, counts: np.ndarray, mean: np.ndarray, depth: np.ndarray | None, height: np.ndarray | None
-    ):
+        self,
+        seg: np.ndarray,
+        counts: np.ndarray,
+        mean: np.ndarray,
+        jumps: DepthJumps | None,
+        height: np.ndarray | None,
+    ) -> np.ndarray:
         """(n,) bool: regions touching the image border, and regions coloured like a large one
         unless the depth puts them in front of the scene; with heights above the support
         plane, no region that rises from it."""
@@ -189,8 +191,8 @@ class GraphProposer:
         background[border] = True
         if len(reference):
             alike = np.linalg.norm(mean[:, None] - mean[None, reference], axis=2).min(1) < self.background_distance
-            if depth is not None:  # what stands in front of the scene is no floor tile, whatever its colour
-                alike &= ~_in_front(seg, occluding_pixels(depth, self.depth_jump), self.occluding_share)
+            if jumps is not None:  # what stands in front of the scene is no floor tile, whatever its colour
+                alike &= ~_in_front(seg, jumps.near, self.occluding_share)
             background |= alike
         if height is not None:
             background &= ~_standing(seg, height, self.standing_height)

@@ -12,20 +12,20 @@ from dataset_tools import InputError, load_scene
 from dataset_tools.depth_maps import read_depth, write_depth
 from dataset_tools.synth.generator import render_view
 from hqmask.build import CACHE, BuildConfig, build_masks
-from hqmask.occlusions import cut_at_edges, occlusion_edges
+from hqmask.occlusions import cut_at_edges, depth_jumps
 from hqmask.proposers import GraphProposer
 
 
 def test_a_step_in_depth_is_an_edge_and_a_tilted_plane_is_not():
     rows = np.linspace(1.0, 3.0, 64)[:, None] * np.ones((1, 64))  # a floor seen at a slant: depth x3 over 64 rows
-    assert not occlusion_edges(rows.astype(np.float32), 0.2).any()
+    assert not depth_jumps(rows.astype(np.float32), 0.2).edges.any()
     step = np.ones((64, 64), np.float32)
     step[:, 32:] = 1.5  # a 50% jump between columns 31 and 32
-    edges = occlusion_edges(step, 0.2)
+    edges = depth_jumps(step, 0.2).edges
     assert edges[:, 31:33].all() and not edges[:, :31].any() and not edges[:, 33:].any()
     sky = np.ones((64, 64), np.float32)
     sky[:, 40:] = 0  # nothing opaque: beyond everything
-    assert occlusion_edges(sky, 0.2)[:, 39:41].all()
+    assert depth_jumps(sky, 0.2).edges[:, 39:41].all()
 
 
 def test_cut_at_edges_splits_only_the_region_that_spans_a_jump():
