@@ -161,27 +161,7 @@ def test_a_click_selects_what_gsseg_edit_click_selects(segmented, small_scene, t
     for label in [int(x) for x in np.unique(mask) if x][:3]:
         u, v = _inside_pixel(mask, label)
         chosen = session.select_at(ViewCamera(view.camera, view.cam_from_world), u, v)
-        r = subprocess.run(
-            [
-                script("gsseg"),
-                "edit",
-                str(run),
-                "--click",
-                view.stem,
-                str(u),
-                str(v),
-                "--op",
-                "remove",
-                "--name",
-                f"click_{label}",
-                "--backend",
-                "cpu",
-            ],
-            capture_output=True,
-            text=True,
-        )
-        assert r.returncode == 0, r.stderr
-        assert chosen == label == json.loads((run / "edits" / f"click_{label}" / "edit.json").read_text())["object_id"]
+        assert chosen == label == _edited_by_click(run, view.stem, u, v, "remove", f"click_{label}")
 
 
 @pytest.mark.slow
@@ -318,6 +298,14 @@ def browser():
     driver.quit()
 
 
+def _edited_by_click(run: Path, view: str, u: float, v: float, op: str, name: str) -> int:
+    """The object ``gsseg edit RUN --click VIEW U V --op OP --name NAME`` edits."""
+    cmd = [script("gsseg"), "edit", str(run), "--click", view, str(u), str(v), "--op", op, "--name", name]
+    r = subprocess.run([*cmd, "--backend", "cpu"], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    return json.loads((run / "edits" / name / "edit.json").read_text())["object_id"]
+
+
 def _canvas_image(driver, canvas) -> np.ndarray:
     """(H, W, 3) uint8 screenshot of the page cut to ``canvas``."""
     import cv2
@@ -411,27 +399,7 @@ def test_the_viewer_in_headless_chromium_selects_and_removes_by_click(segmented,
         highlighted = _canvas_image(browser, element)
         # the same pixel through `gsseg edit --click` selects the same object
         u, v = canvas.to_view(x, y)
-        r = subprocess.run(
-            [
-                script("gsseg"),
-                "edit",
-                str(run),
-                "--click",
-                view.stem,
-                str(u),
-                str(v),
-                "--op",
-                "extract",
-                "--name",
-                "click",
-                "--backend",
-                "cpu",
-            ],
-            capture_output=True,
-            text=True,
-        )
-        assert r.returncode == 0, r.stderr
-        assert json.loads((run / "edits" / "click" / "edit.json").read_text())["object_id"] == label
+        assert _edited_by_click(run, view.stem, u, v, "extract", "click") == label
         # "Remove" in the panel: the object's pixels change in the next frames
         browser.find_element(By.XPATH, "//button[normalize-space(.)='Remove']").click()
         _wait(lambda: viewer.session.steps, what="the removal")
