@@ -219,7 +219,7 @@ def build_masks(
     out_dir = scene_dir / cfg.out_masks
     reads = scene_inputs(scene_dir, [cfg.from_masks])
     if cfg.depth is not None:
-        reads.append(("the depth maps it reads", Path(cfg.depth)))
+        reads.append(("the depth maps", Path(cfg.depth)))
     refuse_overlap(out_dir, reads)
     if cfg.dataset:  # a dataset is no part of the scene: it may replace nothing in it
         refuse_overlap(cfg.dataset, [*scene_entries(scene_dir), ("the mask folder it writes", out_dir)])
