@@ -60,7 +60,7 @@ def run_scene(name: str, real: Path, work: Path, iters: int | None, max_gaussian
     views = run.scene().split("test")
     renders = [run.render_rgb(v) for v in views]
     truth = [v.load_image() for v in views]
-    history = json.loads(run.folder.metrics.read_text())["train"]["history"]
+    history = run.folder.read_history()
     return {
         "scene": name,
         "images": images,

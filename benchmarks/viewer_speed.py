@@ -29,6 +29,7 @@ from dataset_tools.errors import InputError
 from eval.report import markdown_table
 from gsseg.render_views import segment_pixels
 from gsseg.run import load_run
+from gsseg.run_folder import RunFolder, read_edit_record
 from gsseg.viewer.session import ViewCamera, ViewerSession, browser_camera
 
 
@@ -44,7 +45,7 @@ def timed(fn, repeats: int = 3) -> float:
 def measure(run_dir: Path, max_size: int) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         run = Path(shutil.copytree(run_dir, Path(tmp) / "run"))  # the cache is written into the copy
-        (run / "contributions.npz").unlink(missing_ok=True)
+        RunFolder(run).contributions.unlink(missing_ok=True)
         session = ViewerSession(load_run(run))
         view = session.scene.split("train")[0]
         scale = min(1.0, max_size / max(view.camera.width, view.camera.height))
@@ -125,9 +126,7 @@ def clicks_agree(run: Path, session: ViewerSession, view) -> tuple[int, int]:
             capture_output=True,
             text=True,
         )
-        theirs = (
-            json.loads((run / "edits" / name / "edit.json").read_text())["object_id"] if done.returncode == 0 else None
-        )
+        theirs = read_edit_record(RunFolder(run).edit(name))["object_id"] if done.returncode == 0 else None
         agree += mine == theirs
         clicks += 1
     return agree, clicks

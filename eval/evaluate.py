@@ -94,18 +94,9 @@ class Evaluation:
         return cls(**fields)
 
     def save(self, path: Path) -> None:
+        """Write the scores as JSON (a report's ``metrics.json``; a run's copy is written by
+        :meth:`gsseg.run_folder.RunFolder.write_evaluation`)."""
         write_bytes_atomic(path, (json.dumps(self.to_json(), indent=2) + "\n").encode())
-
-    @classmethod
-    def load(cls, path: Path) -> Evaluation:
-        """An ``evaluation.json`` written by :meth:`save`; a missing or damaged file is an
-        :class:`InputError` that says how to write it again."""
-        if not path.is_file():
-            raise InputError(f"{path}: missing; run `gseval report {path.parent} --scene SCENE --out DIR` first.")
-        try:
-            return cls.from_json(json.loads(path.read_text()))
-        except (ValueError, TypeError, KeyError, AttributeError) as e:
-            raise InputError(f"{path}: damaged ({e}); run `gseval report` on the run again.") from None
 
 
 def _mean(values: list[float]) -> float | None:

@@ -10,7 +10,6 @@ from __future__ import annotations
 import base64
 import html
 import io
-import json
 from pathlib import Path
 
 import numpy as np
@@ -332,8 +331,7 @@ def report_run(
         ev.edits = edit_rows(run, segmentation, views, scene_dir, ev.id_map, backend=backend)
     edits = edit_panels(run, segmentation, views, selected, color, backend)
     truth = truth_rows(scene_dir, views, ev.id_map.get(selected), edits) if ev.edits else None
-    metrics = run.folder.metrics
-    history = json.loads(metrics.read_text()).get("train", {}).get("history", []) if metrics.is_file() else []
+    history = run.folder.read_history()
     write_report(
         ev,
         renders,
@@ -346,7 +344,7 @@ def report_run(
         overwrite=overwrite,
     )
     with run.folder.lock():
-        ev.save(run.folder.evaluation)
+        run.folder.write_evaluation(ev.to_json())
     return ev
 
 
@@ -355,7 +353,7 @@ def compare_runs(run_dirs: list[Path]) -> str:
     head = ["run", "scene", "mIoU visible", "mAcc visible", "mIoU extracted", "mAcc extracted", "PSNR", "SSIM"]
     rows = []
     for run in run_dirs:
-        ev = Evaluation.load(RunFolder(run).evaluation)
+        ev = Evaluation.from_json(RunFolder(run).read_evaluation())
         s = ev.summary()
         rows.append(
             [

@@ -181,13 +181,14 @@ def render(run: Path, scene: Path, out: Path, what: str, force: bool, **options)
 @other_scene_option
 def segment(run: Path, scene: Path, masks: str, backend: str, other_scene: bool, **options) -> None:
     """Prior-guided label reassignment of every Gaussian of RUN; writes RUN/labels.npz."""
+    from gsseg.run_folder import RunFolder
     from gsseg.segment.segment_run import LabelOptions, segment_run
 
     result = segment_run(
         run, scene, options=LabelOptions(**options), masks=masks, backend=backend, other_scene=other_scene
     )
     counts = {int(o): int(s.sum()) for o, s in zip(result.objects, result.selections)}
-    click.echo(f"wrote {run / 'labels.npz'}: {len(result.labels)} Gaussians; per object {counts}")
+    click.echo(f"wrote {RunFolder(run).labels}: {len(result.labels)} Gaussians; per object {counts}")
 
 
 def _click_options(click_help: str, exclude_help: str):

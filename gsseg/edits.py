@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -21,6 +20,7 @@ from gsseg.gaussians import Gaussians
 from gsseg.ply import write_ply
 from gsseg.render import Backend, get_backend
 from gsseg.run import Run, load_run
+from gsseg.run_folder import write_edit_record
 from gsseg.segment.clicks import Click, select_by_points
 from gsseg.segment.prompts import pick_object, point_from_click
 from gsseg.segment.reassign import Segmentation
@@ -222,7 +222,7 @@ def write_edit(
             write_png(tmp / "renders" / f"{view.stem}.png", frame)
             frames.append(frame)
         _write_video(tmp / "video.mp4", frames, fps)
-        (tmp / "edit.json").write_text(json.dumps(record, indent=2) + "\n")
+        write_edit_record(tmp, record)
     return out
 
 

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import hashlib
-import json
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
@@ -17,12 +15,11 @@ from dataset_tools.errors import InputError
 from dataset_tools.overlap import Protected, run_inputs, scene_entries
 from dataset_tools.scene import Scene, load_scene
 from gsseg.environment import Environment, background_image
-from gsseg.gaussians import Gaussians, make_classifier
-from gsseg.ply import read_ply
+from gsseg.gaussians import Gaussians
 from gsseg.render import Backend, RenderOutput, get_backend, render, to_uint8
 from gsseg.run_folder import RunFolder
 from gsseg.segment.reassign import Segmentation
-from gsseg.train.config import RunRecord, TrainConfig, scene_difference
+from gsseg.train_config import RunRecord, TrainConfig, scene_difference
 
 Background = Literal["environment", "white", "black"]
 
@@ -56,11 +53,11 @@ class Run:
 
     @cached_property
     def fingerprint(self) -> str:
-        return hashlib.sha256(self.folder.gaussians.read_bytes()).hexdigest()[:16]
+        return self.folder.model_fingerprint()
 
     def labels(self) -> Segmentation:
         """``labels.npz``, refused when it labels another model than the run's."""
-        segmentation = Segmentation.load(self.folder.labels)
+        segmentation = self.folder.read_labels()
         if len(segmentation.labels) != len(self.gaussians) or segmentation.model not in ("", self.fingerprint):
             raise InputError(
                 f"{self.folder.labels}: labels another model than {self.folder.gaussians} (trained "
@@ -157,46 +154,16 @@ class Run:
         return to_uint8(self.render(view, **options).rgb)
 
 
-def _damaged(path: Path, e: Exception) -> InputError:
-    return InputError(
-        f"{path}: damaged run file ({type(e).__name__}: {str(e).splitlines()[0] if str(e) else ''}); "
-        "restore it or train the run again."
-    )
-
-
-def _classifier(path: Path) -> torch.nn.Linear:
-    try:
-        state = torch.load(path, map_location="cpu", weights_only=True)
-        classifier = make_classifier(state["weight"].shape[0])
-        classifier.load_state_dict(state)
-        return classifier
-    except Exception as e:  # truncated, foreign or unpicklable: torch raises many types
-        raise _damaged(path, e) from None
-
-
-def _environment(path: Path) -> Environment | None:
-    if not path.is_file():
-        return None
-    try:
-        return Environment.from_state(torch.load(path, map_location="cpu", weights_only=True))
-    except Exception as e:  # as above
-        raise _damaged(path, e) from None
-
-
 def load_run(root: Path | str, *, other_scene: bool = False) -> Run:
     """Load the model of a finished training run; damaged files are refused in one sentence.
     ``other_scene``: :meth:`Run.scene` accepts a scene other than the one the run recorded."""
     folder = RunFolder(root)
     folder.require_finished()
-    try:
-        record = RunRecord.from_json(json.loads(folder.config.read_text()))
-    except (ValueError, KeyError, TypeError, AttributeError) as e:
-        raise _damaged(folder.config, e) from None
     return Run(
         folder,
-        record,
-        read_ply(folder.gaussians),
-        _classifier(folder.classifier),
-        _environment(folder.environment),
+        folder.read_config(),
+        folder.read_gaussians(),
+        folder.read_classifier(),
+        folder.read_environment(),
         other_scene,
     )

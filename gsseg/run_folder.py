@@ -13,22 +13,46 @@ file of a run is named here and nowhere else.
       evaluation.json   the scores of `gseval report`, for `gseval compare`
       edits/NAME/       one edit: gaussians.ply, renders/, video.mp4, edit.json
       .lock             held by the command writing the run (an OS file lock)
+
+Each file is read and written here alone (``RunFolder.read_*`` / ``write_*``): the JSON files
+and the npz files carry ``format_version`` (:data:`FORMAT_VERSIONS`); a file without one is
+from before versions were recorded and reads as version 0; a file from a newer version is
+refused in one sentence.
 """
 
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import io
 import json
+import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 import torch
 
 from dataset_tools.atomic import write_bytes_atomic
 from dataset_tools.errors import InputError
 from dataset_tools.locks import exclusive
 from dataset_tools.names import plain_name
+from gsseg.environment import Environment
+from gsseg.gaussians import Gaussians, make_classifier
+from gsseg.ply import read_ply, write_ply
+from gsseg.render.contributions import Contributions
+from gsseg.segment.reassign import Segmentation
+from gsseg.train_config import RunRecord
+
+FORMAT_VERSIONS = {
+    "config.json": 1,
+    "metrics.json": 1,
+    "labels.npz": 1,
+    "contributions.npz": 1,
+    "evaluation.json": 1,
+    "edit.json": 1,
+}
+DAMAGED = (OSError, ValueError, KeyError, TypeError, AttributeError, EOFError, zipfile.BadZipFile)
 
 
 @dataclass(frozen=True)
@@ -108,6 +132,193 @@ class RunFolder:
                 raise InputError(
                     f"{self.root} has no {path.name}; point to the --out folder of a finished `gsseg train`."
                 )
+
+    # config.json
+    def read_config(self) -> RunRecord:
+        """The run's options and what it was trained on; a damaged file is refused."""
+        try:
+            return RunRecord.from_json(_read_json(self.config))
+        except DAMAGED as e:
+            raise damaged(self.config, e) from None
+
+    def write_config(self, record: RunRecord) -> None:
+        _write_json(self.config, record.to_json())
+
+    # gaussians.ply, classifier.pt, environment.pt, metrics.json: the finished model
+    def read_gaussians(self) -> Gaussians:
+        return read_ply(self.gaussians)
+
+    def model_fingerprint(self) -> str:
+        """A digest of gaussians.ply, which names the model that labels and contributions were
+        computed for."""
+        return hashlib.sha256(self.gaussians.read_bytes()).hexdigest()[:16]
+
+    def read_classifier(self) -> torch.nn.Linear:
+        try:
+            state = torch.load(self.classifier, map_location="cpu", weights_only=True)
+            classifier = make_classifier(state["weight"].shape[0])
+            classifier.load_state_dict(state)
+            return classifier
+        except Exception as e:  # truncated, foreign or unpicklable: torch raises many types
+            raise damaged(self.classifier, e) from None
+
+    def read_environment(self) -> Environment | None:
+        """The learned background, None when the run has none."""
+        if not self.environment.is_file():
+            return None
+        try:
+            return Environment.from_state(torch.load(self.environment, map_location="cpu", weights_only=True))
+        except Exception as e:  # as above
+            raise damaged(self.environment, e) from None
+
+    def write_model(
+        self,
+        gaussians: Gaussians,
+        classifier: torch.nn.Linear,
+        environment: Environment | None,
+        steps: int,
+        history: list[dict],
+    ) -> None:
+        """Write the finished model: gaussians.ply, classifier.pt, environment.pt (when there is
+        one) and the training curve ``history`` in metrics.json."""
+        write_ply(gaussians.detach().to("cpu"), self.gaussians)
+        write_torch(self.classifier, {k: v.cpu() for k, v in classifier.state_dict().items()})
+        if environment is not None:
+            write_torch(self.environment, {k: v.cpu() for k, v in environment.state_dict().items()})
+        _write_json(self.metrics, {"train": {"steps": steps, "gaussians": len(gaussians), "history": history}})
+
+    def read_history(self) -> list[dict]:
+        """The training curve of metrics.json (one dict per logged step), empty when the file is
+        missing."""
+        if not self.metrics.is_file():
+            return []
+        try:
+            return list(_read_json(self.metrics).get("train", {}).get("history", []))
+        except DAMAGED as e:
+            raise damaged(self.metrics, e) from None
+
+    # labels.npz, contributions.npz: `gsseg segment`
+    def read_labels(self) -> Segmentation:
+        """The labels of ``gsseg segment``; missing or damaged files are refused."""
+        if not self.labels.is_file():
+            raise InputError(f"{self.labels} does not exist; run `gsseg segment` on the run first.")
+        try:
+            with np.load(self.labels, allow_pickle=False) as f:
+                _check_version(self.labels, int(f["format_version"]) if "format_version" in f else 0)
+                return Segmentation(
+                    labels=f["labels"],
+                    objects=f["objects"],
+                    selections=f["selections"],
+                    method=str(f["method"]),
+                    mode=str(f["mode"]),
+                    gamma_p=float(f["gamma_p"]),
+                    model=str(f["model"]) if "model" in f else "",
+                    smooth=int(f["smooth"]) if "smooth" in f else 0,
+                    fill=bool(f["fill"]) if "fill" in f else False,
+                )
+        except DAMAGED as e:
+            raise InputError(f"{self.labels}: damaged labels ({e}); run `gsseg segment` on the run again.") from None
+
+    def write_labels(self, segmentation: Segmentation) -> None:
+        s = segmentation
+        _write_npz(
+            self.labels,
+            compressed=True,
+            labels=s.labels,
+            objects=s.objects,
+            selections=s.selections,
+            method=s.method,
+            mode=s.mode,
+            gamma_p=s.gamma_p,
+            model=s.model,
+            smooth=s.smooth,
+            fill=s.fill,
+            gaussians=len(s.labels),
+        )
+
+    def read_contributions(self) -> Contributions | None:
+        """The contribution matrix ``gsseg segment`` wrote, None when there is none."""
+        if not self.contributions.is_file():
+            return None
+        try:
+            with np.load(self.contributions, allow_pickle=False) as f:
+                _check_version(self.contributions, int(f["format_version"]) if "format_version" in f else 0)
+                return Contributions(
+                    labels=f["labels"],
+                    weights=torch.from_numpy(f["weights"]),
+                    model=str(f["model"]),
+                    masks=str(f["masks"]) if "masks" in f else "",
+                )
+        except DAMAGED as e:
+            raise InputError(
+                f"{self.contributions}: damaged contribution cache ({e}); delete it and run `gsseg segment` again."
+            ) from None
+
+    def write_contributions(self, contributions: Contributions) -> None:
+        c = contributions
+        _write_npz(self.contributions, labels=c.labels, weights=c.weights.numpy(), model=c.model, masks=c.masks)
+
+    # evaluation.json: `gseval report`
+    def read_evaluation(self) -> dict:
+        """The scores ``gseval report`` wrote (``eval.evaluate.Evaluation.to_json``)."""
+        if not self.evaluation.is_file():
+            raise InputError(
+                f"{self.evaluation}: missing; run `gseval report {self.root} --scene SCENE --out DIR` first."
+            )
+        try:
+            return _read_json(self.evaluation)
+        except DAMAGED as e:
+            raise InputError(f"{self.evaluation}: damaged ({e}); run `gseval report` on the run again.") from None
+
+    def write_evaluation(self, data: dict) -> None:
+        _write_json(self.evaluation, data)
+
+
+def write_edit_record(edit_dir: Path, record: dict) -> None:
+    """``edit_dir/edit.json``: what an edit did (object, operation, the labels' settings)."""
+    _write_json(edit_dir / "edit.json", record)
+
+
+def read_edit_record(edit_dir: Path) -> dict:
+    path = edit_dir / "edit.json"
+    try:
+        return _read_json(path)
+    except DAMAGED as e:
+        raise damaged(path, e) from None
+
+
+def damaged(path: Path, e: Exception) -> InputError:
+    """The refusal of a damaged run file."""
+    return InputError(
+        f"{path}: damaged run file ({type(e).__name__}: {str(e).splitlines()[0] if str(e) else ''}); "
+        "restore it or train the run again."
+    )
+
+
+def _check_version(path: Path, version: int) -> None:
+    known = FORMAT_VERSIONS[path.name]
+    if version > known:
+        raise InputError(
+            f"{path}: format version {version}, newer than this gsseg reads ({known}); update gsseg to read it."
+        )
+
+
+def _read_json(path: Path) -> dict:
+    data = json.loads(path.read_text())
+    if not isinstance(data, dict):
+        raise ValueError("not a JSON object")
+    _check_version(path, int(data.pop("format_version", 0)))
+    return data
+
+
+def _write_json(path: Path, data: dict) -> None:
+    write_json(path, {"format_version": FORMAT_VERSIONS[path.name], **data})
+
+
+def _write_npz(path: Path, *, compressed: bool = False, **arrays) -> None:
+    buf = io.BytesIO()
+    (np.savez_compressed if compressed else np.savez)(buf, format_version=FORMAT_VERSIONS[path.name], **arrays)
+    write_bytes_atomic(path, buf.getvalue())
 
 
 def write_json(path: Path, data: dict) -> None:

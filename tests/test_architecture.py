@@ -11,6 +11,9 @@ each other. Every import counts, also those inside functions and under TYPE_CHEC
 importing ``a.b.c`` from outside ``a.b`` also runs ``a/b/__init__.py``, so it counts as an
 import of ``a.b`` too (a package whose ``__init__`` imports back into its importer is a
 circle, however far the names lie apart).
+
+The run folder has one owner, ``gsseg/run_folder.py``: no other module reads or writes a
+run's files.
 """
 
 from __future__ import annotations
@@ -130,3 +133,74 @@ def test_the_checker_sees_function_level_and_relative_imports(tmp_path):
         assert imports("c", tmp_path / "c.py", known) == {"pkg.a", "pkg"}
     finally:
         ROOT = saved
+
+
+RUN_FILES = ("config", "gaussians", "classifier", "environment", "metrics", "labels", "contributions", "evaluation")
+RUN_FILE_NAMES = (
+    "config.json",
+    "classifier.pt",
+    "environment.pt",
+    "labels.npz",
+    "contributions.npz",
+    "evaluation.json",
+    "edit.json",
+)
+OPENERS = ("open", "read_text", "read_bytes", "write_text", "write_bytes")
+
+
+def _is_run_file(node: ast.AST) -> bool:
+    """``folder.<file>`` or ``<x>.folder.<file>``: the path of a run file."""
+    if not (isinstance(node, ast.Attribute) and node.attr in RUN_FILES):
+        return False
+    owner = node.value
+    return (isinstance(owner, ast.Name) and owner.id == "folder") or (
+        isinstance(owner, ast.Attribute) and owner.attr == "folder"
+    )
+
+
+def run_file_access(source: str) -> list[int]:
+    """Lines of ``source`` that open a run file: a run file's path opened or passed to a call
+    (``np.load(run.folder.labels)``), or a run file's name joined onto a path (``run /
+    "labels.npz"``)."""
+    lines = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Call):
+            f = node.func
+            opened = isinstance(f, ast.Attribute) and f.attr in OPENERS and _is_run_file(f.value)
+            if opened or any(_is_run_file(a) for a in [*node.args, *(k.value for k in node.keywords)]):
+                lines.append(node.lineno)
+        elif isinstance(node, ast.BinOp) and isinstance(node.op, ast.Div):
+            if isinstance(node.right, ast.Constant) and node.right.value in RUN_FILE_NAMES:
+                lines.append(node.lineno)
+    return sorted(lines)
+
+
+def test_only_the_run_folder_module_opens_run_files():
+    owner = ROOT / "gsseg" / "run_folder.py"
+    found = [
+        f"{path.relative_to(ROOT)}:{line}"
+        for path in modules().values()
+        if path != owner
+        for line in run_file_access(path.read_text())
+    ]
+    assert not found, "run files opened outside gsseg/run_folder.py:\n" + "\n".join(found)
+
+
+def test_the_run_file_checker_sees_reads_writes_and_joined_names():
+    """The checker itself: each way of opening a run file is seen; naming one in a message,
+    asking whether it exists or opening another folder's file is not."""
+    opened = (
+        "np.load(run.folder.labels)\n"
+        "folder.config.read_text()\n"
+        "torch.load(path=self.run.folder.classifier)\n"
+        "(run / 'labels.npz').unlink()\n"
+        "write_json(folder.metrics, {})\n"
+    )
+    assert run_file_access(opened) == [1, 2, 3, 4, 5]
+    fine = (
+        "raise InputError(f'{run.folder.labels} is missing')\n"
+        "run.folder.labels.is_file()\n"
+        "np.load(scene / 'points.npz')\n"
+        "labels.read_text()\n"
+    )
+    assert run_file_access(fine) == []

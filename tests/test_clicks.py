@@ -72,7 +72,7 @@ def _joined(segmented: Path, tmp_path: Path):
     a, b = (int(o) for o in np.argsort(-counts[1:])[:2] + 1)
     merged = np.where(seg.labels == b, a, seg.labels).astype(np.uint8)
     objects = np.array([o for o in seg.objects if o != b], np.uint8)
-    replace(seg, labels=merged, objects=objects, selections=merged[None] == objects[:, None]).save(run.folder.labels)
+    run.folder.write_labels(replace(seg, labels=merged, objects=objects, selections=merged[None] == objects[:, None]))
     return run_dir, run, seg, merged, a, b
 
 
@@ -129,7 +129,7 @@ def test_exclude_click_splits_an_object_joined_to_another(segmented, tmp_path):
     )
     assert r.returncode == 0, r.stderr
     assert len(read_ply(exported)) == alone.sum()  # no environment shell for a selection
-    seg.save(run.folder.labels)  # the original labels: two clicks join the two objects
+    run.folder.write_labels(seg)  # the original labels: two clicks join the two objects
     joined = chosen(edit("--click", va, str(ua), str(wa), "--click", vb, str(ub), str(wb), "--name", "joined"))
     np.testing.assert_array_equal(joined, (seg.labels == a) | (seg.labels == b))
 

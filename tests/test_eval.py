@@ -25,7 +25,7 @@ from gsseg.render_views import render_run, segment_pixels
 from gsseg.run import Run
 from gsseg.run_folder import RunFolder
 from gsseg.segment.reassign import Segmentation
-from gsseg.train.config import RunRecord, TrainConfig
+from gsseg.train_config import RunRecord, TrainConfig
 
 
 def script(name: str) -> str:

@@ -7,6 +7,7 @@ import numpy as np
 import torch
 
 from gsseg.render.contributions import Contributions
+from gsseg.run_folder import RunFolder
 from gsseg.segment.reassign import Segmentation
 from gsseg.segment.regularize import fill_interiors, smooth_weak_labels, weak_evidence
 
@@ -74,8 +75,8 @@ def test_the_regularisation_applied_is_saved_with_the_labels(tmp_path):
     seg = fill_interiors(
         smooth_weak_labels(_segmentation(labels), np.eye(4, 3), np.ones(4), np.zeros(4, bool), k=4), np.eye(4, 3)
     )
-    seg.save(tmp_path / "labels.npz")
-    loaded = Segmentation.load(tmp_path / "labels.npz")
+    RunFolder(tmp_path).write_labels(seg)
+    loaded = RunFolder(tmp_path).read_labels()
     assert (loaded.smooth, loaded.fill) == (4, True)
     np.testing.assert_array_equal(loaded.selections, seg.selections)
 

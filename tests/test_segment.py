@@ -15,6 +15,7 @@ from gsseg.gaussians import Gaussians
 from gsseg.ply import read_ply
 from gsseg.render import BACKENDS, render
 from gsseg.render.contributions import Contributions, MaskedView, contribution_matrix
+from gsseg.run_folder import RunFolder
 from gsseg.segment import object_at_point, reassign
 
 F, SIZE = 20.0, 16
@@ -171,7 +172,6 @@ def test_segment_edit_and_render_segments_from_the_command_line(trained, small_s
 
     from dataset_tools.image_files import read_image, read_mask
     from dataset_tools.scene import load_scene
-    from gsseg.segment.reassign import Segmentation
 
     run = tmp_path / "run"
     shutil.copytree(trained, run)
@@ -183,7 +183,7 @@ def test_segment_edit_and_render_segments_from_the_command_line(trained, small_s
         return r
 
     ok("segment", run, "--scene", small_scene.root)
-    seg = Segmentation.load(run / "labels.npz")
+    seg = RunFolder(run).read_labels()
     assert set(seg.objects.tolist()) == {1, 2, 3, 4}
     ok("render", run, "--scene", small_scene.root, "--out", tmp_path / "r", "--what", "segments", "--split", "train")
     scene = load_scene(small_scene.root)
@@ -216,7 +216,6 @@ def test_segment_votes_with_the_masks_the_run_was_trained_on(segmented, scene_co
     from it without ``--masks``: the same labels as from ``object_mask``."""
     import shutil
 
-    from gsseg.segment.reassign import Segmentation
     from gsseg.segment.segment_run import segment_run
 
     run = tmp_path / "run"
@@ -226,14 +225,13 @@ def test_segment_votes_with_the_masks_the_run_was_trained_on(segmented, scene_co
     (run / "config.json").write_text(json.dumps({**config, "masks": "hqmask"}))
     (scene_copy / "object_mask").rename(scene_copy / "hqmask")
     result = segment_run(run, scene_copy, backend="cpu", progress=False)
-    np.testing.assert_array_equal(result.labels, Segmentation.load(segmented / "labels.npz").labels)
+    np.testing.assert_array_equal(result.labels, RunFolder(segmented).read_labels().labels)
     with pytest.raises(InputError, match="object_mask holds no masks"):
         segment_run(run, scene_copy, masks="object_mask", backend="cpu", progress=False)
 
 
 def test_a_run_trained_on_colour_alone_segments_only_with_masks_named(small_scene, tmp_path):
     """No fallback to the scene's ``object_mask`` (a synthetic scene's ground truth)."""
-    from gsseg.render.contributions import Contributions
     from gsseg.segment.segment_run import segment_run
     from gsseg.train import TrainConfig, train
 
@@ -243,4 +241,4 @@ def test_a_run_trained_on_colour_alone_segments_only_with_masks_named(small_scen
         segment_run(run, small_scene.root, backend="cpu", progress=False)
     labels = segment_run(run, small_scene.root, masks="object_mask", backend="cpu", progress=False)
     assert labels.gamma_p == 0.0  # the classifier knows no mask IDs: the prior is left out
-    assert Contributions.load(run / "contributions.npz").masks == "object_mask"
+    assert RunFolder(run).read_contributions().masks == "object_mask"

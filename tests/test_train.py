@@ -18,10 +18,10 @@ from gsseg.ply import read_ply
 from gsseg.render_views import render_run
 from gsseg.train import TrainConfig, TrainingDiverged, train
 from gsseg.train import trainer as trainer_module
-from gsseg.train.config import LearningRates
 from gsseg.train.optim import GaussianOptimizer
 from gsseg.train.strategy import DensifyOptions, DensifyStats, densify_and_prune
 from gsseg.train.views import TrainViews, view_bytes
+from gsseg.train_config import LearningRates
 
 
 def _history(run):

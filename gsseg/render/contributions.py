@@ -8,20 +8,15 @@ computed with the blending rules of training, one pass per view on the chosen ba
 
 from __future__ import annotations
 
-import io
-import zipfile
 from collections.abc import Sequence
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Protocol
 
 import numpy as np
 import torch
 from tqdm import tqdm
 
-from dataset_tools.atomic import write_bytes_atomic
 from dataset_tools.cameras import PinholeCamera
-from dataset_tools.errors import InputError
 from gsseg.gaussians import Gaussians
 from gsseg.render.backends import Backend, get_backend
 
@@ -57,25 +52,6 @@ class Contributions:
     weights: torch.Tensor
     model: str = ""
     masks: str = ""
-
-    def save(self, path: Path) -> None:
-        """Write ``labels``, ``weights``, ``model`` and ``masks`` as an npz file, atomically."""
-        buf = io.BytesIO()
-        np.savez(buf, labels=self.labels, weights=self.weights.numpy(), model=self.model, masks=self.masks)
-        write_bytes_atomic(Path(path), buf.getvalue())
-
-    @classmethod
-    def load(cls, path: Path) -> Contributions:
-        try:
-            with np.load(path, allow_pickle=False) as f:
-                masks = str(f["masks"]) if "masks" in f else ""
-                return cls(
-                    labels=f["labels"], weights=torch.from_numpy(f["weights"]), model=str(f["model"]), masks=masks
-                )
-        except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as e:
-            raise InputError(
-                f"{path}: damaged contribution cache ({e}); delete it and run `gsseg segment` again."
-            ) from None
 
 
 def contribution_matrix(

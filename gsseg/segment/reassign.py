@@ -12,14 +12,11 @@ breaks near-ties. Gaussians no view observed (column sum 0) keep their prior lab
 
 from __future__ import annotations
 
-import zipfile
 from dataclasses import dataclass, replace
-from pathlib import Path
 
 import numpy as np
 import torch
 
-from dataset_tools.atomic import write_bytes_atomic
 from dataset_tools.errors import InputError
 from gsseg.render.contributions import Contributions
 
@@ -73,45 +70,6 @@ class Segmentation:
     def subset(self, keep: np.ndarray) -> Segmentation:
         """The labels and selections of the Gaussians where (N,) bool ``keep`` is true."""
         return replace(self, labels=self.labels[keep], selections=self.selections[:, keep])
-
-    def save(self, path: Path) -> None:
-        import io
-
-        buf = io.BytesIO()
-        np.savez_compressed(
-            buf,
-            labels=self.labels,
-            objects=self.objects,
-            selections=self.selections,
-            method=self.method,
-            mode=self.mode,
-            gamma_p=self.gamma_p,
-            model=self.model,
-            smooth=self.smooth,
-            fill=self.fill,
-            gaussians=len(self.labels),
-        )
-        write_bytes_atomic(Path(path), buf.getvalue())
-
-    @classmethod
-    def load(cls, path: Path) -> Segmentation:
-        if not Path(path).is_file():
-            raise InputError(f"{path} does not exist; run `gsseg segment` on the run first.")
-        try:
-            with np.load(path, allow_pickle=False) as f:
-                return cls(
-                    labels=f["labels"],
-                    objects=f["objects"],
-                    selections=f["selections"],
-                    method=str(f["method"]),
-                    mode=str(f["mode"]),
-                    gamma_p=float(f["gamma_p"]),
-                    model=str(f["model"]) if "model" in f else "",
-                    smooth=int(f["smooth"]) if "smooth" in f else 0,
-                    fill=bool(f["fill"]) if "fill" in f else False,
-                )
-        except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as e:
-            raise InputError(f"{path}: damaged labels ({e}); run `gsseg segment` on the run again.") from None
 
 
 def normalize(weights: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:

@@ -115,6 +115,6 @@ def segment_run(
         )
     result = label_gaussians(run, contributions, options)
     with run.folder.lock():
-        result.save(run.folder.labels)
-        contributions.save(run.folder.contributions)
+        run.folder.write_labels(result)
+        run.folder.write_contributions(contributions)
     return result

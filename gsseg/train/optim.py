@@ -6,7 +6,7 @@ from __future__ import annotations
 import torch
 
 from gsseg.gaussians import Gaussians
-from gsseg.train.config import LearningRates
+from gsseg.train_config import LearningRates
 
 
 class GaussianOptimizer:

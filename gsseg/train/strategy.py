@@ -12,8 +12,8 @@ import torch
 from gsseg.gaussians import Gaussians
 from gsseg.render import RenderOutput
 from gsseg.render.projection import quat_to_rotmat
-from gsseg.train.config import Schedule
 from gsseg.train.optim import GaussianOptimizer
+from gsseg.train_config import Schedule
 
 
 @dataclass

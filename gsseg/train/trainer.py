@@ -9,7 +9,6 @@ step; Ctrl-C and SIGTERM stop after the step in progress and write one, so that
 
 from __future__ import annotations
 
-import json
 import math
 import shutil
 import sys
@@ -32,15 +31,14 @@ from dataset_tools.overlap import refuse_overlap, scene_entries
 from dataset_tools.scene import Scene, View, load_scene
 from gsseg.environment import Environment, background_image, mean_up, profile_bins
 from gsseg.gaussians import Gaussians, gaussians_from_points, make_classifier, random_points
-from gsseg.ply import write_ply
 from gsseg.render import Backend, RenderOutput, get_backend, render
 from gsseg.render.cpu_kernels import compiled_on_disk
-from gsseg.run_folder import RunFolder, write_json, write_torch
-from gsseg.train.config import RunRecord, TrainConfig, scene_difference
+from gsseg.run_folder import RunFolder, write_torch
 from gsseg.train.losses import knn_identity_loss, object_loss, photometric_loss, psnr
 from gsseg.train.optim import GaussianOptimizer
 from gsseg.train.strategy import DensifyOptions, DensifyStrategy
 from gsseg.train.views import TrainView, TrainViews, camera_extent
+from gsseg.train_config import RunRecord, TrainConfig, scene_difference
 
 LOG_EVERY = 10
 KEEP_CHECKPOINTS = 2
@@ -131,13 +129,7 @@ def _environment(cfg: TrainConfig, views: list[View]) -> Environment | None:
 
 def _saved_config(folder: RunFolder) -> TrainConfig:
     """The options recorded in a run's config.json, refused in one sentence when damaged."""
-    try:
-        return TrainConfig.from_json(json.loads(folder.config.read_text()))
-    except (ValueError, KeyError, TypeError, AttributeError) as e:
-        raise InputError(
-            f"{folder.config}: damaged run file ({type(e).__name__}); restore it, or start the run "
-            "again in a new folder."
-        ) from None
+    return folder.read_config().config
 
 
 def _asked_options(cfg: TrainConfig, given: Collection[str] | None) -> set[str]:
@@ -234,13 +226,7 @@ def _save_checkpoint(folder: RunFolder, state: _State) -> Path:
 
 def _export(folder: RunFolder, state: _State) -> None:
     """Write the finished model: gaussians.ply, classifier.pt, environment.pt, metrics.json."""
-    write_ply(state.gaussians.gaussians.detach().to("cpu"), folder.gaussians)
-    write_torch(folder.classifier, {k: v.cpu() for k, v in state.classifier.state_dict().items()})
-    if state.environment is not None:
-        write_torch(folder.environment, {k: v.cpu() for k, v in state.environment.state_dict().items()})
-    write_json(
-        folder.metrics, {"train": {"steps": state.step, "gaussians": len(state.gaussians), "history": state.history}}
-    )
+    folder.write_model(state.gaussians.gaussians, state.classifier, state.environment, state.step, state.history)
 
 
 def _train_step(state: _State, view: TrainView, cfg: TrainConfig, backend: Backend, step: int) -> dict:
@@ -373,7 +359,7 @@ def _train_locked(
             "or train on colour alone with --masks none."
         )
     if restore and not other_scene:
-        difference = scene_difference(RunRecord.from_json(json.loads(folder.config.read_text())), scene)
+        difference = scene_difference(folder.read_config(), scene)
         if difference is not None:
             raise InputError(
                 f"{scene_dir}: not the scene {folder.root} was trained on ({difference}); pass that "
@@ -397,8 +383,7 @@ def _train_locked(
         state = _new_state(scene, cfg, train_views, extent, backend.device)
         if restore:
             state.load_state_dict(_latest_good_checkpoint(folder, backend.device))
-        write_json(
-            folder.config,
+        folder.write_config(
             RunRecord(
                 cfg,
                 str(scene_dir.resolve()),
@@ -407,7 +392,7 @@ def _train_locked(
                 scene.views[0].camera.near,
                 views.names,
                 scene_fingerprint(scene),
-            ).to_json(),
+            )
         )
         return _loop(folder, state, views, cfg, backend, stop_after, progress)
     finally:

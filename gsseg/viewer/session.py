@@ -240,8 +240,7 @@ class ViewerSession:
         """The run's contribution matrix: the cached one when it belongs to this model."""
         with self._lock:
             if self._contributions is None:
-                path = self.run.folder.contributions
-                cached = Contributions.load(path) if path.is_file() else None
+                cached = self.run.folder.read_contributions()
                 if cached is not None and cached.model == self.run.fingerprint:
                     self._contributions = cached
                 else:
@@ -254,7 +253,7 @@ class ViewerSession:
                             "with `hqmask build`."
                         )
                     with self.run.folder.lock():
-                        computed.save(path)
+                        self.run.folder.write_contributions(computed)
                     self._contributions = computed
             return self._contributions
 
