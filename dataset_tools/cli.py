@@ -67,10 +67,14 @@ def synth(
 @click.option("--frames", type=int, default=150, show_default=True, help="Frames to keep from a video.")
 @click.option(
     "--matcher",
-    type=click.Choice(["auto", "exhaustive", "sequential"]),
+    type=click.Choice(["auto", "exhaustive", "sequential", "retrieval"]),
     default="auto",
     show_default=True,
-    help="auto: exhaustive for up to 150 photos, sequential with keyframe loop closure otherwise and for video.",
+    help="auto: exhaustive for up to 50 photos, retrieval (each photo with its --neighbours most alike) for "
+    "more, sequential with keyframe loop closure for a video.",
+)
+@click.option(
+    "--neighbours", type=int, default=20, show_default=True, help="Retrieval matching: photos matched with each."
 )
 @click.option("--mapper", type=click.Choice(["incremental", "global"]), default="incremental", show_default=True)
 @click.option("--camera-model", default="SIMPLE_RADIAL", show_default=True, help="COLMAP camera model to fit.")

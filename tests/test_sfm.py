@@ -173,6 +173,27 @@ def test_sfm_recovers_the_exact_cameras_of_a_synthetic_orbit_and_again_the_same(
     )
 
 
+@pytest.mark.slow
+def test_retrieval_matching_registers_shuffled_photos_with_fewer_pairs(speckled, tmp_path):
+    """The orbit's 40 photos renamed in a random order: each matched with its 8 most alike
+    (VLAD of its SIFT descriptors), every photo registers with the cameras exhaustive
+    matching finds, from under half of the pairs."""
+    photos = tmp_path / "photos"
+    photos.mkdir()
+    order = np.random.default_rng(0).permutation(40)
+    for rank, path in zip(order, sorted((speckled / "images").iterdir())):
+        shutil.copy(path, photos / f"{rank:03d}_{path.name}")
+    result = run_sfm(photos, tmp_path / "scene", SfmConfig(matcher="retrieval", neighbours=8), progress=False)
+    assert result.registered == result.images == 40
+    pairs = (tmp_path / "scene" / ".sfm" / "pairs.txt").read_text().splitlines()
+    assert len(pairs) < 0.5 * 40 * 39 / 2
+    made, truth = load_scene(result.scene), {v.name: v for v in load_scene(speckled).views}
+    rot, ctr = camera_errors(
+        [v.cam_from_world for v in made.views], [truth[v.name[4:]].cam_from_world for v in made.views]
+    )
+    assert np.median(rot) < 0.5 and np.median(ctr) < 0.01
+
+
 def _video_of(views, path: Path) -> Path:
     """The views' images as the frames of an MP4 at 10 frames a second, as a phone writes one."""
     height, width = views[0].load_image().shape[:2]

@@ -32,6 +32,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+import numpy as np
 from PIL import Image
 from tqdm import tqdm
 
@@ -41,13 +42,14 @@ from dataset_tools.errors import InputError
 from dataset_tools.image_files import IMAGE_SUFFIXES, write_downsampled
 from dataset_tools.locks import exclusive
 from dataset_tools.overlap import refuse_overlap
+from dataset_tools.sfm import retrieval
 from dataset_tools.sfm.frames import VIDEO_SUFFIXES, sample_frames
 
 if TYPE_CHECKING:
     import pycolmap
 
 STEPS = ("images", "features", "matches", "mapping", "undistort")
-EXHAUSTIVE_UP_TO = 150
+EXHAUSTIVE_UP_TO = 50
 MIN_REGISTERED_SHARE = 0.5
 SIFT_PEAK_THRESHOLD = 0.02 / 3  # COLMAP's default, for photos of about REFERENCE_SIDE pixels
 REFERENCE_SIDE = 1000
@@ -59,7 +61,7 @@ class SfmConfig:
     """Options of ``python -m dataset_tools sfm`` (same names as the CLI)."""
 
     frames: int = 150  # a video's frames to keep
-    matcher: str = "auto"  # auto | exhaustive | sequential
+    matcher: str = "auto"  # auto | exhaustive | sequential | retrieval
     mapper: str = "incremental"  # incremental | global
     camera_model: str = "SIMPLE_RADIAL"
     single_camera: bool | None = None  # None: one camera for a video, one per folder of photos
@@ -68,14 +70,17 @@ class SfmConfig:
     scale_thresholds: bool = True  # the mapper's pixel thresholds scaled to the image size; False: COLMAP's
     overlap: int = 10  # sequential matching: each image with its next ``overlap``
     keyframes: int = 30  # sequential matching: keyframes matched exhaustively among themselves
+    neighbours: int = 20  # retrieval matching: each image with this many most alike
     deterministic: bool = True  # SIFT, matching and mapping on one thread: the same photos and seed, the same model
     seed: int = 0  # of the two-view verification's RANSAC and of the mapper
 
     def check(self) -> None:
         if self.frames < 3:
             raise InputError(f"--frames {self.frames}: keep at least 3 frames.")
-        if self.matcher not in ("auto", "exhaustive", "sequential"):
-            raise InputError(f"--matcher {self.matcher}: use auto, exhaustive or sequential.")
+        if self.matcher not in ("auto", "exhaustive", "sequential", "retrieval"):
+            raise InputError(f"--matcher {self.matcher}: use auto, exhaustive, sequential or retrieval.")
+        if self.neighbours < 1:
+            raise InputError(f"--neighbours {self.neighbours}: match each photo with at least 1 other.")
         if self.mapper not in ("incremental", "global"):
             raise InputError(f"--mapper {self.mapper}: use incremental or global.")
         if self.camera_model not in CAMERA_MODELS:
@@ -211,10 +216,9 @@ def incremental_options(scale: float, seed: int, threads: int) -> pycolmap.Incre
     return options
 
 
-def _pairs_file(names: list[str], cfg: SfmConfig, path: Path) -> None:
-    """Image pairs for sequential matching: each image with its next ``overlap`` and at powers
-    of two further, and every pair of ``keyframes`` spread over the sequence (loop closure)."""
-    n = len(names)
+def sequential_pairs(n: int, cfg: SfmConfig) -> list[tuple[int, int]]:
+    """Pairs (i < j) of n images in order: each with its next ``overlap`` and at powers of two
+    further, and every pair of ``keyframes`` spread over the sequence (loop closure)."""
     pairs = set()
     for i in range(n):
         for j in range(i + 1, min(n, i + cfg.overlap + 1)):
@@ -225,7 +229,25 @@ def _pairs_file(names: list[str], cfg: SfmConfig, path: Path) -> None:
             step *= 2
     keys = sorted({round(k) for k in (i * (n - 1) / max(1, cfg.keyframes - 1) for i in range(min(n, cfg.keyframes)))})
     pairs |= set(itertools.combinations(keys, 2))
-    path.write_text("".join(f"{names[i]} {names[j]}\n" for i, j in sorted(pairs)))
+    return sorted(pairs)
+
+
+def retrieval_pairs(pycolmap, database: Path, names: list[str], cfg: SfmConfig) -> list[tuple[int, int]]:
+    """Pairs (i < j) of the images ``names``: each with its ``neighbours`` most alike by the
+    VLAD vectors of their SIFT descriptors in ``database``
+    (:mod:`dataset_tools.sfm.retrieval`)."""
+    db = pycolmap.Database.open(str(database))
+    try:
+        ids = {image.name: image.image_id for image in db.read_all_images()}
+        descriptors = [np.asarray(db.read_descriptors(ids[name]).data) for name in names]
+    finally:
+        db.close()
+    centres = retrieval.vocabulary(descriptors, seed=cfg.seed)
+    return retrieval.similar_pairs(retrieval.vlad(descriptors, centres, seed=cfg.seed), cfg.neighbours)
+
+
+def _write_pairs(names: list[str], pairs: list[tuple[int, int]], path: Path) -> None:
+    path.write_text("".join(f"{names[i]} {names[j]}\n" for i, j in pairs))
 
 
 class _Steps:
@@ -234,6 +256,7 @@ class _Steps:
     def __init__(self, work: Path):
         self.path = work / "steps.json"
         self.done: dict = json.loads(self.path.read_text()) if self.path.is_file() else {}
+        self.started = time.perf_counter()
 
     def finished(self, step: str, options: dict) -> bool:
         """Whether ``step`` finished with these options; if not, it and every later step are forgotten."""
@@ -241,10 +264,12 @@ class _Steps:
             return True
         for later in STEPS[STEPS.index(step) :]:
             self.done.pop(later, None)
+        self.started = time.perf_counter()
         return False
 
     def record(self, step: str, options: dict, **facts) -> None:
-        self.done[step] = {"options": options, **facts}
+        """Record ``step`` as finished with ``options``, its ``facts`` and the seconds it took."""
+        self.done[step] = {"options": options, **facts, "seconds": round(time.perf_counter() - self.started, 2)}
         write_bytes_atomic(self.path, (json.dumps(self.done, indent=2) + "\n").encode())
 
 
@@ -350,9 +375,17 @@ def _run_sfm_locked(
     matcher = (
         cfg.matcher
         if cfg.matcher != "auto"
-        else ("sequential" if video or len(names) > EXHAUSTIVE_UP_TO else "exhaustive")
+        else "sequential"
+        if video
+        else ("retrieval" if len(names) > EXHAUSTIVE_UP_TO else "exhaustive")
     )
-    options = {"matcher": matcher, "overlap": cfg.overlap, "keyframes": cfg.keyframes, "seed": cfg.seed}
+    options = {
+        "matcher": matcher,
+        "overlap": cfg.overlap,
+        "keyframes": cfg.keyframes,
+        "neighbours": cfg.neighbours,
+        "seed": cfg.seed,
+    }
     if not steps.finished("matches", options):
         _rebuild_database_without_matches(pycolmap, database)
         matching = pycolmap.FeatureMatchingOptions(use_gpu=False, num_threads=threads)
@@ -363,7 +396,12 @@ def _run_sfm_locked(
                 database, matching_options=matching, verification_options=verification, device=pycolmap.Device.cpu
             )
         else:
-            _pairs_file(names, cfg, work / "pairs.txt")
+            pairs = (
+                sequential_pairs(len(names), cfg)
+                if matcher == "sequential"
+                else retrieval_pairs(pycolmap, database, names, cfg)
+            )
+            _write_pairs(names, pairs, work / "pairs.txt")
             pycolmap.match_image_pairs(
                 database,
                 matching_options=matching,
