@@ -12,7 +12,7 @@ from importlib.metadata import PackageNotFoundError, version
 import click
 from tqdm import tqdm
 
-from dataset_tools.errors import InputError
+from dataset_tools.errors import InputError, RunFailed
 from dataset_tools.interrupts import Interrupted
 from dataset_tools.threads import configure_threads
 
@@ -60,6 +60,8 @@ def _failure(e: BaseException, prog_name: str) -> tuple[str, int]:
     """The one line to print for an exception that ends a command, and the exit code."""
     if isinstance(e, InputError):
         return f"error: {e}", 2
+    if isinstance(e, RunFailed):
+        return f"error: {e}", 1
     if isinstance(e, OSError):
         return f"error: {describe_os_error(e)}", 2
     if isinstance(e, Interrupted):
@@ -118,7 +120,15 @@ def run_cli(group: click.Group, prog_name: str) -> Callable[[], None]:
         configure_threads()
         try:
             group.main(prog_name=prog_name, standalone_mode=False)
-        except (InputError, OSError, Interrupted, click.exceptions.Abort, KeyboardInterrupt, click.ClickException) as e:
+        except (
+            InputError,
+            RunFailed,
+            OSError,
+            Interrupted,
+            click.exceptions.Abort,
+            KeyboardInterrupt,
+            click.ClickException,
+        ) as e:
             _close_progress_bars()
             message, code = _failure(e, prog_name)
             click.echo(message, err=True)

@@ -1,4 +1,5 @@
-"""The one exception type for mistakes a user can make (paths, formats, sizes, options)."""
+"""The exceptions a command ends with: a mistake a user can make (paths, formats, sizes,
+options), and work that failed on good input."""
 
 
 class InputError(Exception):
@@ -6,3 +7,9 @@ class InputError(Exception):
 
     Command-line front ends print the message (no traceback) and exit with code 2.
     """
+
+
+class RunFailed(Exception):
+    """Work that failed on good input (training that diverged). The message says what was
+    kept and how to go on; command-line front ends print it (no traceback) and exit with
+    code 1."""

@@ -100,3 +100,19 @@ def test_every_cli_default_is_its_dataclass_default(command, name, options):
         assert value == default, f"{command} {name} --{option.replace('_', '-')}: {value!r}, dataclass {default!r}"
         compared += 1
     assert compared >= 5
+
+
+def test_failed_work_is_one_line_and_exit_1_and_bad_input_exit_2():
+    """How a command ends: work that failed on good input (training that diverged) exits 1,
+    bad input 2, each with one line and no traceback."""
+    from pathlib import Path
+
+    from dataset_tools.cli_support import _failure
+    from dataset_tools.errors import InputError
+    from gsseg.train import TrainingDiverged
+
+    message, code = _failure(TrainingDiverged(12, float("nan"), Path("run/checkpoints/step_0000010.pt")), "gsseg")
+    assert code == 1 and message.startswith("error: training diverged at step 12") and "\n" not in message
+    assert "step_0000010.pt" in message
+    refused = "x.png: not an image; pass a PNG."
+    assert _failure(InputError(refused), "gsseg") == (f"error: {refused}", 2)

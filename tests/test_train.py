@@ -162,8 +162,10 @@ def test_a_loss_that_turns_nan_stops_and_keeps_the_last_checkpoint(small_scene, 
         return value * float("nan") if calls["n"] >= 12 else value
 
     monkeypatch.setattr(trainer_module, "photometric_loss", loss_going_nan)
-    with pytest.raises(TrainingDiverged, match="diverged at step 12.*step_0000010.pt"):
+    with pytest.raises(TrainingDiverged, match="diverged at step 12.*step_0000010.pt") as failed:
         train(small_scene.root, tmp_path / "run", TrainConfig(iters=60, backend="cpu"), progress=False)
+    assert failed.value.step == 12 and failed.value.checkpoint.name == "step_0000010.pt"
+    assert not isinstance(failed.value, InputError)  # the input was good: the work failed
     kept = sorted(p.name for p in (tmp_path / "run" / "checkpoints").glob("*.pt"))
     assert kept == ["step_0000010.pt"]
     state = torch.load(tmp_path / "run" / "checkpoints" / kept[0], weights_only=False)

@@ -24,7 +24,7 @@ from tqdm import tqdm
 
 from dataset_tools.atomic import require_folder_path
 from dataset_tools.cameras import PinholeCamera
-from dataset_tools.errors import InputError
+from dataset_tools.errors import InputError, RunFailed
 from dataset_tools.fingerprint import scene_fingerprint
 from dataset_tools.interrupts import Interrupted, stop_requests
 from dataset_tools.overlap import refuse_overlap, scene_entries
@@ -44,8 +44,17 @@ LOG_EVERY = 10
 KEEP_CHECKPOINTS = 2
 
 
-class TrainingDiverged(InputError):
-    """The loss or the parameters stopped being finite."""
+class TrainingDiverged(RunFailed):
+    """The loss stopped being finite at ``step`` (``loss``); ``checkpoint`` is the last good
+    one, None when none was written yet."""
+
+    def __init__(self, step: int, loss: float, checkpoint: Path | None):
+        self.step, self.loss, self.checkpoint = step, loss, checkpoint
+        kept = f"the last good checkpoint is {checkpoint}" if checkpoint else "no checkpoint was written yet"
+        super().__init__(
+            f"training diverged at step {step} (loss {loss}); {kept}; lower the learning rates and "
+            "--resume, or start again."
+        )
 
 
 @dataclass
@@ -445,11 +454,7 @@ def _loop(
             losses = _train_step(state, views.at_step(step), cfg, backend, step)
             if not math.isfinite(losses["loss"]):
                 kept = folder.checkpoint_files()
-                raise TrainingDiverged(
-                    f"training diverged at step {step} (loss {losses['loss']}); "
-                    + (f"the last good checkpoint is {kept[-1]}; " if kept else "no checkpoint was written yet; ")
-                    + "lower the learning rates and --resume, or start again."
-                )
+                raise TrainingDiverged(step, losses["loss"], kept[-1] if kept else None)
             state.step = step
             if step % LOG_EVERY == 0 or step == timing.iters:
                 state.history.append({"step": step, **losses, "gaussians": len(state.gaussians)})
