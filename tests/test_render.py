@@ -202,3 +202,12 @@ def test_gsplat_backend_matches_torch_reference(seed, n, size, scales):
     for name, expected in ref_grads.items():
         rel = (grads[name].cpu() - expected).norm() / expected.norm()
         assert expected.norm() > 0 and rel < 1e-3, (name, rel.item())
+
+
+def test_a_pose_or_background_of_the_wrong_shape_is_refused_naming_it():
+    cam, pose = look_down_z(8, 8)
+    g = random_gaussians(3, 0)
+    with pytest.raises(ValueError, match=r"cam_from_world has shape \(3, 3\)"):
+        render(g, cam, pose[:3, :3])
+    with pytest.raises(ValueError, match=r"background has shape \(4,\)"):
+        render(g, cam, pose, background=torch.zeros(4))

@@ -80,8 +80,8 @@ def render(
         with_features: also blend the 16-d object features.
         feature_geometry_grad: let gradients of the features reach the geometry (means,
             rotations, scales, opacities, and ``means2d``, hence densification); when False
-            the features are blended in a second pass over the geometry detached, and their
-            gradients reach only ``obj_feat``.
+            the features are blended as over the geometry detached
+            (:meth:`Backend.rasterize_beside`), and their gradients reach only ``obj_feat``.
         backend: a :class:`Backend` or its name (see :func:`get_backend`).
 
     Returns:
@@ -89,24 +89,22 @@ def render(
     """
     g = gaussians
     cam_from_world = torch.as_tensor(cam_from_world)
+    if tuple(cam_from_world.shape) not in ((3, 4), (4, 4)):
+        raise ValueError(f"render: cam_from_world has shape {tuple(cam_from_world.shape)}, expected (3, 4) or (4, 4)")
+    if background is not None and background.shape[-1] != 3:
+        raise ValueError(f"render: background has shape {tuple(background.shape)}, expected (3,) or (H, W, 3)")
     R, t = cam_from_world[:3, :3].to(g.means), cam_from_world[:3, 3].to(g.means)
     dirs = torch.nn.functional.normalize(g.means + (R.T @ t), dim=-1)  # centre - camera centre
     colors = eval_sh(sh_degree, g.sh, dirs)
     backend = get_backend(backend)
-    fused = with_features and feature_geometry_grad
-    values = torch.cat([colors, g.obj_feat], dim=1) if fused else colors
-    raster = backend.rasterize(g.means, g.quats, g.scales, g.opacities, values, cam_from_world, camera)
-    features = raster.image[..., 3:]
-    if with_features and not fused:
-        features = backend.rasterize(
-            g.means.detach(),
-            g.quats.detach(),
-            g.scales.detach(),
-            g.opacities.detach(),
-            g.obj_feat,
-            cam_from_world,
-            camera,
-        ).image
+    if with_features and not feature_geometry_grad:
+        raster, features = backend.rasterize_beside(
+            g.means, g.quats, g.scales, g.opacities, colors, g.obj_feat, cam_from_world, camera
+        )
+    else:
+        values = torch.cat([colors, g.obj_feat], dim=1) if with_features else colors
+        raster = backend.rasterize(g.means, g.quats, g.scales, g.opacities, values, cam_from_world, camera)
+        features = raster.image[..., 3:]
     rgb = raster.image[..., :3]
     if background is not None:
         rgb = rgb + (1 - raster.alpha[..., None]) * background.to(rgb)

@@ -82,6 +82,24 @@ class Backend:
         opacities (N,)) carrying ``values`` (N, C) into ``camera``; differentiable."""
         raise NotImplementedError
 
+    def rasterize_beside(
+        self,
+        means: torch.Tensor,
+        quats: torch.Tensor,
+        scales: torch.Tensor,
+        opacities: torch.Tensor,
+        values: torch.Tensor,
+        beside: torch.Tensor,
+        cam_from_world: torch.Tensor,
+        camera: PinholeCamera,
+    ) -> tuple[Raster, torch.Tensor]:
+        """:meth:`rasterize` ``values`` (N, C), and ``beside`` (N, E) blended by the same
+        Gaussians with gradients that reach ``beside`` alone, not the geometry: the raster and
+        the (H, W, E) image of ``beside``. By default a second pass over the detached geometry."""
+        raster = self.rasterize(means, quats, scales, opacities, values, cam_from_world, camera)
+        detached = (x.detach() for x in (means, quats, scales, opacities))
+        return raster, self.rasterize(*detached, beside, cam_from_world, camera).image
+
     def contributions(
         self,
         means: torch.Tensor,
@@ -140,6 +158,26 @@ class CpuBackend(_Projecting):
 
     def blend(self, *args):
         return blend_cpu(*args)
+
+    def rasterize_beside(self, means, quats, scales, opacities, values, beside, cam_from_world, camera):
+        """One projection and one blend of ``values``, depth and ``beside`` together, whose
+        backward pass lets only ``values`` and depth reach the geometry."""
+        proj = project_gaussians(means, quats, scales, cam_from_world, camera, opacities)
+        if proj.means2d.requires_grad:
+            proj.means2d.retain_grad()
+        c = values.shape[1]
+        image, alpha = blend_cpu(
+            proj.means2d,
+            proj.conics,
+            opacities,
+            torch.cat([values, proj.depths[:, None], beside], dim=1),
+            proj.depths,
+            proj.radii,
+            camera.width,
+            camera.height,
+            c + 1,
+        )
+        return Raster(image[..., :c], alpha, image[..., c], proj.means2d, proj.radii), image[..., c + 1 :]
 
     @torch.no_grad()
     def contributions(self, means, quats, scales, opacities, cam_from_world, camera, rows, n_rows):

@@ -26,13 +26,14 @@ def bin_tiles(
 
 class _BlendCPU(torch.autograd.Function):
     @staticmethod
-    def forward(ctx, means2d, conics, opacities, features, depths, radii, width, height):
+    def forward(ctx, means2d, conics, opacities, features, depths, radii, width, height, geometry_channels):
         arrays = [as_float32_array(x) for x in (means2d, conics, opacities, features)]
         offsets, ids = bin_tiles(means2d, radii, depths, width, height)
         image, final_t, n_contrib = cpu_kernels.blend_forward(*arrays, offsets, ids, width, height, TILE_SIZE)
         ctx.arrays, ctx.tiles, ctx.size = arrays, (offsets, ids), (width, height)
         ctx.state = (final_t, n_contrib)
         ctx.dtype = features.dtype
+        ctx.geometry_channels = features.shape[1] if geometry_channels is None else geometry_channels
         alpha = (1.0 - final_t).astype(np.float32)
         return torch.from_numpy(image).to(features.dtype), torch.from_numpy(alpha).to(features.dtype)
 
@@ -46,10 +47,11 @@ class _BlendCPU(torch.autograd.Function):
             *ctx.state,
             as_float32_array(grad_image),
             as_float32_array(grad_alpha),
+            ctx.geometry_channels,
             numba.get_num_threads(),
         )
         g_means, g_conics, g_opac, g_feat = (torch.from_numpy(g).to(ctx.dtype) for g in grads)
-        return g_means, g_conics, g_opac, g_feat, None, None, None, None
+        return g_means, g_conics, g_opac, g_feat, None, None, None, None, None
 
 
 def blend_cpu(
@@ -61,6 +63,10 @@ def blend_cpu(
     radii: torch.Tensor,
     width: int,
     height: int,
+    geometry_channels: int | None = None,
 ) -> tuple[torch.Tensor, torch.Tensor]:
-    """Same contract as :func:`gsseg.render.torch_blend.blend_torch`, computed by numba."""
-    return _BlendCPU.apply(means2d, conics, opacities, features, depths, radii, width, height)
+    """Same contract as :func:`gsseg.render.torch_blend.blend_torch`, computed by numba; where
+    ``geometry_channels`` is given, only the first that many channels of ``features`` (N, C)
+    pass gradients to ``means2d``, ``conics`` and ``opacities`` (the others reach their own
+    features alone, as if blended in a second pass over the geometry detached)."""
+    return _BlendCPU.apply(means2d, conics, opacities, features, depths, radii, width, height, geometry_channels)

@@ -213,17 +213,22 @@ def _unblend_step(j, lo, hi, n_last, alpha, trans, weight):
 
 
 @numba.njit(cache=True, fastmath=_FAST, error_model="numpy")
-def _feature_grads(feat, j, d_pix, weight, lo, hi, f_dot, tg):
+def _feature_grads(feat, j, d_pix, weight, lo, hi, f_dot, tg, n_geo):
     """Gradient of the tile's j-th Gaussian's features, tg[j, 6 + ch] += sum_p weight[p]
-    d_pix[ch, p], and f_dot[p] = feat[j] . d_pix[:, p] over the pixels in [lo, hi)."""
+    d_pix[ch, p], and f_dot[p] = feat[j, :n_geo] . d_pix[:n_geo, p] over the pixels in
+    [lo, hi): only the first ``n_geo`` channels pass their gradient on to the geometry."""
     f_dot[lo:hi] = 0.0
     for ch in range(d_pix.shape[0]):
         f = feat[j, ch]
         d_row = d_pix[ch]
         s = f32(0.0)
-        for p in range(np.uint64(lo), np.uint64(hi)):
-            f_dot[p] += f * d_row[p]
-            s += weight[p] * d_row[p]
+        if ch < n_geo:
+            for p in range(np.uint64(lo), np.uint64(hi)):
+                f_dot[p] += f * d_row[p]
+                s += weight[p] * d_row[p]
+        else:
+            for p in range(np.uint64(lo), np.uint64(hi)):
+                s += weight[p] * d_row[p]
         tg[j, 6 + ch] += s
 
 
@@ -319,10 +324,13 @@ def blend_backward(
     n_contrib,
     grad_image,
     grad_alpha,
+    n_geo,
     n_workers,
 ):
     """Gradients of a loss with respect to means2d (N, 2), conics (N, 3), opacities (N,)
     and features (N, C), given its gradients grad_image (H, W, C) and grad_alpha (H, W).
+    Only the first ``n_geo`` channels' gradients reach means2d, conics and opacities (the
+    others' reach their features alone, as if blended over the geometry detached).
 
     Walks each tile's list back to front, recovering every pixel's transmittance by
     division as the 3D-GS backward pass does. Worker w handles tiles w, w + n_workers, ...
@@ -369,7 +377,7 @@ def blend_backward(
                     continue
                 if _unblend_step(j, lo, hi, n_last, alpha, trans, weight) == 0:
                     continue
-                _feature_grads(feat, j, d_pix, weight, lo, hi, f_dot, tg)
+                _feature_grads(feat, j, d_pix, weight, lo, hi, f_dot, tg, n_geo)
                 _shape_grads(loc, j, px, py, lo, hi, alpha, gauss, trans, weight, f_dot, behind, d_out, tg)
             for j in range(end - start):
                 g = ids[start + j]
