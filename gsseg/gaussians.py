@@ -18,6 +18,17 @@ def make_classifier(num_classes: int = 256) -> torch.nn.Linear:
     return torch.nn.Linear(OBJ_FEAT_DIM, num_classes)
 
 
+_TRAILING_SHAPES = {
+    "means": (3,),
+    "log_scales": (3,),
+    "quats": (4,),
+    "opacity_logits": (),
+    "sh_dc": (3,),
+    "sh_rest": (num_coeffs(MAX_DEGREE) - 1, 3),
+    "obj_feat": (None,),  # any width; 16 in trained runs (OBJ_FEAT_DIM)
+}
+
+
 @dataclass
 class Gaussians:
     """N anisotropic 3D Gaussians in their optimisation parameterisation (as 3D-GS stores them).
@@ -39,6 +50,28 @@ class Gaussians:
     sh_dc: torch.Tensor
     sh_rest: torch.Tensor
     obj_feat: torch.Tensor
+
+    def __post_init__(self) -> None:
+        """Every field must have N rows and its trailing shape, and the means' floating dtype
+        and device; a mismatch is a ValueError naming the field."""
+        first = self.means
+        n = first.shape[0] if isinstance(first, torch.Tensor) and first.ndim else -1
+        for name, tail in _TRAILING_SHAPES.items():
+            t = getattr(self, name)
+            shape = tuple(t.shape) if isinstance(t, torch.Tensor) else None
+            if (
+                shape is None
+                or len(shape) != len(tail) + 1
+                or shape[0] != n
+                or any(d is not None and d != s for d, s in zip(tail, shape[1:]))
+            ):
+                expected = ("N", *("F" if d is None else d for d in tail))
+                raise ValueError(f"Gaussians.{name}: shape {shape or type(t).__name__}, expected {expected}, N = {n}")
+            if not t.is_floating_point() or t.dtype != first.dtype or t.device != first.device:
+                raise ValueError(
+                    f"Gaussians.{name}: {t.dtype} on {t.device}, expected the means' floating "
+                    f"{first.dtype} on {first.device}"
+                )
 
     def __len__(self) -> int:
         return self.means.shape[0]

@@ -67,3 +67,16 @@ def test_a_ply_with_a_one_byte_property_loads(tmp_path):
     for name, value in g.tensors().items():
         assert torch.equal(getattr(back, name), value), name
     np.testing.assert_array_equal(PlyData.read(str(tmp_path / "g.ply"))["vertex"]["label"], labels)
+
+
+def test_gaussians_with_a_wrong_shape_or_dtype_are_refused_naming_the_field():
+    from gsseg.gaussians import Gaussians
+
+    g = random_gaussians(5, 0)
+    with pytest.raises(ValueError, match=r"Gaussians\.quats: shape \(5, 3\), expected \('N', 4\), N = 5"):
+        Gaussians(**{**g.tensors(), "quats": g.quats[:, :3]})
+    with pytest.raises(ValueError, match=r"Gaussians\.sh_dc: shape \(4, 3\)"):
+        Gaussians(**{**g.tensors(), "sh_dc": g.sh_dc[:4]})
+    with pytest.raises(ValueError, match=r"Gaussians\.opacity_logits: torch\.float64 on cpu, expected"):
+        Gaussians(**{**g.tensors(), "opacity_logits": g.opacity_logits.double()})
+    assert len(Gaussians(**{**g.tensors(), "obj_feat": g.obj_feat[:, :2]})) == 5  # any feature width
