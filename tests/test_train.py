@@ -215,3 +215,24 @@ def test_training_from_disk_writes_the_bytes_of_training_from_memory(small_scene
     for mode in ("memory", "disk"):
         train(small_scene.root, tmp_path / mode, cfg, cache_views=mode, progress=False)
     assert (tmp_path / "memory" / "gaussians.ply").read_bytes() == (tmp_path / "disk" / "gaussians.ply").read_bytes()
+
+
+def test_the_training_ssim_is_kornias_in_value_and_gradient():
+    """:func:`ssim_map` against ``kornia.metrics.ssim`` (the reference, 11x11 window) on two
+    random image pairs of odd sizes: the same map and the same gradient."""
+    import kornia
+
+    from gsseg.train.losses import ssim_map
+
+    gen = torch.Generator().manual_seed(0)
+    for shape in ((1, 3, 37, 52), (2, 1, 20, 15)):
+        a = torch.rand(shape, generator=gen, dtype=torch.float64)
+        b = (a + 0.2 * torch.rand(shape, generator=gen, dtype=torch.float64)).clamp(0, 1)
+        grads = []
+        for fn in (ssim_map, lambda x, y: kornia.metrics.ssim(x, y, 11)):
+            x = a.clone().requires_grad_(True)
+            value = fn(x, b)
+            (value * torch.linspace(0, 1, value.numel(), dtype=torch.float64).view(value.shape)).sum().backward()
+            grads.append((value.detach(), x.grad))
+        torch.testing.assert_close(grads[0][0], grads[1][0], atol=1e-10, rtol=0)
+        torch.testing.assert_close(grads[0][1], grads[1][1], atol=1e-8, rtol=0)
