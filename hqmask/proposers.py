@@ -18,6 +18,8 @@ from pathlib import Path
 
 import numpy as np
 from scipy import ndimage
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 
 from dataset_tools.errors import InputError
 from dataset_tools.scene import View
@@ -73,6 +75,30 @@ def _touching(seg: np.ndarray, edges: np.ndarray | None = None) -> tuple[np.ndar
     )
     p = np.sort(p[p[:, 0] != p[:, 1]], axis=1)
     return np.unique(p, axis=0, return_counts=True)
+
+
+def merge_by_mean_colour(segments: np.ndarray, colours: np.ndarray, threshold: float) -> np.ndarray:
+    """Regions of ``segments`` (H, W) joined where two that touch (8-neighbourhood) have mean
+    ``colours`` (H, W, C) less than ``threshold`` apart, and so on transitively: the
+    partition of scikit-image's ``graph.cut_threshold(segments, graph.rag_mean_color(colours,
+    segments), threshold)``, whose graph is built by a Python callback per pixel, from array
+    operations, numbered as it numbers them (by their first region).
+
+    Returns:
+        (H, W) int64 region map.
+    """
+    _, seg = np.unique(segments, return_inverse=True)
+    seg = seg.reshape(segments.shape)
+    n = int(seg.max()) + 1
+    counts = np.bincount(seg.ravel(), minlength=n)
+    mean = np.stack([np.bincount(seg.ravel(), colours[..., c].ravel(), n) for c in range(colours.shape[-1])], 1)
+    mean /= counts[:, None]
+    a = np.concatenate([seg[:, :-1].ravel(), seg[:-1].ravel(), seg[:-1, :-1].ravel(), seg[:-1, 1:].ravel()])
+    b = np.concatenate([seg[:, 1:].ravel(), seg[1:].ravel(), seg[1:, 1:].ravel(), seg[1:, :-1].ravel()])
+    pairs = np.unique(np.sort(np.stack([a, b], 1)[a != b], axis=1), axis=0)
+    close = np.linalg.norm(mean[pairs[:, 0]] - mean[pairs[:, 1]], axis=1) < threshold
+    graph = coo_matrix((np.ones(int(close.sum())), (pairs[close, 0], pairs[close, 1])), shape=(n, n))
+    return connected_components(graph, directed=False)[1][seg].astype(np.int64)
 
 
 def _join_detached_parts(
@@ -164,13 +190,12 @@ class GraphProposer:
 
     def _regions(self, image: np.ndarray, lab: np.ndarray, jumps: DepthJumps | None) -> np.ndarray:
         """(H, W) region map: Felzenszwalb, merged by colour, cut at the depth ``jumps``."""
-        from skimage import graph, segmentation
+        from skimage import segmentation
 
         H, W = image.shape[:2]
         min_size = max(20, int(0.0005 * H * W))
         seg = segmentation.felzenszwalb(image, scale=self.scale, sigma=self.sigma, min_size=min_size)
-        if seg.max() > 0:  # a RAG needs two regions
-            seg = graph.cut_threshold(seg, graph.rag_mean_color(lab, seg), self.merge_threshold)
+        seg = merge_by_mean_colour(seg, lab, self.merge_threshold)
         return seg if jumps is None else cut_at_edges(seg, jumps.edges, min_size)
 
     def _background(

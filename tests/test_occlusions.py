@@ -211,3 +211,23 @@ def test_what_rises_from_the_floor_is_an_object_even_at_the_border():
     assert len(proposer.propose(image, None, depth).masks) == 0  # it touches the border
     masks = proposer.propose(image, None, depth, height).masks
     assert len(masks) == 1 and masks[0][60, 10] and not masks[0][60, 100]
+
+
+def test_colour_merge_is_scikit_images_region_adjacency_cut(small_scene):
+    """:func:`merge_by_mean_colour` against scikit-image's ``rag_mean_color`` +
+    ``cut_threshold`` (the reference) on Felzenszwalb regions of two rendered views and of
+    a random label map: the same region map, label for label."""
+    from skimage import color, graph, segmentation
+
+    from hqmask.proposers import merge_by_mean_colour
+
+    rng = np.random.default_rng(0)
+    cases = []
+    for view in load_scene(small_scene.root).views[:2]:
+        image = view.load_image()
+        cases.append((segmentation.felzenszwalb(image, scale=100, sigma=0.8, min_size=20), color.rgb2lab(image)))
+    cases.append((rng.integers(0, 40, (30, 24)), rng.normal(0, 10, (30, 24, 3))))
+    for seg, lab in cases:
+        for threshold in (4.0, 8.0, 16.0):
+            expected = graph.cut_threshold(seg, graph.rag_mean_color(lab, seg), threshold)
+            np.testing.assert_array_equal(merge_by_mean_colour(seg, lab, threshold), expected)
