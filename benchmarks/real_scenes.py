@@ -43,7 +43,7 @@ from dataset_tools.scene import View, load_scene
 from dataset_tools.sfm import run_sfm
 from eval.metrics import binary_scores
 from eval.report import markdown_table
-from gsseg.render_views import segment_pixels
+from gsseg.render.pixel_labels import segment_pixels
 from gsseg.run import Run, load_run
 from gsseg.segment.clicks import select_by_points
 from gsseg.segment.prompts import point_from_click

@@ -27,7 +27,7 @@ from scipy.spatial.transform import Rotation
 from benchmarks import record
 from dataset_tools.errors import InputError
 from eval.report import markdown_table
-from gsseg.render_views import segment_pixels
+from gsseg.render.pixel_labels import segment_pixels
 from gsseg.run import load_run
 from gsseg.run_folder import RunFolder, read_edit_record
 from gsseg.viewer.session import ViewCamera, ViewerSession, browser_camera

@@ -6,7 +6,7 @@ The loader accepts the forms such a dataset takes on the Hub, in any nesting:
 - scene folders (``images/``, ``sparse/0/``, a mask folder), copied after they load;
 - archives of scene folders (``.zip``, ``.tar``, ``.tar.gz``, ``.tgz``), unpacked first;
 - ``datasets`` view rows (a ``save_to_disk`` folder or parquet files with the columns of
-  :data:`dataset_tools.hf_dataset.COLUMNS`), written out as scene folders.
+  :data:`dataset_tools.dataset_rows.COLUMNS`), written out as scene folders.
 """
 
 from __future__ import annotations
@@ -20,8 +20,8 @@ from pathlib import Path
 from tqdm import tqdm
 
 from dataset_tools.atomic import atomic_directory
+from dataset_tools.dataset_rows import write_scenes_from_rows
 from dataset_tools.errors import InputError
-from dataset_tools.hf_dataset import write_scenes_from_rows
 from dataset_tools.overlap import refuse_overlap
 from dataset_tools.scene import load_scene
 

@@ -9,7 +9,7 @@ import torch
 
 from dataset_tools.scene import View
 from gsseg.render import Backend, get_backend
-from gsseg.render_views import segment_pixels
+from gsseg.render.pixel_labels import segment_pixels
 from gsseg.run import Run
 from gsseg.segment.reassign import Segmentation
 

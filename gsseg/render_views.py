@@ -13,37 +13,11 @@ from dataset_tools.depth_maps import write_depth
 from dataset_tools.errors import InputError
 from dataset_tools.image_files import colorize_labels, write_png
 from dataset_tools.overlap import refuse_overlap
-from gsseg.gaussians import Gaussians
-from gsseg.render import Backend, get_backend, render, surface_depth, to_uint8
+from gsseg.render import Backend, get_backend, surface_depth, to_uint8
+from gsseg.render.pixel_labels import classify_pixels, segment_pixels
 from gsseg.run import load_run
 
 PRODUCTS = ("rgb", "labels", "segments", "depth")
-
-
-def classify_pixels(features: torch.Tensor, classifier: torch.nn.Linear) -> torch.Tensor:
-    """(H, W) int64 argmax of the classifier on rendered object features (H, W, F)."""
-    return classifier(features).argmax(dim=-1)
-
-
-def segment_pixels(
-    gaussians: Gaussians,
-    labels: np.ndarray,
-    camera,
-    cam_from_world: torch.Tensor,
-    *,
-    backend: str | Backend,
-    min_alpha: float = 0.5,
-) -> np.ndarray:
-    """(H, W) uint8: each pixel takes the Gaussian label with the largest blended weight
-    (labels (N,) uint8), 0 where the accumulated alpha is below ``min_alpha``."""
-    present = np.unique(labels)
-    index = np.searchsorted(present, labels)
-    one_hot = torch.nn.functional.one_hot(torch.as_tensor(index), len(present)).to(gaussians.means)
-    out = render(
-        Gaussians(**{**gaussians.tensors(), "obj_feat": one_hot}), camera, cam_from_world, sh_degree=0, backend=backend
-    )
-    best = torch.as_tensor(present)[out.features.argmax(dim=-1).cpu()]
-    return np.where(out.alpha.cpu().numpy() >= min_alpha, best.numpy(), 0).astype(np.uint8)
 
 
 @torch.no_grad()

@@ -280,7 +280,7 @@ def _build_locked(
             write_bytes_atomic(tmp / f"{view.stem}.png", encode_png(view.to_file_frame(m)))
         write_bytes_atomic(tmp / MANIFEST, _manifest(cfg, associate, geometry))
     if cfg.dataset:
-        from dataset_tools.hf_dataset import export_dataset
+        from dataset_tools.dataset_rows import export_dataset
 
         export_dataset(
             load_scene(scene_dir, images=cfg.images, masks=cfg.out_masks), Path(cfg.dataset), overwrite=cfg.force

@@ -26,7 +26,7 @@ from dataset_tools.synth import SynthConfig, generate_scene
 from eval.evaluate import evaluate
 from eval.metrics import matched_miou, mean_iou, psnr, ssim
 from gsseg.render import Backend, to_uint8
-from gsseg.render_views import classify_pixels
+from gsseg.render.pixel_labels import classify_pixels
 from gsseg.run import load_run
 from gsseg.run_folder import RunFolder
 from gsseg.segment.segment_run import LabelOptions, label_gaussians, mask_contributions

@@ -17,7 +17,7 @@ from scipy import ndimage
 
 from dataset_tools.errors import InputError
 from gsseg.ply import read_ply
-from gsseg.render_views import segment_pixels
+from gsseg.render.pixel_labels import segment_pixels
 from gsseg.run import load_run
 from gsseg.segment.clicks import select_by_points, split_by_graph
 from gsseg.segment.prompts import point_from_click

@@ -21,7 +21,8 @@ from eval.evaluate import score_views
 from eval.metrics import binary_scores, psnr, ssim
 from eval.renders import ViewRenders, render_view
 from gsseg.gaussians import Gaussians, make_classifier
-from gsseg.render_views import render_run, segment_pixels
+from gsseg.render.pixel_labels import segment_pixels
+from gsseg.render_views import render_run
 from gsseg.run import Run
 from gsseg.run_folder import RunFolder
 from gsseg.segment.reassign import Segmentation

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from dataset_tools import load_scene
-from dataset_tools.hf_dataset import export_dataset
+from dataset_tools.dataset_rows import export_dataset
 from dataset_tools.hq_dataset import convert_hq
 
 

@@ -357,7 +357,7 @@ def test_the_viewer_in_headless_chromium_selects_and_removes_by_click(segmented,
     from selenium.webdriver.common.action_chains import ActionChains
     from selenium.webdriver.common.by import By
 
-    from gsseg.render_views import segment_pixels
+    from gsseg.render.pixel_labels import segment_pixels
     from gsseg.viewer.server import Viewer
 
     run = Path(os.environ["VIEWER_RUN"]) if "VIEWER_RUN" in os.environ else _copy(segmented, tmp_path)
