@@ -41,8 +41,8 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks import record
-from dataset_tools.atomic import write_bytes_atomic
-from dataset_tools.errors import InputError
+from dataset_tools.infra.atomic import write_bytes_atomic
+from dataset_tools.infra.errors import InputError
 from dataset_tools.scene import load_scene
 from eval.metrics import segment_ceiling
 from eval.report import markdown_table

@@ -21,8 +21,8 @@ import numpy as np
 
 from benchmarks import record
 from dataset_tools import colmap
-from dataset_tools.atomic import atomic_directory
 from dataset_tools.image_files import write_png
+from dataset_tools.infra.atomic import atomic_directory
 from dataset_tools.scene import load_scene
 from dataset_tools.synth import SynthConfig, generate_scene
 from eval.report import markdown_table

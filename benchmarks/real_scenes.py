@@ -37,8 +37,8 @@ from scipy import ndimage
 
 from benchmarks import record
 from dataset_tools import colmap
-from dataset_tools.errors import InputError
 from dataset_tools.image_files import read_mask
+from dataset_tools.infra.errors import InputError
 from dataset_tools.scene import View, load_scene
 from dataset_tools.sfm import run_sfm
 from eval.metrics import binary_scores

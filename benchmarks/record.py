@@ -16,7 +16,7 @@ from pathlib import Path
 
 import torch
 
-from dataset_tools.atomic import write_bytes_atomic
+from dataset_tools.infra.atomic import write_bytes_atomic
 
 RESULTS = Path(__file__).resolve().parent / "results"
 

@@ -25,7 +25,7 @@ from scipy import ndimage
 from scipy.spatial.transform import Rotation
 
 from benchmarks import record
-from dataset_tools.errors import InputError
+from dataset_tools.infra.errors import InputError
 from eval.report import markdown_table
 from gsseg.render.pixel_labels import segment_pixels
 from gsseg.run import load_run

@@ -4,7 +4,7 @@ The scene folder (images, ``images_N``, ``sparse/0``, ``object_mask``, ``scene.j
 the interchange format between every stage of the pipeline.
 """
 
-from dataset_tools.errors import InputError
+from dataset_tools.infra.errors import InputError
 from dataset_tools.scene import PinholeCamera, Scene, SparsePoints, View, load_scene, save_scene
 
 __all__ = [

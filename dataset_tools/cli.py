@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from dataset_tools.cli_support import run_cli
+from dataset_tools.infra.cli_support import run_cli
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
@@ -168,8 +168,8 @@ def corrupt(
 )
 def inspect(scene_dir: Path, images: str, masks: str, sheet: Path | None) -> None:
     """Print a summary of a scene folder and write a contact sheet PNG."""
+    from dataset_tools.infra.overlap import refuse_overlap, scene_inputs
     from dataset_tools.inspect_scene import contact_sheet, summarize
-    from dataset_tools.overlap import refuse_overlap, scene_inputs
     from dataset_tools.scene import load_scene
 
     sheet = sheet or scene_dir / "contact_sheet.png"

@@ -14,7 +14,7 @@ import cv2
 import numpy as np
 
 from dataset_tools.cameras import PINHOLE_MODELS, PinholeCamera, SourceCamera
-from dataset_tools.errors import InputError
+from dataset_tools.infra.errors import InputError
 
 
 @dataclass

@@ -10,10 +10,10 @@ from pathlib import Path
 import numpy as np
 
 from dataset_tools import colmap
-from dataset_tools.atomic import atomic_directory, write_bytes_atomic
 from dataset_tools.cameras import PinholeCamera
-from dataset_tools.errors import InputError
 from dataset_tools.image_files import as_label_map, encode_png
+from dataset_tools.infra.atomic import atomic_directory, write_bytes_atomic
+from dataset_tools.infra.errors import InputError
 from dataset_tools.scene import Scene
 
 COLUMNS = ("image", "mask", "intrinsics", "width", "height", "cam_from_world", "view", "scene", "split")

@@ -13,8 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-from dataset_tools.atomic import write_bytes_atomic
-from dataset_tools.errors import InputError
+from dataset_tools.infra.atomic import write_bytes_atomic
+from dataset_tools.infra.errors import InputError
 
 
 def write_depth(path: Path, depth: np.ndarray) -> None:

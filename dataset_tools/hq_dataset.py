@@ -19,10 +19,10 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from dataset_tools.atomic import atomic_directory
 from dataset_tools.dataset_rows import write_scenes_from_rows
-from dataset_tools.errors import InputError
-from dataset_tools.overlap import refuse_overlap
+from dataset_tools.infra.atomic import atomic_directory
+from dataset_tools.infra.errors import InputError
+from dataset_tools.infra.overlap import refuse_overlap
 from dataset_tools.scene import load_scene
 
 HQ_REPO = "joshir/3D-Scene-Segmentation-HQ"

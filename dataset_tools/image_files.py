@@ -8,8 +8,8 @@ import cv2
 import numpy as np
 from PIL import Image
 
-from dataset_tools.atomic import atomic_directory, write_bytes_atomic
-from dataset_tools.errors import InputError
+from dataset_tools.infra.atomic import atomic_directory, write_bytes_atomic
+from dataset_tools.infra.errors import InputError
 
 IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".JPG", ".JPEG", ".PNG")
 

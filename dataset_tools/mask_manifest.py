@@ -11,7 +11,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from dataset_tools.cli_support import package_version
+from dataset_tools.infra.cli_support import package_version
 
 MANIFEST = "manifest.json"
 FORMAT = 1

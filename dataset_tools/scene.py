@@ -20,10 +20,10 @@ import cv2
 import numpy as np
 
 from dataset_tools import colmap
-from dataset_tools.atomic import atomic_directory, write_bytes_atomic
 from dataset_tools.cameras import DEFAULT_NEAR, PinholeCamera, SourceCamera
-from dataset_tools.errors import InputError
 from dataset_tools.image_files import encode_image, encode_png, image_size, read_image, read_mask
+from dataset_tools.infra.atomic import atomic_directory, write_bytes_atomic
+from dataset_tools.infra.errors import InputError
 
 Split = Literal["train", "test", "all"]
 

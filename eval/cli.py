@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from dataset_tools.cli_support import engine_options, none_means_off, other_scene_option, run_cli
+from dataset_tools.infra.cli_support import engine_options, none_means_off, other_scene_option, run_cli
 
 
 @click.group(name="gseval", context_settings={"help_option_names": ["-h", "--help"]})
@@ -88,8 +88,8 @@ def report(
 @click.option("--out", default=None, type=click.Path(path_type=Path), help="Also write the table to this .md file.")
 def compare(runs: tuple[Path, ...], out: Path | None) -> None:
     """Put the evaluations of several reported runs side by side (markdown)."""
-    from dataset_tools.atomic import write_bytes_atomic
-    from dataset_tools.overlap import refuse_overlap, run_inputs
+    from dataset_tools.infra.atomic import write_bytes_atomic
+    from dataset_tools.infra.overlap import refuse_overlap, run_inputs
     from eval.report import compare_runs
 
     if out is not None:

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from dataset_tools.errors import InputError
+from dataset_tools.infra.errors import InputError
 from dataset_tools.scene import View
 from dataset_tools.synth.edit_truth import EDIT_TRUTH, read_edit_truth
 from eval.metrics import extraction_scores, removal_scores

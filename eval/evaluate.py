@@ -21,8 +21,8 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from dataset_tools.atomic import write_bytes_atomic
-from dataset_tools.errors import InputError
+from dataset_tools.infra.atomic import write_bytes_atomic
+from dataset_tools.infra.errors import InputError
 from dataset_tools.label_maps import match_ids, overlap
 from dataset_tools.scene import View
 from eval.edit_scores import summarize_edits

@@ -16,8 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
-from dataset_tools.atomic import write_bytes_atomic
-from dataset_tools.errors import InputError
+from dataset_tools.infra.atomic import write_bytes_atomic
+from dataset_tools.infra.errors import InputError
 
 INPUTS = ("image0", "image1")
 NETS = ("alex", "vgg", "squeeze")

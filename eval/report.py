@@ -14,10 +14,10 @@ from pathlib import Path
 
 import numpy as np
 
-from dataset_tools.atomic import atomic_directory, write_bytes_atomic
-from dataset_tools.errors import InputError
 from dataset_tools.image_files import colorize_labels, encode_png
-from dataset_tools.overlap import refuse_overlap, run_inputs, scene_entries
+from dataset_tools.infra.atomic import atomic_directory, write_bytes_atomic
+from dataset_tools.infra.errors import InputError
+from dataset_tools.infra.overlap import refuse_overlap, run_inputs, scene_entries
 from dataset_tools.scene import View
 from dataset_tools.synth.edit_truth import read_edit_truth
 from eval.edit_scores import edit_rows, summarize_edits

@@ -8,7 +8,7 @@ import click
 import numpy as np
 from click.core import ParameterSource
 
-from dataset_tools.cli_support import none_means_off, other_scene_option, run_cli
+from dataset_tools.infra.cli_support import none_means_off, other_scene_option, run_cli
 
 
 @click.group(name="gsseg", context_settings={"help_option_names": ["-h", "--help"]})

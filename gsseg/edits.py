@@ -10,11 +10,11 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from dataset_tools.atomic import atomic_directory, remove_stale_temporaries
-from dataset_tools.errors import InputError
 from dataset_tools.image_files import write_png
-from dataset_tools.names import plain_name
-from dataset_tools.overlap import refuse_overlap, scene_entries
+from dataset_tools.infra.atomic import atomic_directory, remove_stale_temporaries
+from dataset_tools.infra.errors import InputError
+from dataset_tools.infra.names import plain_name
+from dataset_tools.infra.overlap import refuse_overlap, scene_entries
 from dataset_tools.scene import Scene
 from gsseg.gaussians import Gaussians
 from gsseg.ply import write_ply

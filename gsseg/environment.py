@@ -23,7 +23,7 @@ import torch
 import torch.nn.functional as F
 
 from dataset_tools.cameras import PinholeCamera
-from dataset_tools.errors import InputError
+from dataset_tools.infra.errors import InputError
 from gsseg.gaussians import OBJ_FEAT_DIM, Gaussians
 from gsseg.sh import eval_sh, num_coeffs, rgb_to_sh_dc
 

@@ -17,10 +17,10 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from dataset_tools.atomic import write_bytes_atomic
 from dataset_tools.cameras import CameraPose, PinholeCamera
-from dataset_tools.errors import InputError
-from dataset_tools.overlap import refuse_overlap, run_inputs
+from dataset_tools.infra.atomic import write_bytes_atomic
+from dataset_tools.infra.errors import InputError
+from dataset_tools.infra.overlap import refuse_overlap, run_inputs
 from gsseg.edits import check_prompts, select
 from gsseg.environment import environment_shell, shell_radius, shell_spacing
 from gsseg.gaussians import Gaussians

@@ -17,8 +17,8 @@ import numpy as np
 import torch
 from plyfile import PlyData, PlyElement
 
-from dataset_tools.atomic import write_bytes_atomic
-from dataset_tools.errors import InputError
+from dataset_tools.infra.atomic import write_bytes_atomic
+from dataset_tools.infra.errors import InputError
 from gsseg.gaussians import OBJ_FEAT_DIM, Gaussians
 from gsseg.sh import MAX_DEGREE, num_coeffs
 

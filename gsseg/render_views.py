@@ -8,11 +8,11 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from dataset_tools.atomic import atomic_directory
 from dataset_tools.depth_maps import write_depth
-from dataset_tools.errors import InputError
 from dataset_tools.image_files import colorize_labels, write_png
-from dataset_tools.overlap import refuse_overlap
+from dataset_tools.infra.atomic import atomic_directory
+from dataset_tools.infra.errors import InputError
+from dataset_tools.infra.overlap import refuse_overlap
 from gsseg.render import Backend, get_backend, surface_depth, to_uint8
 from gsseg.render.pixel_labels import classify_pixels, segment_pixels
 from gsseg.run import load_run

@@ -11,8 +11,8 @@ import numpy as np
 import torch
 
 from dataset_tools.cameras import PinholeCamera
-from dataset_tools.errors import InputError
-from dataset_tools.overlap import Protected, run_inputs, scene_entries
+from dataset_tools.infra.errors import InputError
+from dataset_tools.infra.overlap import Protected, run_inputs, scene_entries
 from dataset_tools.scene import Scene, load_scene
 from gsseg.environment import Environment, background_image
 from gsseg.gaussians import Gaussians

@@ -33,10 +33,10 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from dataset_tools.atomic import write_bytes_atomic
-from dataset_tools.errors import InputError
-from dataset_tools.locks import exclusive
-from dataset_tools.names import plain_name
+from dataset_tools.infra.atomic import write_bytes_atomic
+from dataset_tools.infra.errors import InputError
+from dataset_tools.infra.locks import exclusive
+from dataset_tools.infra.names import plain_name
 from gsseg.environment import Environment
 from gsseg.gaussians import Gaussians, make_classifier
 from gsseg.ply import read_ply, write_ply
@@ -122,7 +122,7 @@ class RunFolder:
         return all(p.is_file() for p in (self.config, self.gaussians, self.classifier))
 
     def lock(self) -> contextlib.AbstractContextManager[None]:
-        """Hold the run's lock (:func:`dataset_tools.locks.exclusive` on ``.lock``) while
+        """Hold the run's lock (:func:`dataset_tools.infra.locks.exclusive` on ``.lock``) while
         writing the run; a second writer is refused in one sentence."""
         return exclusive(self.root / ".lock", self.root, "this run")
 

@@ -6,8 +6,8 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass, field, fields, replace
 
-from dataset_tools.errors import InputError
 from dataset_tools.fingerprint import fingerprint_difference
+from dataset_tools.infra.errors import InputError
 from dataset_tools.scene import Scene
 
 

@@ -20,16 +20,16 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
-from dataset_tools.atomic import atomic_directory, write_bytes_atomic
-from dataset_tools.checked_files import read_checked, write_checked
 from dataset_tools.depth_maps import read_depth
-from dataset_tools.engine import Engine
-from dataset_tools.errors import InputError
 from dataset_tools.image_files import encode_png, read_mask
-from dataset_tools.locks import exclusive_folder
+from dataset_tools.infra.atomic import atomic_directory, write_bytes_atomic
+from dataset_tools.infra.checked_files import read_checked, write_checked
+from dataset_tools.infra.engine import Engine
+from dataset_tools.infra.errors import InputError
+from dataset_tools.infra.locks import exclusive_folder
+from dataset_tools.infra.names import plain_name
+from dataset_tools.infra.overlap import refuse_overlap, scene_entries, scene_inputs
 from dataset_tools.mask_manifest import MANIFEST, manifest_bytes
-from dataset_tools.names import plain_name
-from dataset_tools.overlap import refuse_overlap, scene_entries, scene_inputs
 from dataset_tools.scene import Scene, View, load_scene
 from hqmask.association import associate_flow, associate_tracks
 from hqmask.association.anchors import sighting, triangulate
@@ -189,7 +189,7 @@ def _check_min_area(min_area: int | None) -> None:
 
 def build_scene(job: tuple[Path, BuildConfig]) -> BuildResult:
     """:func:`build_masks` of one (scene, options) pair without progress bars: a task for
-    :meth:`dataset_tools.engine.Engine.map` over several scenes."""
+    :meth:`dataset_tools.infra.engine.Engine.map` over several scenes."""
     return build_masks(job[0], job[1], progress=False)
 
 

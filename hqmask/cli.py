@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from dataset_tools.cli_support import engine_options, run_cli
+from dataset_tools.infra.cli_support import engine_options, run_cli
 
 
 @click.group(name="hqmask", context_settings={"help_option_names": ["-h", "--help"]})

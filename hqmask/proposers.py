@@ -21,7 +21,7 @@ from scipy import ndimage
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from dataset_tools.errors import InputError
+from dataset_tools.infra.errors import InputError
 from dataset_tools.scene import View
 from hqmask.occlusions import DepthJumps, cut_at_edges, depth_jumps
 from hqmask.proposals import Proposals, Proposer

@@ -30,10 +30,10 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from dataset_tools.atomic import require_folder_path
-from dataset_tools.errors import InputError
 from dataset_tools.image_files import IMAGE_SUFFIXES, image_size, write_downsampled
-from dataset_tools.overlap import refuse_overlap, scene_entries
+from dataset_tools.infra.atomic import require_folder_path
+from dataset_tools.infra.errors import InputError
+from dataset_tools.infra.overlap import refuse_overlap, scene_entries
 from dataset_tools.scene import linked_scene
 from dataset_tools.sfm import run_sfm
 from dataset_tools.synth import SynthConfig, generate_scene

@@ -35,8 +35,8 @@ from pathlib import Path
 
 import numpy as np
 
-from dataset_tools.atomic import require_folder_path, write_bytes_atomic
-from dataset_tools.engine import Engine
+from dataset_tools.infra.atomic import require_folder_path, write_bytes_atomic
+from dataset_tools.infra.engine import Engine
 from eval.report import markdown_table
 from gsseg.render import Backend, get_backend
 from gsseg.segment.segment_run import LabelOptions

@@ -107,8 +107,8 @@ def test_failed_work_is_one_line_and_exit_1_and_bad_input_exit_2():
     bad input 2, each with one line and no traceback."""
     from pathlib import Path
 
-    from dataset_tools.cli_support import _failure
-    from dataset_tools.errors import InputError
+    from dataset_tools.infra.cli_support import _failure
+    from dataset_tools.infra.errors import InputError
     from gsseg.train import TrainingDiverged
 
     message, code = _failure(TrainingDiverged(12, float("nan"), Path("run/checkpoints/step_0000010.pt")), "gsseg")

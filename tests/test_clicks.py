@@ -15,7 +15,7 @@ import torch
 from helpers import script
 from scipy import ndimage
 
-from dataset_tools.errors import InputError
+from dataset_tools.infra.errors import InputError
 from gsseg.ply import read_ply
 from gsseg.render.pixel_labels import segment_pixels
 from gsseg.run import load_run

@@ -12,9 +12,9 @@ import subprocess
 import pytest
 from helpers import script
 
-from dataset_tools.engine import Engine
-from dataset_tools.errors import InputError
-from dataset_tools.names import plain_name
+from dataset_tools.infra.engine import Engine
+from dataset_tools.infra.errors import InputError
+from dataset_tools.infra.names import plain_name
 from dataset_tools.scene import load_scene
 from hqmask.build import CACHE, BuildConfig, build_masks, propose_view
 from hqmask.proposers import make_proposer

@@ -8,7 +8,7 @@ import pytest
 import torch
 
 from dataset_tools.cameras import PinholeCamera
-from dataset_tools.errors import InputError
+from dataset_tools.infra.errors import InputError
 from dataset_tools.synth.camera_paths import look_at, orbit
 from gsseg.environment import Environment, background_image, mean_up, profile_bins, ray_directions
 from gsseg.gaussians import Gaussians

@@ -10,11 +10,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dataset_tools.atomic import STALE_AFTER_S, atomic_directory, remove_stale_temporaries, write_bytes_atomic
-from dataset_tools.checked_files import read_checked, write_checked
-from dataset_tools.errors import InputError
-from dataset_tools.locks import exclusive, exclusive_folder, try_lock
-from dataset_tools.overlap import overlap, refuse_overlap, scene_entries, scene_inputs
+from dataset_tools.infra.atomic import STALE_AFTER_S, atomic_directory, remove_stale_temporaries, write_bytes_atomic
+from dataset_tools.infra.checked_files import read_checked, write_checked
+from dataset_tools.infra.errors import InputError
+from dataset_tools.infra.locks import exclusive, exclusive_folder, try_lock
+from dataset_tools.infra.overlap import overlap, refuse_overlap, scene_entries, scene_inputs
 
 
 @pytest.mark.parametrize(

@@ -8,7 +8,7 @@ import torch
 from helpers import random_gaussians
 from plyfile import PlyData, PlyElement
 
-from dataset_tools.errors import InputError
+from dataset_tools.infra.errors import InputError
 from gsseg.ply import read_ply, write_ply
 
 

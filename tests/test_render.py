@@ -177,7 +177,7 @@ def test_background_fills_what_the_gaussians_leave():
 
 
 def test_unknown_backend_is_refused():
-    from dataset_tools.errors import InputError
+    from dataset_tools.infra.errors import InputError
 
     with pytest.raises(InputError, match="unknown backend"):
         get_backend("opengl")

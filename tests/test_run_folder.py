@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import torch
 
-from dataset_tools.errors import InputError
+from dataset_tools.infra.errors import InputError
 from gsseg.render.contributions import Contributions
 from gsseg.run_folder import FORMAT_VERSIONS, RunFolder, read_edit_record, write_edit_record
 from gsseg.segment.reassign import Segmentation

@@ -9,7 +9,7 @@ import pytest
 import torch
 
 from dataset_tools.cameras import PinholeCamera
-from dataset_tools.errors import InputError
+from dataset_tools.infra.errors import InputError
 from gsseg.edits import apply_edit
 from gsseg.gaussians import Gaussians
 from gsseg.ply import read_ply

@@ -15,7 +15,7 @@ from helpers import script
 from dataset_tools import InputError, load_scene
 from dataset_tools.cameras import turned_frames
 from dataset_tools.image_files import read_image
-from dataset_tools.locks import exclusive
+from dataset_tools.infra.locks import exclusive
 from dataset_tools.sfm import SfmConfig, run_sfm
 from dataset_tools.sfm.pipeline import _input_images, incremental_options, pixel_scale, sift_peak_threshold
 from dataset_tools.synth import SynthConfig, generate_scene

@@ -11,8 +11,8 @@ import pytest
 import torch
 from helpers import GEOMETRY, random_gaussians
 
-from dataset_tools.errors import InputError
 from dataset_tools.image_files import read_mask
+from dataset_tools.infra.errors import InputError
 from dataset_tools.scene import load_scene
 from gsseg.ply import read_ply
 from gsseg.render_views import render_run

@@ -21,7 +21,7 @@ from plyfile import PlyData
 from scipy import ndimage
 from scipy.spatial.transform import Rotation
 
-from dataset_tools.errors import InputError
+from dataset_tools.infra.errors import InputError
 from dataset_tools.scene import load_scene
 from eval.standard_render import read_splats, render_reference
 from gsseg.export import export_run, read_splat, splat_records

@@ -20,15 +20,15 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from dataset_tools.atomic import atomic_directory, write_bytes_atomic
 from dataset_tools.corruption import blobs, proposer
 from dataset_tools.corruption.blobs import PERMUTE_ONLY, BlobModel, corrupt_mask
 from dataset_tools.corruption.ops import coarsen
-from dataset_tools.errors import InputError
 from dataset_tools.image_files import encode_png
+from dataset_tools.infra.atomic import atomic_directory, write_bytes_atomic
+from dataset_tools.infra.errors import InputError
+from dataset_tools.infra.names import plain_name
+from dataset_tools.infra.overlap import refuse_overlap, scene_inputs
 from dataset_tools.label_maps import matched_error
-from dataset_tools.names import plain_name
-from dataset_tools.overlap import refuse_overlap, scene_inputs
 from dataset_tools.scene import load_scene
 
 FAMILIES = ("blobs", "proposer")

@@ -10,7 +10,7 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
-from dataset_tools.errors import InputError
+from dataset_tools.infra.errors import InputError
 
 VIDEO_SUFFIXES = (".mp4", ".mov", ".avi", ".mkv", ".m4v", ".webm", ".MP4", ".MOV", ".AVI", ".MKV", ".M4V")
 

@@ -36,12 +36,12 @@ import numpy as np
 from PIL import Image
 from tqdm import tqdm
 
-from dataset_tools.atomic import require_folder_path, write_bytes_atomic
 from dataset_tools.cameras import turned_frames
-from dataset_tools.errors import InputError
 from dataset_tools.image_files import IMAGE_SUFFIXES, write_downsampled
-from dataset_tools.locks import exclusive
-from dataset_tools.overlap import refuse_overlap
+from dataset_tools.infra.atomic import require_folder_path, write_bytes_atomic
+from dataset_tools.infra.errors import InputError
+from dataset_tools.infra.locks import exclusive
+from dataset_tools.infra.overlap import refuse_overlap
 from dataset_tools.sfm import retrieval
 from dataset_tools.sfm.frames import VIDEO_SUFFIXES, sample_frames
 

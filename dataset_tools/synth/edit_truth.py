@@ -22,9 +22,9 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from dataset_tools.atomic import atomic_directory
-from dataset_tools.errors import InputError
 from dataset_tools.image_files import read_image, read_mask, write_png
+from dataset_tools.infra.atomic import atomic_directory
+from dataset_tools.infra.errors import InputError
 from dataset_tools.scene import View, load_scene
 from dataset_tools.synth.generator import Layout, SynthConfig, make_layout, observe, render_view
 

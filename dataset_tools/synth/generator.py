@@ -12,10 +12,10 @@ import numpy as np
 from tqdm import tqdm
 
 from dataset_tools import colmap
-from dataset_tools.atomic import atomic_directory, write_bytes_atomic
 from dataset_tools.cameras import PinholeCamera
-from dataset_tools.errors import InputError
 from dataset_tools.image_files import encode_png
+from dataset_tools.infra.atomic import atomic_directory, write_bytes_atomic
+from dataset_tools.infra.errors import InputError
 from dataset_tools.mask_manifest import MANIFEST, manifest_bytes
 from dataset_tools.scene import llff_test_names
 from dataset_tools.synth import camera_paths

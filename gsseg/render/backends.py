@@ -20,7 +20,7 @@ import numpy as np
 import torch
 
 from dataset_tools.cameras import PinholeCamera
-from dataset_tools.errors import InputError
+from dataset_tools.infra.errors import InputError
 from gsseg.render import cpu_kernels
 from gsseg.render.blend_rules import ALPHA_MAX
 from gsseg.render.cpu_blend import as_float32_array, bin_tiles, blend_cpu

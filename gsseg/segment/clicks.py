@@ -21,7 +21,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 
-from dataset_tools.errors import InputError
+from dataset_tools.infra.errors import InputError
 from gsseg.segment.prompts import object_at_point
 
 GRAPH_NEIGHBOURS = 10  # each selected Gaussian is joined to this many nearest others

@@ -7,7 +7,7 @@ import torch
 from scipy.spatial import cKDTree
 
 from dataset_tools.cameras import PinholeCamera
-from dataset_tools.errors import InputError
+from dataset_tools.infra.errors import InputError
 from gsseg.gaussians import Gaussians
 from gsseg.render import Backend, get_backend, render
 

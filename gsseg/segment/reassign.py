@@ -17,7 +17,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 import torch
 
-from dataset_tools.errors import InputError
+from dataset_tools.infra.errors import InputError
 from gsseg.render.contributions import Contributions
 
 METHODS = ("prior", "flashsplat", "classifier")

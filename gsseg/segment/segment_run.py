@@ -6,7 +6,7 @@ import math
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from dataset_tools.errors import InputError
+from dataset_tools.infra.errors import InputError
 from gsseg.render import Backend
 from gsseg.render.contributions import Contributions, contribution_matrix
 from gsseg.run import Run, load_run

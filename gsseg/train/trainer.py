@@ -22,12 +22,12 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from dataset_tools.atomic import require_folder_path
 from dataset_tools.cameras import PinholeCamera
-from dataset_tools.errors import InputError, RunFailed
 from dataset_tools.fingerprint import scene_fingerprint
-from dataset_tools.interrupts import Interrupted, stop_requests
-from dataset_tools.overlap import refuse_overlap, scene_entries
+from dataset_tools.infra.atomic import require_folder_path
+from dataset_tools.infra.errors import InputError, RunFailed
+from dataset_tools.infra.interrupts import Interrupted, stop_requests
+from dataset_tools.infra.overlap import refuse_overlap, scene_entries
 from dataset_tools.scene import Scene, View, load_scene
 from gsseg.environment import Environment, background_image, mean_up, profile_bins
 from gsseg.gaussians import Gaussians, gaussians_from_points, make_classifier, random_points

@@ -14,7 +14,7 @@ import torch
 from tqdm import tqdm
 
 from dataset_tools.cameras import PinholeCamera
-from dataset_tools.errors import InputError
+from dataset_tools.infra.errors import InputError
 from dataset_tools.scene import View
 
 CACHE_MODES = ("auto", "memory", "disk")

@@ -19,9 +19,9 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from dataset_tools.errors import InputError
 from dataset_tools.image_files import label_palette
-from dataset_tools.interrupts import stop_requests
+from dataset_tools.infra.errors import InputError
+from dataset_tools.infra.interrupts import stop_requests
 from gsseg.run import load_run
 from gsseg.segment.reassign import METHODS
 from gsseg.viewer.session import ViewCamera, ViewerSession, browser_camera

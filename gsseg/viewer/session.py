@@ -15,8 +15,8 @@ import torch
 from scipy.spatial.transform import Rotation
 
 from dataset_tools.cameras import PinholeCamera
-from dataset_tools.errors import InputError
 from dataset_tools.image_files import label_palette
+from dataset_tools.infra.errors import InputError
 from gsseg.edits import apply_edit, check_edit, write_edit
 from gsseg.gaussians import Gaussians
 from gsseg.render import get_backend

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from dataset_tools.errors import InputError
+from dataset_tools.infra.errors import InputError
 
 
 class UnionFind:

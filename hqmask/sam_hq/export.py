@@ -19,9 +19,9 @@ import numpy as np
 import torch
 from torch import nn
 
-from dataset_tools.atomic import atomic_directory
-from dataset_tools.errors import InputError
-from dataset_tools.overlap import refuse_overlap
+from dataset_tools.infra.atomic import atomic_directory
+from dataset_tools.infra.errors import InputError
+from dataset_tools.infra.overlap import refuse_overlap
 from hqmask.sam_hq.model import DECODER, DECODER_OUTPUTS, ENCODER, ENCODER_OUTPUTS, MODEL_JSON, ModelInfo
 
 MODEL_TYPES = ("vit_tiny", "vit_b", "vit_l", "vit_h")

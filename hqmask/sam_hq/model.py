@@ -17,9 +17,9 @@ from pathlib import Path
 
 import numpy as np
 
-from dataset_tools.atomic import write_bytes_atomic
-from dataset_tools.checked_files import read_checked, write_checked
-from dataset_tools.errors import InputError
+from dataset_tools.infra.atomic import write_bytes_atomic
+from dataset_tools.infra.checked_files import read_checked, write_checked
+from dataset_tools.infra.errors import InputError
 from hqmask.sam_hq.transforms import preprocess, transform_coords
 
 ENCODER, DECODER, MODEL_JSON = "encoder.onnx", "decoder.onnx", "model.json"

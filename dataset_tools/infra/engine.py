@@ -18,14 +18,14 @@ from typing import Any
 
 from tqdm import tqdm
 
-from dataset_tools.errors import InputError
+from dataset_tools.infra.errors import InputError
 
 ENGINES = ("local", "ray")
 
 
 def task_cpus() -> int:
     """The CPUs a piece of work uses here: the entry point's thread count, else every usable CPU."""
-    from dataset_tools.threads import usable_cpus
+    from dataset_tools.infra.threads import usable_cpus
 
     return int(os.environ.get("OMP_NUM_THREADS") or usable_cpus())
 

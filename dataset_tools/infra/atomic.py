@@ -15,8 +15,8 @@ import time
 from collections.abc import Iterator
 from pathlib import Path
 
-from dataset_tools.errors import InputError
-from dataset_tools.locks import try_lock
+from dataset_tools.infra.errors import InputError
+from dataset_tools.infra.locks import try_lock
 
 STALE_AFTER_S = 60  # a temporary sibling younger than this may be one another writer is just creating
 

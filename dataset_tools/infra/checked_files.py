@@ -7,7 +7,7 @@ from __future__ import annotations
 import hashlib
 from pathlib import Path
 
-from dataset_tools.atomic import write_bytes_atomic
+from dataset_tools.infra.atomic import write_bytes_atomic
 
 DIGEST_SIZE = 16
 

@@ -13,7 +13,7 @@ import os
 from collections.abc import Iterable
 from pathlib import Path
 
-from dataset_tools.errors import InputError
+from dataset_tools.infra.errors import InputError
 
 Protected = tuple[str, Path]  # (what it is, in words; its path)
 

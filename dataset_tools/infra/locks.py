@@ -9,7 +9,7 @@ import os
 from collections.abc import Iterator
 from pathlib import Path
 
-from dataset_tools.errors import InputError
+from dataset_tools.infra.errors import InputError
 
 
 def try_lock(fd: int) -> bool:

@@ -3,7 +3,7 @@ an edit in a run): plain folder names, never a path that leaves the folder."""
 
 from __future__ import annotations
 
-from dataset_tools.errors import InputError
+from dataset_tools.infra.errors import InputError
 
 
 def plain_name(name: str, option: str) -> str:

@@ -12,9 +12,9 @@ from importlib.metadata import PackageNotFoundError, version
 import click
 from tqdm import tqdm
 
-from dataset_tools.errors import InputError, RunFailed
-from dataset_tools.interrupts import Interrupted
-from dataset_tools.threads import configure_threads
+from dataset_tools.infra.errors import InputError, RunFailed
+from dataset_tools.infra.interrupts import Interrupted
+from dataset_tools.infra.threads import configure_threads
 
 # What to do about an operating-system error, by errno.
 OS_FIXES = {
@@ -88,11 +88,11 @@ def other_scene_option(command: Callable) -> Callable:
 
 def engine_options(command: Callable) -> Callable:
     """``--engine local|ray`` and ``--address``, handed to ``command`` as one ``engine``
-    (:class:`dataset_tools.engine.Engine`)."""
+    (:class:`dataset_tools.infra.engine.Engine`)."""
 
     @functools.wraps(command)
     def with_engine(*args, engine_name: str, address: str | None, **kwargs):
-        from dataset_tools.engine import Engine
+        from dataset_tools.infra.engine import Engine
 
         return command(*args, engine=Engine(engine_name, address), **kwargs)
 
@@ -113,7 +113,7 @@ def run_cli(group: click.Group, prog_name: str) -> Callable[[], None]:
     """An entry point that runs ``group`` and turns an ``InputError`` or an ``OSError`` into
     ``error: ...`` on stderr and exit code 2, without a traceback; interrupted work exits 130
     with its own message (a checkpoint written, how to continue). Threads are configured
-    first (:func:`dataset_tools.threads.configure_threads`)."""
+    first (:func:`dataset_tools.infra.threads.configure_threads`)."""
     group = click.version_option(package_version(), "--version", prog_name=prog_name)(group)
 
     def main() -> None:
