@@ -1,7 +1,7 @@
 """Mask proposers: one image in, candidate object masks with scores out.
 
 - ``graph``: weight-free default. Felzenszwalb's graph segmentation, regions merged by mean
-  colour on a region adjacency graph (scikit-image), and background removed: regions that
+  colour on a region adjacency graph (:func:`merge_by_mean_colour`), and background removed: regions that
   touch the image border, and regions whose colour is close to a large border region (a
   tiled floor whose inner tiles do not reach the border), are background. Adjacent
   foreground regions of similar hue are joined into one object. Given the view's depth (a
