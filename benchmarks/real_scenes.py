@@ -15,12 +15,15 @@ selection (docs/evaluation.md):
   masks of colour alone and for those cut at the depth jumps.
 - **the options**: the single-click mIoU under ``gsseg segment``'s defaults as well.
 
+``--seed`` sets the training seed, ``--tag`` the JSON file's suffix: the same command with
+other seeds (and another ``--work``) shows the run-to-run spread.
+
 The people's masks are drawn on the photos; they are carried into each undistorted view
 through the camera that SfM estimated for the photo. Every stage's wall time is recorded;
 finished stages in ``--work`` are reused. Prints and writes JSON.
 
     python -m benchmarks.real_scenes [--real ../shared/data/real] [--scenes statue,dtu_scan24]
-        [--work /tmp/real_scenes] [--iters N] [--max-gaussians N] [--out FILE]
+        [--work /tmp/real_scenes] [--iters N] [--max-gaussians N] [--seed 0] [--tag T] [--out FILE]
 """
 
 from __future__ import annotations
@@ -193,7 +196,7 @@ def mask_scores(scene_dir: Path, images: str, masks: str, truth: dict[str, np.nd
     }
 
 
-def run_scene(name: str, real: Path, work: Path, iters: int | None, max_gaussians: int | None) -> dict:
+def run_scene(name: str, real: Path, work: Path, iters: int | None, max_gaussians: int | None, seed: int = 0) -> dict:
     """Every stage of one scene, with its wall time; finished stages in ``work`` are reused."""
     times, out = {}, work / name
     start = time.perf_counter()
@@ -207,7 +210,8 @@ def run_scene(name: str, real: Path, work: Path, iters: int | None, max_gaussian
     run_dir = out / "run"
     start = time.perf_counter()
     if not (run_dir / "gaussians.ply").is_file():
-        train(scene_dir, run_dir, TrainConfig(iters=iters, masks=MASKS, images=images, max_gaussians=max_gaussians))
+        cfg = TrainConfig(iters=iters, masks=MASKS, images=images, max_gaussians=max_gaussians, seed=seed)
+        train(scene_dir, run_dir, cfg)
     times["train_s"] = time.perf_counter() - start
     start = time.perf_counter()
     if not (scene_dir / DEPTH_MASKS).is_dir():
@@ -248,13 +252,15 @@ def main() -> None:
     parser.add_argument("--work", type=Path, default=Path("/tmp/real_scenes"))
     parser.add_argument("--iters", type=int, default=None, help="Training iterations (default: the CPU schedule's).")
     parser.add_argument("--max-gaussians", type=int, default=None)
+    parser.add_argument("--seed", type=int, default=0, help="Training seed (the run-to-run spread).")
+    parser.add_argument("--tag", default="", help="Suffix of the JSON file's name.")
     parser.add_argument("--out", default=None, help="JSON file (default: benchmarks/results/real_scenes.json).")
     args = parser.parse_args()
     results = {"scenes": []}
     for name in args.scenes.split(","):
-        results["scenes"].append(run_scene(name, args.real, args.work, args.iters, args.max_gaussians))
+        results["scenes"].append(run_scene(name, args.real, args.work, args.iters, args.max_gaussians, args.seed))
         print(json.dumps(results["scenes"][-1], indent=2))
-    record.save("real_scenes", results, out=args.out)
+    record.save("real_scenes", results, tag=args.tag, out=args.out)
 
 
 def report(r: dict) -> tuple[str, str]:
