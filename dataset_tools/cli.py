@@ -70,7 +70,7 @@ def synth(
     type=click.Choice(["auto", "exhaustive", "sequential", "retrieval"]),
     default="auto",
     show_default=True,
-    help="auto: exhaustive for up to 50 photos, retrieval (each photo with its --neighbours most alike) for "
+    help="auto: exhaustive for up to 80 photos, retrieval (each photo with its --neighbours most alike) for "
     "more, sequential with keyframe loop closure for a video.",
 )
 @click.option(

@@ -8,9 +8,10 @@ changed, with every step after it):
 2. ``features``: SIFT on every image into ``.sfm/database.db`` (one shared camera for a video,
    one per folder of photos by default), its peak threshold lowered for small images
    (:func:`sift_peak_threshold`);
-3. ``matches``: exhaustive for up to ``EXHAUSTIVE_UP_TO`` images; otherwise, and for a video,
-   sequential (each image with its next ``overlap`` and at powers of two further) plus every
-   pair of keyframes spread over the sequence, which closes loops without a vocabulary tree;
+3. ``matches``: exhaustive for up to ``EXHAUSTIVE_UP_TO`` photos; past that, each with its
+   ``neighbours`` most alike (:mod:`dataset_tools.sfm.retrieval`); for a video, sequential
+   (each image with its next ``overlap`` and at powers of two further) plus every pair of
+   keyframes spread over the sequence, which closes loops without a vocabulary tree;
 4. ``mapping``: incremental (its pixel thresholds scaled to the image size,
    :func:`incremental_options`) or global mapping; the model with the most images is kept and
    the others reported, with a video's frames turned far from the frame before (flips);
@@ -49,7 +50,7 @@ if TYPE_CHECKING:
     import pycolmap
 
 STEPS = ("images", "features", "matches", "mapping", "undistort")
-EXHAUSTIVE_UP_TO = 50
+EXHAUSTIVE_UP_TO = 80
 MIN_REGISTERED_SHARE = 0.5
 SIFT_PEAK_THRESHOLD = 0.02 / 3  # COLMAP's default, for photos of about REFERENCE_SIDE pixels
 REFERENCE_SIDE = 1000
