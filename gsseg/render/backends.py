@@ -131,24 +131,35 @@ class Backend:
 class _Projecting(Backend):
     """The backends that share :func:`project_gaussians` and blend on their own."""
 
-    def blend(self, means2d, conics, opacities, values, depths, radii, width, height):
+    def blend(self, means2d, conics, opacities, values, depths, radii, width, height, *, geometry_channels=None):
+        """(H, W, C) image and (H, W) alpha of ``values`` (N, C); only the first
+        ``geometry_channels`` channels (all when None) pass gradients to the geometry, where
+        the backend can keep the others off it."""
         raise NotImplementedError
 
     def rasterize(self, means, quats, scales, opacities, values, cam_from_world, camera):
+        return self._project_and_blend(means, quats, scales, opacities, values, None, cam_from_world, camera)[0]
+
+    def _project_and_blend(self, means, quats, scales, opacities, values, beside, cam_from_world, camera):
+        """The raster of ``values`` (N, C) with depth, and the (H, W, E) image of ``beside``
+        (N, E; None: none) blended in the same pass, its gradients kept off the geometry."""
         proj = project_gaussians(means, quats, scales, cam_from_world, camera, opacities)
         if proj.means2d.requires_grad:
             proj.means2d.retain_grad()
+        c = values.shape[1]
         image, alpha = self.blend(
             proj.means2d,
             proj.conics,
             opacities,
-            torch.cat([values, proj.depths[:, None]], dim=1),
+            torch.cat([values, proj.depths[:, None], *([] if beside is None else [beside])], dim=1),
             proj.depths,
             proj.radii,
             camera.width,
             camera.height,
+            geometry_channels=None if beside is None else c + 1,
         )
-        return Raster(image[..., :-1], alpha, image[..., -1], proj.means2d, proj.radii)
+        raster = Raster(image[..., :c], alpha, image[..., c], proj.means2d, proj.radii)
+        return raster, None if beside is None else image[..., c + 1 :]
 
 
 class CpuBackend(_Projecting):
@@ -156,28 +167,13 @@ class CpuBackend(_Projecting):
 
     name = "cpu"
 
-    def blend(self, *args):
-        return blend_cpu(*args)
+    def blend(self, *args, geometry_channels=None):
+        return blend_cpu(*args, geometry_channels)
 
     def rasterize_beside(self, means, quats, scales, opacities, values, beside, cam_from_world, camera):
         """One projection and one blend of ``values``, depth and ``beside`` together, whose
         backward pass lets only ``values`` and depth reach the geometry."""
-        proj = project_gaussians(means, quats, scales, cam_from_world, camera, opacities)
-        if proj.means2d.requires_grad:
-            proj.means2d.retain_grad()
-        c = values.shape[1]
-        image, alpha = blend_cpu(
-            proj.means2d,
-            proj.conics,
-            opacities,
-            torch.cat([values, proj.depths[:, None], beside], dim=1),
-            proj.depths,
-            proj.radii,
-            camera.width,
-            camera.height,
-            c + 1,
-        )
-        return Raster(image[..., :c], alpha, image[..., c], proj.means2d, proj.radii), image[..., c + 1 :]
+        return self._project_and_blend(means, quats, scales, opacities, values, beside, cam_from_world, camera)
 
     @torch.no_grad()
     def contributions(self, means, quats, scales, opacities, cam_from_world, camera, rows, n_rows):
@@ -204,7 +200,9 @@ class TorchBackend(_Projecting):
 
     name = "torch"
 
-    def blend(self, *args):
+    def blend(self, *args, geometry_channels=None):
+        if geometry_channels is not None:  # its rasterize_beside blends such channels in a pass of their own
+            raise NotImplementedError("the torch backend keeps channels off the geometry by a second pass")
         return blend_torch(*args)
 
 
