@@ -77,12 +77,21 @@ def _touching(seg: np.ndarray, edges: np.ndarray | None = None) -> tuple[np.ndar
     return np.unique(p, axis=0, return_counts=True)
 
 
+def _region_means(seg: np.ndarray, colours: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each region's pixel count (n,) float and mean colour (n, C) over a region map (H, W)
+    of labels 0..n-1 and ``colours`` (H, W, C); an empty label has mean 0."""
+    n = int(seg.max()) + 1
+    counts = np.bincount(seg.ravel(), minlength=n).astype(float)
+    sums = np.stack([np.bincount(seg.ravel(), colours[..., c].ravel(), n) for c in range(colours.shape[-1])], 1)
+    return counts, sums / np.maximum(counts, 1)[:, None]
+
+
 def merge_by_mean_colour(segments: np.ndarray, colours: np.ndarray, threshold: float) -> np.ndarray:
     """Regions of ``segments`` (H, W) joined where two that touch (8-neighbourhood) have mean
-    ``colours`` (H, W, C) less than ``threshold`` apart, and so on transitively: the
-    partition of scikit-image's ``graph.cut_threshold(segments, graph.rag_mean_color(colours,
-    segments), threshold)``, whose graph is built by a Python callback per pixel, from array
-    operations, numbered as it numbers them (by their first region).
+    ``colours`` (H, W, C) less than ``threshold`` apart, and so on transitively. The result is
+    scikit-image's ``graph.cut_threshold(segments, graph.rag_mean_color(colours, segments),
+    threshold)``, label for label, computed with array operations where scikit-image builds
+    its graph with a Python callback per pixel.
 
     Returns:
         (H, W) int64 region map.
@@ -90,9 +99,7 @@ def merge_by_mean_colour(segments: np.ndarray, colours: np.ndarray, threshold: f
     _, seg = np.unique(segments, return_inverse=True)
     seg = seg.reshape(segments.shape)
     n = int(seg.max()) + 1
-    counts = np.bincount(seg.ravel(), minlength=n)
-    mean = np.stack([np.bincount(seg.ravel(), colours[..., c].ravel(), n) for c in range(colours.shape[-1])], 1)
-    mean /= counts[:, None]
+    mean = _region_means(seg, colours)[1]
     a = np.concatenate([seg[:, :-1].ravel(), seg[:-1].ravel(), seg[:-1, :-1].ravel(), seg[:-1, 1:].ravel()])
     b = np.concatenate([seg[:, 1:].ravel(), seg[1:].ravel(), seg[1:, 1:].ravel(), seg[1:, :-1].ravel()])
     pairs = np.unique(np.sort(np.stack([a, b], 1)[a != b], axis=1), axis=0)
@@ -173,10 +180,7 @@ class GraphProposer:
         lab = color.rgb2lab(image)
         jumps = None if depth is None else depth_jumps(depth, self.depth_jump)
         seg = self._regions(image, lab, jumps)
-        n = int(seg.max()) + 1
-        counts = np.bincount(seg.ravel(), minlength=n).astype(float)
-        mean = np.stack([np.bincount(seg.ravel(), lab[..., c].ravel(), n) for c in range(3)], 1)
-        mean /= np.maximum(counts, 1)[:, None]
+        counts, mean = _region_means(seg, lab)
         background = self._background(seg, counts, mean, jumps, height)
         pairs, touches = _touching(seg, None if jumps is None else jumps.edges)
         obj = self._join(mean, background, pairs)
