@@ -204,7 +204,7 @@ class RunFolder:
             raise InputError(f"{self.labels} does not exist; run `gsseg segment` on the run first.")
         try:
             with np.load(self.labels, allow_pickle=False) as f:
-                _check_version(self.labels, int(f["format_version"]) if "format_version" in f else 0)
+                _check_version(self.labels, f)
                 return Segmentation(
                     labels=f["labels"],
                     objects=f["objects"],
@@ -242,7 +242,7 @@ class RunFolder:
             return None
         try:
             with np.load(self.contributions, allow_pickle=False) as f:
-                _check_version(self.contributions, int(f["format_version"]) if "format_version" in f else 0)
+                _check_version(self.contributions, f)
                 return Contributions(
                     labels=f["labels"],
                     weights=torch.from_numpy(f["weights"]),
@@ -295,7 +295,10 @@ def damaged(path: Path, e: Exception) -> InputError:
     )
 
 
-def _check_version(path: Path, version: int) -> None:
+def _check_version(path: Path, data) -> None:
+    """Refuse ``path`` when ``data`` (its JSON object or npz arrays) carries a format version
+    newer than this code reads; none is version 0."""
+    version = int(data["format_version"]) if "format_version" in data else 0
     known = FORMAT_VERSIONS[path.name]
     if version > known:
         raise InputError(
@@ -307,7 +310,8 @@ def _read_json(path: Path) -> dict:
     data = json.loads(path.read_text())
     if not isinstance(data, dict):
         raise ValueError("not a JSON object")
-    _check_version(path, int(data.pop("format_version", 0)))
+    _check_version(path, data)
+    data.pop("format_version", None)
     return data
 
 
