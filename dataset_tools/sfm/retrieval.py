@@ -49,13 +49,10 @@ def vocabulary(descriptors: list[np.ndarray], words: int = WORDS, seed: int = 0)
     Returns:
         (W, D) float32 centres.
     """
-    rng = np.random.default_rng(seed)
-    data = np.concatenate(
-        [root_sift(d) for d in _spread(descriptors, max(1, SAMPLE // max(len(descriptors), 1)), rng) if len(d)]
-        or [np.zeros((0, 128), np.float32)]
-    )
-    if not len(data):
+    if not any(len(d) for d in descriptors):
         raise ValueError("no photo has a descriptor")
+    rng = np.random.default_rng(seed)
+    data = np.concatenate([root_sift(d) for d in _spread(descriptors, max(1, SAMPLE // len(descriptors)), rng)])
     centres = data[rng.choice(len(data), min(words, len(data)), replace=False)]
     for _ in range(ITERATIONS):
         owner = _nearest(data, centres)
