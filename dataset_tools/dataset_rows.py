@@ -13,7 +13,7 @@ from dataset_tools import colmap
 from dataset_tools.cameras import PinholeCamera
 from dataset_tools.image_files import as_label_map, encode_png
 from dataset_tools.infra.atomic import atomic_directory, write_bytes_atomic
-from dataset_tools.infra.errors import InputError
+from dataset_tools.infra.errors import InputError, OutputExists
 from dataset_tools.scene import Scene
 
 COLUMNS = ("image", "mask", "intrinsics", "width", "height", "cam_from_world", "view", "scene", "split")
@@ -49,7 +49,7 @@ def export_dataset(scene: Scene, out: Path, *, overwrite: bool = False, shard_vi
 
     out = Path(out)
     if out.exists() and not overwrite:
-        raise InputError(f"{out}: already exists; choose another --dataset or pass --force.")
+        raise OutputExists(out)
 
     def rows():
         for v in scene.views:
@@ -94,7 +94,7 @@ def write_scenes_from_rows(
     for name, indices in sorted(by_scene.items()):
         dst = Path(out) / name
         if dst.exists() and not overwrite:
-            raise InputError(f"{dst}: already exists; pass --force to replace it.")
+            raise OutputExists(dst)
         with atomic_directory(dst, overwrite=overwrite) as tmp:
             names, cameras, poses, test = [], [], [], []
             for k in indices:

@@ -21,7 +21,7 @@ from tqdm import tqdm
 
 from dataset_tools.dataset_rows import write_scenes_from_rows
 from dataset_tools.infra.atomic import atomic_directory
-from dataset_tools.infra.errors import InputError
+from dataset_tools.infra.errors import InputError, OptionError, OutputExists
 from dataset_tools.infra.overlap import refuse_overlap
 from dataset_tools.scene import load_scene
 
@@ -29,7 +29,7 @@ HQ_REPO = "joshir/3D-Scene-Segmentation-HQ"
 ARCHIVE_SUFFIXES = (".zip", ".tar", ".tar.gz", ".tgz")
 OFFLINE_HINT = (
     f"download it where the Hub is reachable (`huggingface-cli download {HQ_REPO} --repo-type dataset "
-    "--local-dir DIR`) and pass --local DIR"
+    "--local-dir DIR`) and pass that folder as {local}"
 )
 
 
@@ -42,7 +42,7 @@ def download_hq(*, repo_id: str = HQ_REPO, revision: str | None = None, cache_di
         return Path(snapshot_download(repo_id, repo_type="dataset", revision=revision, cache_dir=cache_dir))
     except (LocalEntryNotFoundError, HfHubHTTPError, OSError) as e:
         reason = type(e).__name__
-        raise InputError(
+        raise OptionError(
             f"cannot download {repo_id} from the Hugging Face Hub ({reason}: offline or not reachable); {OFFLINE_HINT}."
         ) from None
 
@@ -139,7 +139,7 @@ def convert_hq(
             load_scene(folder, masks=masks)  # refuses broken scenes with a message naming the file
             dst = out / folder.name
             if dst.exists() and not overwrite:
-                raise InputError(f"{dst}: already exists; pass --force to replace it.")
+                raise OutputExists(dst)
             with atomic_directory(dst, overwrite=overwrite) as tmp:
                 shutil.copytree(folder, tmp, dirs_exist_ok=True)
             written.append(dst)

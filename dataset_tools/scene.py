@@ -233,7 +233,7 @@ def load_scene(
     image_root = root / images
     if not image_root.is_dir():
         raise InputError(
-            f"{image_root}: image folder not found; put the views in {images}/ or pick another with --images."
+            f"{image_root}: image folder not found; put the views in {images}/ or pick another image folder."
         )
     model = colmap.read_model(root / "sparse" / "0")
     mask_root = root / masks if masks else None

@@ -22,7 +22,7 @@ import numpy as np
 from tqdm import tqdm
 
 from dataset_tools.infra.atomic import write_bytes_atomic
-from dataset_tools.infra.errors import InputError
+from dataset_tools.infra.errors import InputError, OptionError
 from dataset_tools.label_maps import match_ids, overlap
 from dataset_tools.scene import View
 from eval.edit_scores import summarize_edits
@@ -143,9 +143,9 @@ def load_inputs(
     run = load_run(run_dir, other_scene=other_scene)
     segmentation = run.labels()
     if gt_masks is not None and not (scene_dir / gt_masks).is_dir():
-        raise InputError(
-            f"{scene_dir / gt_masks}: no ground-truth masks for the metrics; "
-            "pass --gt-masks NAME, the scene's ground-truth mask folder."
+        raise OptionError(
+            "no ground-truth masks for the metrics; pass the scene's ground-truth mask folder as {gt_masks}.",
+            file=scene_dir / gt_masks,
         )
     views = run.scene(scene_dir, masks=gt_masks).split(split)
     if not views:

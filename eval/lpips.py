@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from dataset_tools.infra.atomic import write_bytes_atomic
-from dataset_tools.infra.errors import InputError
+from dataset_tools.infra.errors import InputError, OutputExists
 
 INPUTS = ("image0", "image1")
 NETS = ("alex", "vgg", "squeeze")
@@ -69,7 +69,7 @@ def export_lpips(out: Path | str, net: str = "alex", *, overwrite: bool = False)
     if net not in NETS:
         raise InputError(f"unknown LPIPS network {net!r}; choose {', '.join(NETS)}.")
     if out.exists() and not overwrite:
-        raise InputError(f"{out}: already exists; pass --force to replace it.")
+        raise OutputExists(out)
     try:
         import lpips
     except ImportError:

@@ -16,7 +16,7 @@ import numpy as np
 
 from dataset_tools.image_files import colorize_labels, encode_png
 from dataset_tools.infra.atomic import atomic_directory, write_bytes_atomic
-from dataset_tools.infra.errors import InputError
+from dataset_tools.infra.errors import InputError, OutputExists
 from dataset_tools.infra.overlap import refuse_overlap, run_inputs, scene_entries
 from dataset_tools.scene import View
 from dataset_tools.synth.edit_truth import read_edit_truth
@@ -311,7 +311,7 @@ def report_run(
         + ([("the LPIPS network", Path(lpips))] if lpips is not None else []),
     )
     if out_dir.exists() and not overwrite:
-        raise InputError(f"{out_dir}: already exists; pass --force to replace it.")
+        raise OutputExists(out_dir)
     backend = get_backend(backend)
     lpips_net = LPIPS(lpips) if lpips is not None else None  # a bad file fails before any rendering
     run, segmentation, views = load_inputs(run_dir, scene_dir, gt_masks, split, other_scene)

@@ -12,7 +12,7 @@ from tqdm import tqdm
 
 from dataset_tools.image_files import write_png
 from dataset_tools.infra.atomic import atomic_directory, remove_stale_temporaries
-from dataset_tools.infra.errors import InputError
+from dataset_tools.infra.errors import InputError, OptionError, OutputExists
 from dataset_tools.infra.names import plain_name
 from dataset_tools.infra.overlap import refuse_overlap, scene_entries
 from dataset_tools.scene import Scene
@@ -51,7 +51,7 @@ def check_edit(op: str, color: tuple | None) -> None:
     if op not in OPS:
         raise InputError(f"unknown edit {op!r}; choose one of {', '.join(OPS)}.")
     if op == "recolor" and color is None:
-        raise InputError("--op recolor needs --color R G B (0..255).")
+        raise OptionError("{op} needs {color}, three values in 0..255.", op="recolor")
 
 
 def apply_edit(g: Gaussians, selected: np.ndarray, op: str, rgb: tuple[float, float, float] | None = None) -> Gaussians:
@@ -81,13 +81,13 @@ def check_prompts(point, clicks: list[Click] | tuple[Click, ...], object_id: int
     and clicks, excluding clicks only with points or clicks, finite points."""
     positive = any(c.positive for c in clicks)
     if (object_id is not None) + (point is not None or positive) != 1:
-        raise InputError("give --object-id, or --point and/or --click (with --exclude-click to split).")
+        raise OptionError("give {object_id}, or {point} and/or {clicks} (with excluding clicks to split).")
     if object_id is not None and clicks:
-        raise InputError(
-            "--exclude-click splits the selection of --click or --point; give those instead of --object-id."
+        raise OptionError(
+            "excluding clicks split the selection of {clicks} or {point}; give those instead of {object_id}."
         )
     if point is not None and not np.isfinite(np.asarray(point, float)).all():
-        raise InputError(f"--point {' '.join(map(str, point))}: give three finite coordinates.")
+        raise OptionError("{point}: give three finite coordinates.", point=tuple(point))
 
 
 def select(
@@ -160,10 +160,10 @@ def edit_run(
     those renders, and ``edit.json``."""
     check_prompts(point, clicks, object_id)
     if name is not None:
-        plain_name(name, "--name")
+        plain_name(name, "name")
     check_edit(op, color)
     if color is not None and not all(0 <= c <= 255 for c in color):
-        raise InputError(f"--color {' '.join(map(str, color))}: give three values in 0..255.")
+        raise OptionError("{color}: give three values in 0..255.", color=tuple(color))
     run = load_run(run_dir, other_scene=other_scene)
     segmentation = run.labels()
     backend = get_backend(backend)
@@ -213,7 +213,7 @@ def write_edit(
     refuse_overlap(out, scene_entries(scene.root))
     remove_stale_temporaries(out.parent / "*")  # what killed edits left in RUN/edits/
     if out.exists() and not overwrite:
-        raise InputError(f"{out} exists; pass --force or choose another --name.")
+        raise OutputExists(out, " or choose another {name}")
     with run.folder.lock(), atomic_directory(out, overwrite=overwrite) as tmp:
         write_ply(edited, tmp / "gaussians.ply")
         frames = []

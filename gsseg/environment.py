@@ -23,7 +23,7 @@ import torch
 import torch.nn.functional as F
 
 from dataset_tools.cameras import PinholeCamera
-from dataset_tools.infra.errors import InputError
+from dataset_tools.infra.errors import OptionError
 from gsseg.gaussians import OBJ_FEAT_DIM, Gaussians
 from gsseg.sh import eval_sh, num_coeffs, rgb_to_sh_dc
 
@@ -46,8 +46,9 @@ def mean_up(cam_from_world: list[np.ndarray]) -> np.ndarray:
     up = -np.mean([np.asarray(p)[1, :3] for p in cam_from_world], axis=0)
     norm = np.linalg.norm(up)
     if norm < 1e-6:
-        raise InputError(
-            "the cameras' up directions cancel out, so there is no common horizon; train with --no-environment-profile."
+        raise OptionError(
+            "the cameras' up directions cancel out, so there is no common horizon; train with {environment_profile}.",
+            environment_profile=False,
         )
     return up / norm
 

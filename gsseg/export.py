@@ -19,7 +19,7 @@ import torch
 
 from dataset_tools.cameras import CameraPose, PinholeCamera
 from dataset_tools.infra.atomic import write_bytes_atomic
-from dataset_tools.infra.errors import InputError
+from dataset_tools.infra.errors import InputError, OptionError, OutputExists
 from dataset_tools.infra.overlap import refuse_overlap, run_inputs
 from gsseg.edits import check_prompts, select
 from gsseg.environment import environment_shell, shell_radius, shell_spacing
@@ -100,11 +100,11 @@ def export_run(
         raise InputError(f"{out} is a folder; give a file name for the export.")
     fmt = fmt or out.suffix.lstrip(".").lower()
     if fmt not in FORMATS:
-        raise InputError(f"{out}: cannot tell the format; end the name in .ply or .splat, or pass --format.")
+        raise OptionError("cannot tell the format; end the name in .ply or .splat, or pass {fmt}.", file=out)
     run = load_run(run_dir)
     refuse_overlap(out, run.inputs())  # nor anything of the scene it was trained on
     if out.exists() and not overwrite:
-        raise InputError(f"{out}: already exists; pass --force to replace it or choose another --out.")
+        raise OutputExists(out, " or choose another {out}")
     if environment and run.environment is None:
         raise InputError(
             f"{run.root} was trained without an environment (black behind the Gaussians); export it without one."

@@ -11,7 +11,7 @@ from tqdm import tqdm
 from dataset_tools.depth_maps import write_depth
 from dataset_tools.image_files import colorize_labels, write_png
 from dataset_tools.infra.atomic import atomic_directory
-from dataset_tools.infra.errors import InputError
+from dataset_tools.infra.errors import OptionError, OutputExists
 from dataset_tools.infra.overlap import refuse_overlap
 from gsseg.render import Backend, get_backend, surface_depth, to_uint8
 from gsseg.render.pixel_labels import classify_pixels, segment_pixels
@@ -43,12 +43,15 @@ def render_run(
     renders on a scene other than the run's."""
     unknown = set(what) - set(PRODUCTS)
     if unknown:
-        raise InputError(f"unknown --what {', '.join(sorted(unknown))}; choose from {', '.join(PRODUCTS)}.")
+        raise OptionError(
+            f"{{what}}: unknown products {', '.join(sorted(unknown))}; choose from {', '.join(PRODUCTS)}.",
+            what=",".join(what),
+        )
     out = Path(out)
     run = load_run(run_dir, other_scene=other_scene)
     refuse_overlap(out, run.inputs(scene_dir))
     if out.exists() and not overwrite:
-        raise InputError(f"{out} exists; pass --force to replace it or choose another --out.")
+        raise OutputExists(out, " or choose another {out}")
     segmentation = run.labels() if "segments" in what else None
     backend = get_backend(backend)
     classifier = run.classifier.to(backend.device)

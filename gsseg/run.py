@@ -11,7 +11,7 @@ import numpy as np
 import torch
 
 from dataset_tools.cameras import PinholeCamera
-from dataset_tools.infra.errors import InputError
+from dataset_tools.infra.errors import InputError, OptionError
 from dataset_tools.infra.overlap import Protected, run_inputs, scene_entries
 from dataset_tools.scene import Scene, load_scene
 from gsseg.environment import Environment, background_image
@@ -80,9 +80,8 @@ class Run:
         ``object_mask`` may be another tool's masks, or a synthetic scene's ground truth)."""
         chosen = masks or self.config.masks
         if chosen is None:
-            raise InputError(
-                f"{self.root}: trained on colour alone (--masks none), so no mask folder votes by default; "
-                "name one with --masks."
+            raise OptionError(
+                "trained on colour alone, so no mask folder votes by default; name one with {masks}.", file=self.root
             )
         return chosen
 
@@ -100,9 +99,11 @@ class Run:
         scene = load_scene(scene_dir or self.record.scene, images=images or self.images, masks=masks)
         difference = None if self.other_scene else scene_difference(self.record, scene)
         if difference is not None:
-            raise InputError(
-                f"{scene.root}: not the scene {self.root} was trained on ({difference}); pass that "
-                "scene, or --allow-other-scene to use this one."
+            raise OptionError(
+                f"not the scene {self.root} was trained on ({difference}); pass that scene, or {{other_scene}} to "
+                "use this one.",
+                file=scene.root,
+                other_scene=True,
             )
         return scene
 

@@ -107,7 +107,7 @@ class RunFolder:
     def edit(self, name: str) -> Path:
         """The folder of the edit called ``name``, which must be a plain folder name (an edit
         never reaches outside ``edits/``)."""
-        return self.edits / plain_name(name, "--name")
+        return self.edits / plain_name(name, "name")
 
     def checkpoint(self, step: int) -> Path:
         return self.checkpoints / f"step_{step:07d}.pt"
@@ -129,9 +129,7 @@ class RunFolder:
     def require_finished(self) -> None:
         for path in (self.config, self.gaussians, self.classifier):
             if not path.is_file():
-                raise InputError(
-                    f"{self.root} has no {path.name}; point to the --out folder of a finished `gsseg train`."
-                )
+                raise InputError(f"{self.root} has no {path.name}; point to the folder of a finished `gsseg train`.")
 
     # config.json
     def read_config(self) -> RunRecord:

@@ -7,7 +7,7 @@ import math
 from dataclasses import asdict, dataclass, field, fields, replace
 
 from dataset_tools.fingerprint import fingerprint_difference
-from dataset_tools.infra.errors import InputError
+from dataset_tools.infra.errors import InputError, OptionError
 from dataset_tools.scene import Scene
 
 
@@ -113,17 +113,19 @@ class TrainConfig:
         if self.schedule not in SCHEDULES:
             raise InputError(f"unknown schedule {self.schedule!r}; choose {' or '.join(SCHEDULES)}.")
         if self.iters is not None and self.iters < 1:
-            raise InputError(f"--iters must be at least 1 (got {self.iters}).")
+            raise OptionError("{iters}: give 1 or more iterations.", iters=self.iters)
         if not 0 <= self.sh_degree <= 3:
-            raise InputError(f"--sh-degree must be 0..3 (got {self.sh_degree}).")
+            raise OptionError("{sh_degree}: give a degree of 0..3.", sh_degree=self.sh_degree)
         if self.environment_degree is not None and not 0 <= self.environment_degree <= 3:
-            raise InputError(f"--environment-degree must be 0..3 (got {self.environment_degree}).")
+            raise OptionError(
+                "{environment_degree}: give a degree of 0..3.", environment_degree=self.environment_degree
+            )
         if self.max_gaussians is not None and self.max_gaussians < 1:
-            raise InputError(f"--max-gaussians must be at least 1 (got {self.max_gaussians}).")
+            raise OptionError("{max_gaussians}: give 1 or more.", max_gaussians=self.max_gaussians)
         if not math.isfinite(self.gamma_obj) or self.gamma_obj < 0:
-            raise InputError(f"--gamma-obj {self.gamma_obj}: give a finite weight of 0 or more.")
+            raise OptionError("{gamma_obj}: give a finite weight of 0 or more.", gamma_obj=self.gamma_obj)
         if not math.isfinite(self.knn_reg) or self.knn_reg < 0:
-            raise InputError(f"--knn-reg {self.knn_reg}: give a finite weight of 0 or more.")
+            raise OptionError("{knn_reg}: give a finite weight of 0 or more.", knn_reg=self.knn_reg)
 
     @property
     def timing(self) -> Schedule:

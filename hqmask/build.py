@@ -25,7 +25,7 @@ from dataset_tools.image_files import encode_png, read_mask
 from dataset_tools.infra.atomic import atomic_directory, write_bytes_atomic
 from dataset_tools.infra.checked_files import read_checked, write_checked
 from dataset_tools.infra.engine import Engine
-from dataset_tools.infra.errors import InputError
+from dataset_tools.infra.errors import InputError, OptionError, OutputExists
 from dataset_tools.infra.locks import exclusive_folder
 from dataset_tools.infra.names import plain_name
 from dataset_tools.infra.overlap import refuse_overlap, scene_entries, scene_inputs
@@ -87,7 +87,9 @@ def propose_view(
     image, view, cached, depth, height = job
     seg = proposer.propose(image, view, depth, height).paint()
     if seg.max() > 255:
-        raise InputError(f"{view.image_path}: the proposer made {seg.max()} segments, more than 255; raise --min-area.")
+        raise OptionError(
+            f"the proposer made {seg.max()} segments, more than 255; raise {{min_area}}.", file=view.image_path
+        )
     seg = seg.astype(np.uint8)
     if cached is not None:
         write_checked(cached, encode_png(seg))
@@ -118,9 +120,10 @@ def read_geometry(scene: Scene, folder: Path) -> SceneGeometry:
     """Every view's depth map from ``folder/<stem>.npy`` (checked against the view's size), and
     the support plane of the scene's SfM points with the heights above it."""
     if not folder.is_dir():
-        raise InputError(
-            f"{folder}: depth folder not found; write it with `gsseg render RUN --what depth "
-            "--split all --out DIR` and pass DIR/depth."
+        raise OptionError(
+            "depth folder not found; write it with `gsseg render RUN --what depth "
+            "--split all --out DIR` and pass DIR/depth as {depth}.",
+            file=folder,
         )
     depths = [read_depth(folder / f"{view.stem}.npy", (view.camera.width, view.camera.height)) for view in scene.views]
     plane = support_plane(scene.points.xyz, np.array([view.center for view in scene.views]))
@@ -184,7 +187,7 @@ def depth_priors(scene: Scene, ids: list[np.ndarray], associate: str) -> list[np
 
 def _check_min_area(min_area: int | None) -> None:
     if min_area is not None and min_area < 1:
-        raise InputError(f"--min-area {min_area}: give a number of pixels of 1 or more (or leave it out).")
+        raise OptionError("{min_area}: give a number of pixels of 1 or more (or leave it out).", min_area=min_area)
 
 
 def build_scene(job: tuple[Path, BuildConfig]) -> BuildResult:
@@ -200,21 +203,23 @@ def build_masks(
     the views' proposals are made on ``engine``."""
     scene_dir = Path(scene_dir)
     if cfg.associate not in ASSOCIATIONS:
-        raise InputError(f"--associate {cfg.associate}: use auto, flow or tracks.")
-    plain_name(cfg.out_masks, "--out-masks")
+        raise OptionError("{associate}: use auto, flow or tracks.", associate=cfg.associate)
+    plain_name(cfg.out_masks, "out_masks")
     _check_min_area(cfg.min_area)
     if cfg.points_per_side < 1:
-        raise InputError(f"--points-per-side {cfg.points_per_side}: give 1 or more points per side of the grid.")
+        raise OptionError(
+            "{points_per_side}: give 1 or more points per side of the grid.", points_per_side=cfg.points_per_side
+        )
     if cfg.threads < 0:
-        raise InputError(f"--threads {cfg.threads}: give 0 (ONNX Runtime's choice) or a number of threads.")
+        raise OptionError("{threads}: give 0 (ONNX Runtime's choice) or a number of threads.", threads=cfg.threads)
     if cfg.consensus < 0:
-        raise InputError(f"--consensus {cfg.consensus}: use 0 (off) or a number of neighbouring views.")
+        raise OptionError("{consensus}: use 0 (off) or a number of neighbouring views.", consensus=cfg.consensus)
     if cfg.proposer == "existing" and not cfg.from_masks:
-        raise InputError("--proposer existing needs --from-masks NAME, the mask folder to re-associate.")
+        raise OptionError("{proposer} needs {from_masks}, the mask folder to re-associate.", proposer="existing")
     if cfg.depth is not None and cfg.proposer != "graph":
-        raise InputError(
-            f"--depth: only the graph proposer cuts its masks at depth jumps; leave --depth out with "
-            f"--proposer {cfg.proposer}."
+        raise OptionError(
+            "{depth}: only the graph proposer cuts its masks at depth jumps; leave {depth} out with {proposer}.",
+            proposer=cfg.proposer,
         )
     out_dir = scene_dir / cfg.out_masks
     reads = scene_inputs(scene_dir, [cfg.from_masks])
@@ -234,9 +239,9 @@ def build_masks(
     )
     proposer = make()  # an unknown or unavailable one fails before any work
     if out_dir.exists() and not cfg.force:
-        raise InputError(f"{out_dir}: already exists; pass --force to rebuild it.")
+        raise OutputExists(out_dir, option="force")
     if cfg.dataset and Path(cfg.dataset).exists() and not cfg.force:
-        raise InputError(f"{cfg.dataset}: already exists; choose another --dataset or pass --force.")
+        raise OutputExists(cfg.dataset, " or choose another {dataset}", option="force")
     if not scene_dir.is_dir():
         raise InputError(f"{scene_dir}: scene folder not found; check the path.")
     with exclusive_folder(scene_dir, "masks"):
@@ -254,7 +259,7 @@ def _build_locked(
 ) -> BuildResult:
     scene = load_scene(scene_dir, images=cfg.images, masks=cfg.from_masks if cfg.proposer == "existing" else None)
     if cfg.proposer == "existing" and scene.mask_dir is None:
-        raise InputError(f"{scene_dir / cfg.from_masks}: mask folder not found; check --from-masks.")
+        raise OptionError("mask folder not found; check {from_masks}.", file=scene_dir / cfg.from_masks)
     images = [v.load_image() for v in tqdm(scene.views, desc="loading images", disable=not progress)]
     geometry = read_geometry(scene, Path(cfg.depth)) if cfg.depth is not None else None
     segments = [s.astype(np.int32) for s in _segments(scene, proposer, make, cfg, images, geometry, engine, progress)]
@@ -325,13 +330,13 @@ def clean_scene_masks(
 ) -> Path:
     """Noise removal alone: ``scene_dir/masks`` -> ``scene_dir/out_masks``."""
     scene_dir = Path(scene_dir)
-    src, dst = scene_dir / masks, scene_dir / plain_name(out_masks, "--out-masks")
+    src, dst = scene_dir / masks, scene_dir / plain_name(out_masks, "out_masks")
     _check_min_area(min_area)
     if not src.is_dir():
-        raise InputError(f"{src}: mask folder not found; check --masks.")
+        raise OptionError("mask folder not found; check {masks}.", file=src)
     refuse_overlap(dst, scene_inputs(scene_dir, [masks]))
     if dst.exists() and not force:
-        raise InputError(f"{dst}: already exists; pass --force to replace it.")
+        raise OutputExists(dst, option="force")
     files = sorted(src.rglob("*.png"))
     with atomic_directory(dst, overwrite=force) as tmp:
         for f in tqdm(files, desc="cleaning", disable=not progress):

@@ -21,7 +21,7 @@ from scipy import ndimage
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from dataset_tools.infra.errors import InputError
+from dataset_tools.infra.errors import OptionError
 from dataset_tools.scene import View
 from hqmask.occlusions import DepthJumps, cut_at_edges, depth_jumps
 from hqmask.proposals import Proposals, Proposer
@@ -279,7 +279,9 @@ def make_proposer(
         from hqmask.sam_hq import EXPORT_HINT, AutomaticMaskGenerator, GeneratorConfig, SamHQ
 
         if not model_dir:
-            raise InputError(f"--proposer sam-hq needs --model DIR, a SAM-HQ ONNX model folder; {EXPORT_HINT}.")
+            raise OptionError(
+                f"{{proposer}} needs {{model}}, a SAM-HQ ONNX model folder; {EXPORT_HINT}.", proposer="sam-hq"
+            )
         model = SamHQ(model_dir, device=device, threads=threads, cache_dir=embedding_cache)
         return SamHQProposer(AutomaticMaskGenerator(model, GeneratorConfig(points_per_side=points_per_side)))
-    raise InputError(f"--proposer {name}: unknown proposer; use graph, sam-hq or existing.")
+    raise OptionError("{proposer}: unknown proposer; use graph, sam-hq or existing.", proposer=name)

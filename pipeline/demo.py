@@ -32,7 +32,7 @@ import torch
 
 from dataset_tools.image_files import IMAGE_SUFFIXES, image_size, write_downsampled
 from dataset_tools.infra.atomic import require_folder_path
-from dataset_tools.infra.errors import InputError
+from dataset_tools.infra.errors import InputError, OptionError
 from dataset_tools.infra.overlap import refuse_overlap, scene_entries
 from dataset_tools.scene import linked_scene
 from dataset_tools.sfm import run_sfm
@@ -95,9 +95,9 @@ def _demo_object(
         return pick_object(means, labels, point), point
     except InputError:
         if not (labels == default).any():
-            raise InputError(
-                f"{run.folder.labels}: no Gaussian carries an object label; train longer (--iters) "
-                "or check the masks in the scene's object_mask/."
+            raise OptionError(
+                f"{run.folder.labels}: no Gaussian carries an object label; train longer ({{iters}}) or check the "
+                f"masks in the scene's {MASKS}/."
             ) from None
         return default, np.median(means[labels == default], axis=0).astype(np.float64)
 
@@ -164,7 +164,7 @@ def run_demo(
         iters=iters, masks=MASKS, images=images or "images", backend=backend.name, max_gaussians=max_gaussians
     )
     if scene is not None and not Path(scene).exists():
-        raise InputError(f"{scene}: not found; pass a scene folder, a folder of photos or a video with --scene.")
+        raise OptionError("not found; pass a scene folder, a folder of photos or a video as {scene}.", file=scene)
     require_folder_path(out)
     if scene is not None:
         scene = Path(scene)
@@ -172,7 +172,9 @@ def run_demo(
             out, scene_entries(scene) if scene.is_dir() and (scene / "sparse").is_dir() else [("the photos", scene)]
         )
     if out.exists() and any(out.iterdir()) and not overwrite:
-        raise InputError(f"{out}: already exists and is not empty; pass --force or choose another --out.")
+        raise OptionError(
+            "already exists and is not empty; pass {overwrite} or choose another {out}.", file=out, overwrite=True
+        )
     for owned in ("scene", "run", "depth", "report"):  # --force: the demo's own outputs, nothing else
         if (out / owned).is_symlink() or (out / owned).is_file():
             (out / owned).unlink()

@@ -227,7 +227,7 @@ CASES = [
     ("hqmask", "export-onnx --checkpoint {w}/nowhere.pth --model-type vit_b --out {w}/exported", ""),
     # gsseg train
     ("gsseg", "train {w}/nowhere --out {w}/new", "scene folder not found"),
-    ("gsseg", "train {w}/scene --out {w}/new --iters 0", "--iters must be at least 1"),
+    ("gsseg", "train {w}/scene --out {w}/new --iters 0", "--iters 0: give 1 or more iterations"),
     ("gsseg", "train {w}/scene --out {w}/new --stop-after 0", "--stop-after 0"),
     ("gsseg", "train {w}/scene --out {w}/new --stop-after -5", "--stop-after -5"),
     ("gsseg", "train {w}/scene --out {w}/new --max-gaussians 0", "--max-gaussians"),
@@ -248,7 +248,7 @@ CASES = [
     # gsseg render
     ("gsseg", "render {w}/nowhere --out {w}/new", "has no config.json"),
     ("gsseg", "render {w}/unfinished --out {w}/new", "has no gaussians.ply"),
-    ("gsseg", "render {w}/run --out {w}/new --what normals", "unknown --what"),
+    ("gsseg", "render {w}/run --out {w}/new --what normals", "--what normals: unknown products normals"),
     ("gsseg", "render {w}/run --out {w}/report", "exists"),
     ("gsseg", "render {w}/run --out {w}/new --split half", "half"),
     ("gsseg", "render {w}/cut_config --out {w}/new", "damaged run file"),
@@ -298,7 +298,7 @@ CASES = [
     ("gsseg", "export {w}/nan_ply --out {w}/new.ply", "NaN or infinite"),
     ("gsseg", "export {w}/run --out {w}/new.ply --format obj", "obj"),
     # gsseg demo
-    ("gsseg", "demo --out {w}/new --iters 0", "--iters must be at least 1"),
+    ("gsseg", "demo --out {w}/new --iters 0", "--iters 0: give 1 or more iterations"),
     ("gsseg", "demo --out {w}/new --max-gaussians 0", "--max-gaussians"),
     ("gsseg", "demo --out {w}/new --scene {w}/nowhere", "not found; pass a scene folder"),
     ("gsseg", "demo --out {w}/a_file", "a file stands there"),
@@ -380,12 +380,12 @@ CASES += [
     ("gsseg", "render {w}/run --scene {w}/moved_camera --out {w}/new", "the camera of view"),
     ("gsseg", "train {w}/same_names --out {w}/unfinished --resume", "the image of view"),
     # resume keeps its options
-    ("gsseg", "train {w}/scene --out {w}/unfinished --resume --seed 3", "seed = 0, not 3"),
-    ("gsseg", "train {w}/scene --out {w}/unfinished --resume --gamma-obj 2", "gamma_obj"),
-    ("gsseg", "train {w}/scene --out {w}/unfinished --resume --masks none", "masks"),
-    ("gsseg", "train {w}/scene --out {w}/unfinished --resume --images images_9", "images"),
-    ("gsseg", "train {w}/scene --out {w}/unfinished --resume --knn-reg 1", "knn_reg"),
-    ("gsseg", "train {w}/scene --out {w}/unfinished --resume --max-gaussians 9", "max_gaussians"),
+    ("gsseg", "train {w}/scene --out {w}/unfinished --resume --seed 3", "trained with --seed 0, not 3"),
+    ("gsseg", "train {w}/scene --out {w}/unfinished --resume --gamma-obj 2", "--gamma-obj 1.0, not 2.0"),
+    ("gsseg", "train {w}/scene --out {w}/unfinished --resume --masks none", "--masks object_mask, not None"),
+    ("gsseg", "train {w}/scene --out {w}/unfinished --resume --images images_9", "--images images, not 'images_9'"),
+    ("gsseg", "train {w}/scene --out {w}/unfinished --resume --knn-reg 1", "--knn-reg 0.0"),
+    ("gsseg", "train {w}/scene --out {w}/unfinished --resume --max-gaussians 9", "--max-gaussians"),
     ("gsseg", "train {w}/scene --out {w}/unfinished --resume --iters 2", "only lengthen"),
     ("gsseg", "train {w}/scene --out {w}/cut_config --resume", "damaged run file"),
     # the rest of the census

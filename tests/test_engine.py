@@ -32,9 +32,9 @@ def ray_engine():
 
 
 def test_an_engine_is_checked_when_made():
-    with pytest.raises(InputError, match="--engine spark"):
+    with pytest.raises(InputError, match="engine='spark'"):
         Engine("spark")
-    with pytest.raises(InputError, match="with --engine ray"):
+    with pytest.raises(InputError, match="with engine='ray'"):
         Engine("local", address="10.0.0.1:6379")
 
 

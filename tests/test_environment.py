@@ -51,7 +51,7 @@ def test_mean_up_is_the_world_up_of_an_orbit_looking_down():
     poses = orbit(24, 4.0, np.zeros(3))  # every camera pitched 18-34 degrees down
     assert mean_up(poses) == pytest.approx([0.0, 0.0, 1.0], abs=1e-9)
     flipped = [np.diag([-1.0, -1.0, 1.0]) @ p for p in poses[:2]]  # rolled upside down
-    with pytest.raises(InputError, match="--no-environment-profile"):
+    with pytest.raises(InputError, match="environment_profile=False"):
         mean_up(poses[:2] + flipped)
 
 

@@ -125,7 +125,7 @@ def test_clean_writes_a_new_folder(scene_copy):
     [
         (BuildConfig(proposer="nope"), "unknown proposer"),
         (BuildConfig(proposer="sam-hq"), "sam-hq"),
-        (BuildConfig(proposer="existing"), "needs --from-masks"),
+        (BuildConfig(proposer="existing"), "needs from_masks"),
         (BuildConfig(proposer="existing", from_masks="missing", out_masks="x"), "mask folder not found"),
         (BuildConfig(associate="magic"), "use auto, flow or tracks"),
         (BuildConfig(out_masks="object_mask"), "already exists"),
@@ -153,7 +153,7 @@ def test_more_than_255_tracks_is_refused_with_the_fix():
     from hqmask.association.common import compact_ids
 
     segments = [np.arange(300, dtype=np.int32).reshape(15, 20) + 1]  # 300 one-pixel segments
-    with pytest.raises(InputError, match="found 300 objects, more than the 255.*raise --min-area"):
+    with pytest.raises(InputError, match="found 300 objects, more than the 255.*raise min_area"):
         compact_ids([np.arange(-1, 300)], segments)
     ids = compact_ids([np.arange(-1, 255)], [np.minimum(segments[0], 255)])[0]
     assert ids.max() == 255 and len(np.unique(ids)) == 255

@@ -273,7 +273,7 @@ def test_cli_sam_hq_without_model_exits_2(scene_copy):
     hqmask = str(Path(sys.executable).parent / "hqmask")
     args = [hqmask, "build", str(scene_copy), "--proposer", "sam-hq", "--out-masks", "sam"]
     r = subprocess.run(args, capture_output=True, text=True)
-    assert r.returncode == 2 and "needs --model DIR" in r.stderr and "Traceback" not in r.stderr
+    assert r.returncode == 2 and "--proposer sam-hq needs --model," in r.stderr and "Traceback" not in r.stderr
     assert not (scene_copy / "sam").exists()
 
 

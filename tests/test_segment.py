@@ -160,7 +160,7 @@ def test_recolor_keeps_shading_and_extract_keeps_only_the_object():
     rgb = recolored.sh_dc[0] * 0.28209479177387814 + 0.5
     assert rgb[1] > 0.9 and rgb[0] < 0.05 and rgb[2] < 0.05
     assert len(apply_edit(g, np.array([False, True]), "extract")) == 1
-    with pytest.raises(InputError, match="needs --color"):
+    with pytest.raises(InputError, match="needs color"):
         apply_edit(g, np.array([True, False]), "recolor")
 
 
@@ -237,7 +237,7 @@ def test_a_run_trained_on_colour_alone_segments_only_with_masks_named(small_scen
 
     run = tmp_path / "colour"
     train(small_scene.root, run, TrainConfig(iters=3, masks=None, backend="cpu"), progress=False)
-    with pytest.raises(InputError, match="trained on colour alone.*--masks"):
+    with pytest.raises(InputError, match="trained on colour alone.*name one with masks"):
         segment_run(run, small_scene.root, backend="cpu", progress=False)
     labels = segment_run(run, small_scene.root, masks="object_mask", backend="cpu", progress=False)
     assert labels.gamma_p == 0.0  # the classifier knows no mask IDs: the prior is left out

@@ -206,7 +206,7 @@ def test_views_in_memory_are_uint8_and_on_disk_are_read_ahead(small_scene):
         assert torch.equal(a.image, torch.from_numpy(views[order[step]].load_image().astype(np.float32) / 255.0))
     disk.close()
     assert disk.resident_bytes == 0
-    with pytest.raises(InputError, match="--cache-views swap"):
+    with pytest.raises(InputError, match="cache_views='swap'"):
         TrainViews(views, lambda step: 0, mode="swap", progress=False)
 
 

@@ -25,7 +25,7 @@ from dataset_tools.corruption.blobs import PERMUTE_ONLY, BlobModel, corrupt_mask
 from dataset_tools.corruption.ops import coarsen
 from dataset_tools.image_files import encode_png
 from dataset_tools.infra.atomic import atomic_directory, write_bytes_atomic
-from dataset_tools.infra.errors import InputError
+from dataset_tools.infra.errors import InputError, OptionError, OutputExists
 from dataset_tools.infra.names import plain_name
 from dataset_tools.infra.overlap import refuse_overlap, scene_inputs
 from dataset_tools.label_maps import matched_error
@@ -40,11 +40,11 @@ __all__ = ["FAMILIES", "PERMUTE_ONLY", "SEVERITY_NAMES", "BlobModel", "coarsen",
 
 def _check(family: str, severity: str, coarse: bool) -> None:
     if family not in FAMILIES:
-        raise InputError(f"--model {family}: use {' or '.join(FAMILIES)}.")
+        raise OptionError(f"{{model}}: use {' or '.join(FAMILIES)}.", model=family)
     if severity not in SEVERITY_NAMES:
-        raise InputError(f"--severity {severity}: use low, medium or high.")
+        raise OptionError("{severity}: use low, medium or high.", severity=severity)
     if coarse and family != "blobs":
-        raise InputError("--coarse belongs to --model blobs; leave it out or use --model blobs.")
+        raise OptionError("{coarse} belongs to {model}; leave it out or use that model.", coarse=True, model="blobs")
 
 
 def corrupt_scene(
@@ -69,7 +69,7 @@ def corrupt_scene(
     """
     scene_dir = Path(scene_dir)
     _check(model, severity, coarse)
-    refuse_overlap(scene_dir / plain_name(out_masks, "--out-masks"), scene_inputs(scene_dir, [masks]))
+    refuse_overlap(scene_dir / plain_name(out_masks, "out_masks"), scene_inputs(scene_dir, [masks]))
     scene = load_scene(scene_dir, masks=masks)
     if scene.mask_dir is None:
         raise InputError(
@@ -77,7 +77,7 @@ def corrupt_scene(
         )
     target = scene_dir / out_masks
     if target.exists() and not overwrite:
-        raise InputError(f"{target}: already exists; choose another --out-masks or pass --force.")
+        raise OutputExists(target, " or choose another {out_masks}")
     views = [(v, m) for v in scene.views if (m := v.load_mask()) is not None]
     if model == "blobs":
         params = BlobModel(**{**asdict(blobs.SEVERITIES[severity]), "coarse": coarse})

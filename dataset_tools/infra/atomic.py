@@ -24,7 +24,7 @@ STALE_AFTER_S = 60  # a temporary sibling younger than this may be one another w
 def require_folder_path(path: Path) -> None:
     """Refuse an output folder path where a file stands (before any work is done)."""
     if path.exists() and not path.is_dir():
-        raise InputError(f"{path}: a file stands there; choose another --out.")
+        raise InputError(f"{path}: a file stands there; write the output elsewhere.")
 
 
 def _default_mode(kind: int) -> int:

@@ -1,5 +1,6 @@
 """What every command-line front end shares: user errors and I/O failures become one line
-and exit code 2, interruptions exit 130 saying how to continue, and ``--version``."""
+and exit code 2, naming options by their flags; interruptions exit 130 saying how to
+continue; and ``--version``."""
 
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ from importlib.metadata import PackageNotFoundError, version
 import click
 from tqdm import tqdm
 
-from dataset_tools.infra.errors import InputError, RunFailed
+from dataset_tools.infra.errors import NO_VALUE, InputError, RunFailed, Spelling
 from dataset_tools.infra.interrupts import Interrupted
 from dataset_tools.infra.threads import configure_threads
 
@@ -29,6 +30,53 @@ OS_FIXES = {
     errno.ENOENT: "check the path",
     errno.ENAMETOOLONG: "choose a shorter path",
 }
+
+
+# Library keywords that the command lines take under another name.
+KEYWORD_OPTIONS = {"overwrite": "force", "clicks": "click_"}
+
+
+class WordedError(click.ClickException):
+    """A library's :class:`InputError`, worded with the flags of the command that ended."""
+
+    exit_code = 2
+
+
+def flag_spelling(command: click.Command) -> Spelling:
+    """How ``command`` names an option of the library: by its flag (``--max-gaussians 0``,
+    ``--force``); an option the command does not declare as ``--name-with-dashes``."""
+    options = {p.name: p for p in command.params if isinstance(p, click.Option)}
+
+    def spell(name: str, value: object) -> str:
+        option = options.get(KEYWORD_OPTIONS.get(name, name))
+        flag = option.opts[0] if option is not None else "--" + name.replace("_", "-")
+        if value is False and option is not None and option.secondary_opts:
+            return option.secondary_opts[0]
+        if value is NO_VALUE or isinstance(value, bool):
+            return flag
+        if value is None:  # the command lines' word for an option turned off
+            return f"{flag} none"
+        return f"{flag} {' '.join(map(str, value)) if isinstance(value, (tuple, list)) else value}"
+
+    return spell
+
+
+def word_errors_by_flags(command: click.Command) -> None:
+    """Have every command under ``command`` word the library's errors with its own flags."""
+    if isinstance(command, click.Group):
+        for sub in command.commands.values():
+            word_errors_by_flags(sub)
+        return
+    callback, spelling = command.callback, flag_spelling(command)
+
+    @functools.wraps(callback)
+    def worded(*args, **kwargs):
+        try:
+            return callback(*args, **kwargs)
+        except InputError as e:
+            raise WordedError(e.worded(spelling)) from e
+
+    command.callback = worded
 
 
 def package_version() -> str:
@@ -110,11 +158,13 @@ def engine_options(command: Callable) -> Callable:
 
 
 def run_cli(group: click.Group, prog_name: str) -> Callable[[], None]:
-    """An entry point that runs ``group`` and turns an ``InputError`` or an ``OSError`` into
-    ``error: ...`` on stderr and exit code 2, without a traceback; interrupted work exits 130
+    """An entry point that runs ``group`` and turns an ``InputError`` (worded with the flags of
+    the command, :func:`word_errors_by_flags`) or an ``OSError`` into ``error: ...`` on stderr
+    and exit code 2, without a traceback; interrupted work exits 130
     with its own message (a checkpoint written, how to continue). Threads are configured
     first (:func:`dataset_tools.infra.threads.configure_threads`)."""
     group = click.version_option(package_version(), "--version", prog_name=prog_name)(group)
+    word_errors_by_flags(group)
 
     def main() -> None:
         configure_threads()

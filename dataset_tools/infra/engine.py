@@ -18,7 +18,7 @@ from typing import Any
 
 from tqdm import tqdm
 
-from dataset_tools.infra.errors import InputError
+from dataset_tools.infra.errors import OptionError
 
 ENGINES = ("local", "ray")
 
@@ -41,9 +41,9 @@ class Engine:
 
     def __post_init__(self) -> None:
         if self.name not in ENGINES:
-            raise InputError(f"--engine {self.name}: choose local or ray.")
+            raise OptionError("{engine}: choose local or ray.", engine=self.name)
         if self.address is not None and self.name != "ray":
-            raise InputError("--address names a Ray cluster; pass it with --engine ray.")
+            raise OptionError("{address} names a Ray cluster; pass it with {engine}.", engine="ray")
 
     def map(
         self, fn: Callable[[Any], Any], items: Sequence[Any], *, desc: str = "tasks", progress: bool = True
@@ -138,14 +138,15 @@ def _require_reachable(address: str, timeout: float = CONNECT_TIMEOUT_S) -> None
     connection within ``timeout`` seconds: Ray itself retries for minutes."""
     host, _, port = address.removeprefix("ray://").rpartition(":")
     if not host or not port.isdigit():
-        raise InputError(f"--address {address}: give the cluster's HOST:PORT, such as 10.0.0.1:6379.")
+        raise OptionError("{address}: give the cluster's HOST:PORT, such as 10.0.0.1:6379.", address=address)
     try:
         socket.create_connection((host.strip("[]"), int(port)), timeout=timeout).close()
     except (OSError, ValueError) as e:
         why = e.strerror if isinstance(e, OSError) and e.strerror else str(e) or type(e).__name__
-        raise InputError(
-            f"--address {address}: no Ray cluster answers there ({why}); start one with "
-            "`ray start --head` or leave --address out for a local one."
+        raise OptionError(
+            f"{{address}}: no Ray cluster answers there ({why}); start one with `ray start --head` or leave "
+            "{address} out for a local one.",
+            address=address,
         ) from None
 
 
@@ -153,15 +154,16 @@ def _init_ray(address: str | None):
     try:
         import ray
     except ImportError:
-        raise InputError("--engine ray needs Ray; install it with `pip install -e .[ray]`.") from None
+        raise OptionError("{engine} needs Ray; install it with `pip install -e .[ray]`.", engine="ray") from None
     if address is not None and address != "auto":
         _require_reachable(address)
     if not ray.is_initialized():
         try:
             ray.init(address=address, include_dashboard=False, log_to_driver=False, configure_logging=False)
         except ConnectionError as e:
-            raise InputError(
-                f"--address {address}: no Ray cluster answers there ({e}); start one with "
-                "`ray start --head` or leave --address out for a local one."
+            raise OptionError(
+                f"{{address}}: no Ray cluster answers there ({e}); start one with `ray start --head` or leave "
+                "{address} out for a local one.",
+                address=address,
             ) from None
     return ray

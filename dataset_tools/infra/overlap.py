@@ -45,8 +45,8 @@ def refuse_overlap(out: Path | str, protected: Iterable[Protected]) -> None:
             where = "would replace" if relation == "is" else relation
             shown = "" if relation == "is" else f" ({path})"
             raise InputError(
-                f"{out}: the output {where} {what}{shown}, which this command reads; --force never "
-                "replaces an input, so write the output elsewhere."
+                f"{out}: the output {where} {what}{shown}, which this command reads; an input is never "
+                "replaced, so write the output elsewhere."
             )
 
 

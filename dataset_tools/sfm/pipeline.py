@@ -40,7 +40,7 @@ from tqdm import tqdm
 from dataset_tools.cameras import turned_frames
 from dataset_tools.image_files import IMAGE_SUFFIXES, write_downsampled
 from dataset_tools.infra.atomic import require_folder_path, write_bytes_atomic
-from dataset_tools.infra.errors import InputError
+from dataset_tools.infra.errors import InputError, OptionError, OutputExists
 from dataset_tools.infra.locks import exclusive
 from dataset_tools.infra.overlap import refuse_overlap
 from dataset_tools.sfm import retrieval
@@ -77,21 +77,23 @@ class SfmConfig:
 
     def check(self) -> None:
         if self.frames < 3:
-            raise InputError(f"--frames {self.frames}: keep at least 3 frames.")
+            raise OptionError("{frames}: keep at least 3 frames.", frames=self.frames)
         if self.matcher not in ("auto", "exhaustive", "sequential", "retrieval"):
-            raise InputError(f"--matcher {self.matcher}: use auto, exhaustive, sequential or retrieval.")
+            raise OptionError("{matcher}: use auto, exhaustive, sequential or retrieval.", matcher=self.matcher)
         if self.neighbours < 1:
-            raise InputError(f"--neighbours {self.neighbours}: match each photo with at least 1 other.")
+            raise OptionError("{neighbours}: match each photo with at least 1 other.", neighbours=self.neighbours)
         if self.mapper not in ("incremental", "global"):
-            raise InputError(f"--mapper {self.mapper}: use incremental or global.")
+            raise OptionError("{mapper}: use incremental or global.", mapper=self.mapper)
         if self.camera_model not in CAMERA_MODELS:
-            raise InputError(f"--camera-model {self.camera_model}: use one of {', '.join(CAMERA_MODELS)}.")
+            raise OptionError(
+                f"{{camera_model}}: use one of {', '.join(CAMERA_MODELS)}.", camera_model=self.camera_model
+            )
         if self.max_image_size < 64:
-            raise InputError(f"--max-image-size {self.max_image_size}: give 64 pixels or more.")
+            raise OptionError("{max_image_size}: give 64 pixels or more.", max_image_size=self.max_image_size)
         if self.peak_threshold is not None and not 0 < self.peak_threshold < 1:
-            raise InputError(
-                f"--peak-threshold {self.peak_threshold}: give a value between 0 and 1 (COLMAP's "
-                f"default is {SIFT_PEAK_THRESHOLD:.4f})."
+            raise OptionError(
+                f"{{peak_threshold}}: give a value between 0 and 1 (COLMAP's default is {SIFT_PEAK_THRESHOLD:.4f}).",
+                peak_threshold=self.peak_threshold,
             )
 
 
@@ -173,9 +175,10 @@ def _check_free_space(photos: Path, out: Path, n_images: int) -> None:
     existing = next(p for p in (out, *out.parents) if p.exists())
     free = shutil.disk_usage(existing).free
     if free < need:
-        raise InputError(
-            f"{existing}: {free / 1e9:.2f} GB free, structure from motion needs about "
-            f"{need / 1e9:.2f} GB; free some disk space or write --out elsewhere."
+        raise OptionError(
+            f"{free / 1e9:.2f} GB free, structure from motion needs about {need / 1e9:.2f} GB; free some "
+            "disk space or write {out} elsewhere.",
+            file=existing,
         )
 
 
@@ -290,7 +293,11 @@ def run_sfm(
     require_folder_path(out)
     refuse_overlap(out, [("the photos", photos)])
     if (out / "scene.json").exists() and not overwrite:
-        raise InputError(f"{out}: already holds a scene; pass --force to make it again or choose another --out.")
+        raise OptionError(
+            "already holds a scene; pass {overwrite} to make it again or choose another {out}.",
+            file=out,
+            overwrite=True,
+        )
     work = out / ".sfm"
     new_out, new_work = not out.exists(), not work.exists()
     try:
@@ -531,7 +538,7 @@ def _write_scene(work: Path, out: Path, provenance: dict, overwrite: bool) -> No
             target = out / name
             if target.exists():
                 if not overwrite:
-                    raise InputError(f"{target}: already exists; pass --force to replace it.")
+                    raise OutputExists(target)
                 shutil.rmtree(target)
             (built / name).rename(target)
     write_bytes_atomic(out / "scene.json", json.dumps({"provenance": provenance}, indent=2).encode())

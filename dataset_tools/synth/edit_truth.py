@@ -24,7 +24,7 @@ from tqdm import tqdm
 
 from dataset_tools.image_files import read_image, read_mask, write_png
 from dataset_tools.infra.atomic import atomic_directory
-from dataset_tools.infra.errors import InputError
+from dataset_tools.infra.errors import InputError, OptionError, OutputExists
 from dataset_tools.scene import View, load_scene
 from dataset_tools.synth.generator import Layout, SynthConfig, make_layout, observe, render_view
 
@@ -132,7 +132,7 @@ def write_edit_truth(
     supersample = cfg.supersample * factor
     out = scene_dir / EDIT_TRUTH
     if out.exists() and not overwrite:
-        raise InputError(f"{out}: already exists; pass --force to write it again.")
+        raise OutputExists(out)
     seers = [(v, render_view(layout, v.camera, v.cam_from_world, 1)[2]) for v in scene.split("train")]
     with atomic_directory(out, overwrite=overwrite) as tmp:
         for obj in tqdm(layout.objects, desc="edit truth", unit="object", disable=not progress):
@@ -153,8 +153,10 @@ def read_edit_truth(scene_dir: Path | str, object_id: int, stem: str) -> EditTru
     if not (base / "without" / f"{stem}.png").is_file():
         return None
     if not (base / "silhouette_seen" / f"{stem}.png").is_file():
-        raise InputError(
-            f"{base.parent}: written by an older version (no silhouette_seen/); write it again with --force."
+        raise OptionError(
+            "written by an older version (no silhouette_seen/); write it again with {overwrite}.",
+            file=base.parent,
+            overwrite=True,
         )
     return EditTruth(
         read_image(base / "without" / f"{stem}.png"),

@@ -15,7 +15,7 @@ from dataset_tools import colmap
 from dataset_tools.cameras import PinholeCamera
 from dataset_tools.image_files import encode_png
 from dataset_tools.infra.atomic import atomic_directory, write_bytes_atomic
-from dataset_tools.infra.errors import InputError
+from dataset_tools.infra.errors import OptionError, OutputExists
 from dataset_tools.mask_manifest import MANIFEST, manifest_bytes
 from dataset_tools.scene import llff_test_names
 from dataset_tools.synth import camera_paths
@@ -44,17 +44,18 @@ class SynthConfig:
 
     def validate(self) -> None:
         if not 1 <= self.objects <= MAX_OBJECTS:
-            raise InputError(
-                f"--objects {self.objects}: a scene holds 1..{MAX_OBJECTS} objects (8-bit masks); choose fewer."
+            raise OptionError(
+                f"{{objects}}: a scene holds 1..{MAX_OBJECTS} objects (8-bit masks); choose fewer.",
+                objects=self.objects,
             )
         if self.views < 2:
-            raise InputError(f"--views {self.views}: at least 2 views are needed for SfM tracks.")
+            raise OptionError("{views}: at least 2 views are needed for SfM tracks.", views=self.views)
         if not 16 <= self.res <= 4096:
-            raise InputError(f"--res {self.res}: the resolution must lie in 16..4096 pixels.")
+            raise OptionError("{res}: the resolution must lie in 16..4096 pixels.", res=self.res)
         if self.path not in ("orbit", "forward"):
-            raise InputError(f"--path {self.path}: use orbit or forward.")
+            raise OptionError("{path}: use orbit or forward.", path=self.path)
         if self.ground not in ("checker", "speckle"):
-            raise InputError(f"--ground {self.ground}: use checker or speckle.")
+            raise OptionError("{ground}: use checker or speckle.", ground=self.ground)
 
 
 @dataclass(frozen=True)
@@ -118,7 +119,9 @@ def make_layout(cfg: SynthConfig, rng: np.random.Generator) -> Layout:
             if all(np.hypot(x - px, y - py) > footprint + pr + 0.06 * scale for px, py, pr in placed):
                 break
         else:
-            raise InputError(f"--objects {cfg.objects}: cannot place that many objects without overlap; choose fewer.")
+            raise OptionError(
+                "{objects}: cannot place that many objects without overlap; choose fewer.", objects=cfg.objects
+            )
         placed.append((x, y, footprint))
         if kind == "sphere":
             shape: Primitive = Sphere((x, y, size), size)
@@ -281,7 +284,7 @@ def generate_scene(cfg: SynthConfig, out: Path | str, *, overwrite: bool = False
     cfg.validate()
     out = Path(out)
     if out.exists() and not overwrite:
-        raise InputError(f"{out}: already exists; choose another --out or delete it.")
+        raise OutputExists(out)
     rng = np.random.default_rng(cfg.seed)
     layout = make_layout(cfg, rng)
     f = 0.5 * cfg.res / np.tan(np.deg2rad(cfg.fov_deg) / 2)

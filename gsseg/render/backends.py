@@ -20,7 +20,7 @@ import numpy as np
 import torch
 
 from dataset_tools.cameras import PinholeCamera
-from dataset_tools.infra.errors import InputError
+from dataset_tools.infra.errors import InputError, OptionError
 from gsseg.render import cpu_kernels
 from gsseg.render.blend_rules import ALPHA_MAX
 from gsseg.render.cpu_blend import as_float32_array, bin_tiles, blend_cpu
@@ -235,5 +235,5 @@ def get_backend(backend: str | Backend = "auto") -> Backend:
     if backend not in BACKENDS:
         raise InputError(f"unknown backend {backend!r}; choose one of auto, {', '.join(BACKENDS)}.")
     if not BACKENDS[backend].available():
-        raise InputError(f"the {backend} backend needs a CUDA GPU and `pip install gsplat`; use --backend cpu.")
+        raise OptionError("{backend} needs a CUDA GPU and `pip install gsplat`; use the cpu backend.", backend=backend)
     return BACKENDS[backend]

@@ -6,7 +6,7 @@ import math
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from dataset_tools.infra.errors import InputError
+from dataset_tools.infra.errors import OptionError
 from gsseg.render import Backend
 from gsseg.render.contributions import Contributions, contribution_matrix
 from gsseg.run import Run, load_run
@@ -29,15 +29,15 @@ class LabelOptions:
 
     def __post_init__(self) -> None:
         if self.method not in METHODS:
-            raise InputError(f"--method {self.method}: choose one of {', '.join(METHODS)}.")
+            raise OptionError(f"{{method}}: choose one of {', '.join(METHODS)}.", method=self.method)
         if self.mode not in MODES:
-            raise InputError(f"--mode {self.mode}: choose multi or binary.")
+            raise OptionError("{mode}: choose multi or binary.", mode=self.mode)
         if not (math.isfinite(self.gamma_p) and math.isfinite(self.slack)):
-            raise InputError(f"--gamma-p {self.gamma_p} / --slack {self.slack}: give finite numbers.")
+            raise OptionError("{gamma_p} / {slack}: give finite numbers.", gamma_p=self.gamma_p, slack=self.slack)
         if self.smooth < 0:
-            raise InputError(f"--smooth {self.smooth}: give 0 (off) or a number of neighbours.")
+            raise OptionError("{smooth}: give 0 (off) or a number of neighbours.", smooth=self.smooth)
         if (self.smooth or self.fill) and self.mode != "multi":
-            raise InputError("--smooth and --fill-interiors relabel Gaussians one label each; use --mode multi.")
+            raise OptionError("{smooth} and {fill} relabel Gaussians one label each; use {mode}.", mode="multi")
 
 
 def mask_contributions(
@@ -109,9 +109,10 @@ def segment_run(
     masks = run.voting_masks(masks)
     contributions = mask_contributions(run, scene_dir, masks=masks, split=split, backend=backend, progress=progress)
     if not len(contributions.labels) and options.method != "classifier":
-        raise InputError(
-            f"{Path(scene_dir or run.record.scene) / masks} holds no masks for the {split} views; "
-            "build them with `hqmask build` or use --method classifier."
+        raise OptionError(
+            f"holds no masks for the {split} views; build them with `hqmask build` or use {{method}}.",
+            file=Path(scene_dir or run.record.scene) / masks,
+            method="classifier",
         )
     result = label_gaussians(run, contributions, options)
     with run.folder.lock():

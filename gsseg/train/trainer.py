@@ -25,7 +25,7 @@ from tqdm import tqdm
 from dataset_tools.cameras import PinholeCamera
 from dataset_tools.fingerprint import scene_fingerprint
 from dataset_tools.infra.atomic import require_folder_path
-from dataset_tools.infra.errors import InputError, RunFailed
+from dataset_tools.infra.errors import InputError, OptionError, RunFailed
 from dataset_tools.infra.interrupts import Interrupted, stop_requests
 from dataset_tools.infra.overlap import refuse_overlap, scene_entries
 from dataset_tools.scene import Scene, View, load_scene
@@ -53,7 +53,7 @@ class TrainingDiverged(RunFailed):
         kept = f"the last good checkpoint is {checkpoint}" if checkpoint else "no checkpoint was written yet"
         super().__init__(
             f"training diverged at step {step} (loss {loss}); {kept}; lower the learning rates and "
-            "--resume, or start again."
+            "resume, or start again."
         )
 
 
@@ -155,9 +155,11 @@ def _resumed_config(saved: TrainConfig, cfg: TrainConfig, asked: set[str], folde
     grow (the schedule then stretches to it)."""
     for name in sorted(asked - {"iters"}):
         if getattr(cfg, name) != getattr(saved, name):
-            raise InputError(
-                f"{folder.config}: the run was trained with {name} = {getattr(saved, name)!r}, not "
-                f"{getattr(cfg, name)!r}; leave the option out to resume, or start a new run elsewhere."
+            raise OptionError(
+                f"the run was trained with {{{name}}}, not {getattr(cfg, name)!r}; leave the option out to "
+                "resume, or start a new run elsewhere.",
+                file=folder.config,
+                **{name: getattr(saved, name)},
             )
     if "iters" not in asked or cfg.iters is None or cfg.iters == saved.timing.iters:
         return saved
@@ -179,10 +181,12 @@ def _settled_config(
     has_checkpoint = bool(folder.checkpoint_files())
     if resume:
         if not started:
-            raise InputError(f"{folder.root} holds no run to resume; start it without --resume.")
+            raise OptionError("holds no run to resume; start it without {resume}.", file=folder.root, resume=True)
         return _resumed_config(_saved_config(folder), cfg, _asked_options(cfg, given), folder), has_checkpoint
     if started and (has_checkpoint or folder.finished):
-        raise InputError(f"{folder.root} already holds a run; continue it with --resume or choose another --out.")
+        raise OptionError(
+            "already holds a run; continue it with {resume} or choose another folder.", file=folder.root, resume=True
+        )
     return cfg, False
 
 
@@ -200,10 +204,10 @@ def _latest_good_checkpoint(folder: RunFolder, device: str) -> dict:
                 )
                 continue
             raise InputError(
-                f"{path}: damaged checkpoint and none older to fall back on; start the run again in a new --out."
+                f"{path}: damaged checkpoint and none older to fall back on; start the run again in a new folder."
             ) from None
         return ckpt
-    raise InputError(f"{folder.root} holds no checkpoint to resume; start it without --resume.")
+    raise OptionError("holds no checkpoint to resume; start it without {resume}.", file=folder.root, resume=True)
 
 
 def _new_state(scene: Scene, cfg: TrainConfig, train_views: list[View], extent: float, device: str) -> _State:
@@ -336,7 +340,7 @@ def train(
     """
     folder = RunFolder(run)
     if stop_after is not None and stop_after < 1:
-        raise InputError(f"--stop-after {stop_after}: give a step of 1 or more.")
+        raise OptionError("{stop_after}: give a step of 1 or more.", stop_after=stop_after)
     require_folder_path(folder.root)
     refuse_overlap(folder.root, scene_entries(scene_dir))
     created = not folder.root.exists()
@@ -363,16 +367,19 @@ def _train_locked(
     backend = get_backend(cfg.backend)
     scene = load_scene(scene_dir, images=cfg.images, masks=cfg.masks)
     if cfg.masks is not None and scene.mask_dir is None:
-        raise InputError(
-            f"{scene_dir / cfg.masks}: mask folder not found; build masks with `hqmask build` "
-            "or train on colour alone with --masks none."
+        raise OptionError(
+            "mask folder not found; build masks with `hqmask build` or train on colour alone with {masks}.",
+            file=scene_dir / cfg.masks,
+            masks=None,
         )
     if restore and not other_scene:
         difference = scene_difference(folder.read_config(), scene)
         if difference is not None:
-            raise InputError(
-                f"{scene_dir}: not the scene {folder.root} was trained on ({difference}); pass that "
-                "scene, or --allow-other-scene to continue on this one."
+            raise OptionError(
+                f"not the scene {folder.root} was trained on ({difference}); pass that scene, or "
+                "{other_scene} to continue on this one.",
+                file=scene_dir,
+                other_scene=True,
             )
     train_views = scene.split("train")
     if not train_views:

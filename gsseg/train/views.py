@@ -14,7 +14,7 @@ import torch
 from tqdm import tqdm
 
 from dataset_tools.cameras import PinholeCamera
-from dataset_tools.infra.errors import InputError
+from dataset_tools.infra.errors import OptionError
 from dataset_tools.scene import View
 
 CACHE_MODES = ("auto", "memory", "disk")
@@ -70,7 +70,7 @@ def resolve_cache_mode(mode: str, views: list[View]) -> str:
     """``memory`` or ``disk``: ``auto`` keeps the views in memory while they fit in
     :data:`MEMORY_SHARE` of the machine's RAM."""
     if mode not in CACHE_MODES:
-        raise InputError(f"--cache-views {mode}: choose one of {', '.join(CACHE_MODES)}.")
+        raise OptionError(f"{{cache_views}}: choose one of {', '.join(CACHE_MODES)}.", cache_views=mode)
     if mode != "auto":
         return mode
     ram = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")

@@ -20,7 +20,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from dataset_tools.image_files import label_palette
-from dataset_tools.infra.errors import InputError
+from dataset_tools.infra.errors import InputError, OptionError
 from dataset_tools.infra.interrupts import stop_requests
 from gsseg.run import load_run
 from gsseg.segment.reassign import METHODS
@@ -38,9 +38,9 @@ def resolve_host(host: str, timeout: float = RESOLVE_TIMEOUT_S) -> str:
     lookup.join(timeout)
     if not found or isinstance(found[0], OSError):
         why = f"{found[0].strerror or found[0]}" if found else f"no answer in {timeout:.0f} s"
-        raise InputError(
-            f"cannot serve on {host} ({why}); pass an address of this machine with --host, "
-            "such as 127.0.0.1 or 0.0.0.0."
+        raise OptionError(
+            f"cannot serve on {host} ({why}); pass an address of this machine as {{host}}, such as 127.0.0.1 or "
+            "0.0.0.0."
         )
     return found[0]
 
@@ -60,9 +60,9 @@ def require_free_port(host: str, port: int) -> None:
         try:
             s.bind((address, port))
         except OSError as e:
-            raise InputError(
-                f"cannot serve on {host}:{port} ({e.strerror}); pass another --port or --host, or stop "
-                "the program that uses it."
+            raise OptionError(
+                f"cannot serve on {host}:{port} ({e.strerror}); pass another {{port}} or {{host}}, or stop the "
+                "program that uses it."
             ) from None
 
 

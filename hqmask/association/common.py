@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from dataset_tools.infra.errors import InputError
+from dataset_tools.infra.errors import OptionError
 
 
 class UnionFind:
@@ -71,9 +71,9 @@ def compact_ids(global_of: list[np.ndarray], segments: list[np.ndarray]) -> list
                 area[int(track)] = area.get(int(track), 0) + int(counts[local])
     order = sorted((t for t in area if area[t] > 0), key=lambda t: (-area[t], t))
     if len(order) > 255:
-        raise InputError(
+        raise OptionError(
             f"association found {len(order)} objects, more than the 255 an 8-bit mask can hold; "
-            "raise --min-area or use a proposer that makes fewer, larger segments."
+            "raise {min_area} or use a proposer that makes fewer, larger segments."
         )
     final = {t: k + 1 for k, t in enumerate(order)}
     out = []

@@ -20,7 +20,7 @@ import torch
 from torch import nn
 
 from dataset_tools.infra.atomic import atomic_directory
-from dataset_tools.infra.errors import InputError
+from dataset_tools.infra.errors import InputError, OptionError, OutputExists
 from dataset_tools.infra.overlap import refuse_overlap
 from hqmask.sam_hq.model import DECODER, DECODER_OUTPUTS, ENCODER, ENCODER_OUTPUTS, MODEL_JSON, ModelInfo
 
@@ -108,7 +108,7 @@ def export_modules(
     """
     out_dir = Path(out_dir)
     if out_dir.exists() and not overwrite:
-        raise InputError(f"{out_dir}: already exists; pass --force to replace it.")
+        raise OutputExists(out_dir)
     encoder, decoder = encoder.eval(), decoder.eval()
     image = torch.zeros(1, 3, info.image_size, info.image_size)
     with torch.no_grad():
@@ -147,7 +147,7 @@ def export_checkpoint(
     alone instead of adding it to SAM's.
     """
     if model_type not in MODEL_TYPES:
-        raise InputError(f"--model-type {model_type}: use one of {', '.join(MODEL_TYPES)}.")
+        raise OptionError(f"{{model_type}}: use one of {', '.join(MODEL_TYPES)}.", model_type=model_type)
     if checkpoint is not None and not Path(checkpoint).is_file():
         raise InputError(f"{checkpoint}: checkpoint not found; download it from https://github.com/SysCV/sam-hq.")
     if checkpoint is not None:
