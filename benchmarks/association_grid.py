@@ -43,7 +43,7 @@ import numpy as np
 from benchmarks import record
 from dataset_tools.infra.atomic import write_bytes_atomic
 from dataset_tools.infra.errors import InputError
-from dataset_tools.scene import load_scene
+from dataset_tools.scene import GT_MASKS, load_scene
 from eval.metrics import segment_ceiling
 from eval.report import markdown_table
 from hqmask.build import BuildConfig, build_masks, clean_scene_masks
@@ -103,8 +103,8 @@ def measure_scene(cache: str, views: int, res: int, path: str, seed: int) -> dic
         corrupt_masks(scene, f"{family}_{severity}", severity=severity, model=family, seed=seed)
     if path == "shuffled":
         scene = shuffled_copy(scene, Path(cache) / f"shuffled-v{views}-r{res}-s{seed}", seed=seed)
-    truth = _masks(scene, "object_mask")
-    out = {"exact": _built(scene, "object_mask"), "cells": {}}
+    truth = _masks(scene, GT_MASKS)
+    out = {"exact": _built(scene, GT_MASKS), "cells": {}}
     for family, severity in itertools.product(FAMILIES, SEVERITIES):
         noisy = f"{family}_{severity}"
         cell = {"input": mask_scores(scene, noisy)["consistency"]}

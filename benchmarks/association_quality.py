@@ -25,7 +25,7 @@ import numpy as np
 from benchmarks import record
 from dataset_tools.corruption import PERMUTE_ONLY, corrupt_mask
 from dataset_tools.image_files import write_png
-from dataset_tools.scene import load_scene
+from dataset_tools.scene import GT_MASKS, load_scene
 from eval.metrics import segment_ceiling
 from eval.report import markdown_table
 from hqmask.build import clean_scene_masks
@@ -39,7 +39,7 @@ def _masks(scene: Path, name: str) -> list[np.ndarray]:
 def run_path(root: Path, path: str, args: argparse.Namespace) -> dict:
     scene = synthetic_scene(root / path, SceneSpec(path=path, seed=args.seed, res=args.res, views=args.views))
     corrupt_masks(scene, "noisy", severity=args.severity, seed=args.seed)
-    truth = _masks(scene, "object_mask")
+    truth = _masks(scene, GT_MASKS)
     for k, (view, mask) in enumerate(zip(load_scene(scene).views, truth)):
         write_png(scene / "permuted" / f"{view.stem}.png", corrupt_mask(mask, PERMUTE_ONLY, np.random.default_rng(k)))
     row = {"input": mask_scores(scene, "noisy")["consistency"]}

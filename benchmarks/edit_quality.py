@@ -29,6 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks import record
+from dataset_tools.scene import GT_MASKS
 from dataset_tools.synth.edit_truth import write_edit_truth
 from eval.edit_scores import edit_rows, summarize_edits
 from eval.evaluate import evaluate
@@ -51,7 +52,7 @@ SETTINGS = {
 
 def masks_for(scene: Path, kind: str, seed: int) -> str:
     if kind == "exact":
-        return "object_mask"
+        return GT_MASKS
     corrupt_masks(scene, f"noisy_{kind}", severity=kind, seed=seed)
     return associate_masks(scene, f"noisy_{kind}", f"assoc_{kind}", associate="tracks")
 
@@ -60,7 +61,7 @@ def score_run(run_dir: Path, scene: Path, masks: str) -> dict:
     """Every setting's edit scores (and visible mIoU) on one trained run."""
     run = load_run(run_dir)
     contributions = mask_contributions(run, scene, masks=masks, backend="cpu", progress=False)
-    views = run.scene(scene, masks="object_mask").split("test")
+    views = run.scene(scene, masks=GT_MASKS).split("test")
     out = {}
     for name, options in SETTINGS.items():
         segmentation = label_gaussians(run, contributions, options)

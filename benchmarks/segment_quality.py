@@ -25,6 +25,7 @@ import tempfile
 from pathlib import Path
 
 from benchmarks import record
+from dataset_tools.scene import GT_MASKS
 from eval.report import markdown_table
 from gsseg.segment.segment_run import LabelOptions
 from gsseg.train import TrainConfig
@@ -61,7 +62,7 @@ def run_scene(work: Path, path: str, args: argparse.Namespace, train_seeds: list
         )
         summaries = segmentation_scores(run, scene, "assoc", [LabelOptions(method=m, gamma_p=g) for m, g in SETTINGS])
         row = {_column(m, g): s["visible"]["miou"] for (m, g), s in zip(SETTINGS, summaries)}
-        exact = segmentation_scores(run, scene, "object_mask", [LabelOptions(method="flashsplat", gamma_p=0.0)])
+        exact = segmentation_scores(run, scene, GT_MASKS, [LabelOptions(method="flashsplat", gamma_p=0.0)])
         row[EXACT] = exact[0]["visible"]["miou"]
         runs[train_seed] = row
         print(path, train_seed, json.dumps(row))

@@ -1,7 +1,8 @@
 """Scene folders, synthetic scenes with exact ground truth, and mask corruption.
 
-The scene folder (images, ``images_N``, ``sparse/0``, ``object_mask``, ``scene.json``) is
-the interchange format between every stage of the pipeline.
+The scene folder (images, ``images_N``, ``sparse/0``, ``object_mask``, ``scene.json``; a
+synthetic scene's exact masks in ``gt_mask``) is the interchange format between every stage
+of the pipeline.
 """
 
 from dataset_tools.infra.errors import InputError

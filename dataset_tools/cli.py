@@ -8,6 +8,7 @@ from pathlib import Path
 import click
 
 from dataset_tools.infra.cli_support import run_cli
+from dataset_tools.scene import GT_MASKS
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
@@ -139,7 +140,7 @@ def sfm(photos: Path, out: Path, force: bool, **options) -> None:
 )
 @click.option("--coarse", is_flag=True, help="Low-resolution boundaries, like SAM against SAM-HQ (--model blobs).")
 @click.option("--seed", type=int, default=0, show_default=True)
-@click.option("--masks", default="object_mask", show_default=True, help="Exact mask folder to corrupt.")
+@click.option("--masks", default=GT_MASKS, show_default=True, help="Exact mask folder to corrupt.")
 @click.option("--force", is_flag=True, help="Replace --out-masks if it exists.")
 def corrupt(
     scene: Path, out_masks: str, severity: str, model: str, coarse: bool, seed: int, masks: str, force: bool

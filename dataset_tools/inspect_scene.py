@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import cv2
@@ -28,6 +28,7 @@ class SceneSummary:
     masked_views: int
     object_ids: list[int]
     made: str | None = None  # how the masks were made (their manifest), when there are masks
+    other_masks: dict[str, str] = field(default_factory=dict)  # every other mask folder: how it was made
 
     def __str__(self) -> str:
         sizes = [f"{w}x{h}" for w, h in self.resolutions]
@@ -44,8 +45,22 @@ class SceneSummary:
                 f"masks        {self.mask_dir or 'none'}: {self.masked_views} of {self.views} views",
                 *([f"made by      {self.made}"] if self.made else []),
                 f"object IDs   {id_text}",
+                *[f"also masks   {name}: {made}" for name, made in sorted(self.other_masks.items())],
             ]
         )
+
+
+def mask_folders(root: Path) -> dict[str, str]:
+    """Every mask folder of the scene ``root`` (a folder of PNGs other than the images, or one
+    with a manifest), with how it was made."""
+    found = {}
+    for folder in sorted(p for p in Path(root).iterdir() if p.is_dir() and not p.name.startswith(".")):
+        if folder.name.startswith("images") or folder.name == "sparse":
+            continue
+        record = read_manifest(folder)
+        if record is not None or next(folder.glob("*.png"), None) is not None:
+            found[folder.name] = describe(record)
+    return found
 
 
 def summarize(scene: Scene) -> SceneSummary:
@@ -72,6 +87,7 @@ def summarize(scene: Scene) -> SceneSummary:
         masked_views=masked,
         object_ids=sorted(ids),
         made=describe(read_manifest(scene.root / scene.mask_dir)) if scene.mask_dir else None,
+        other_masks={k: v for k, v in mask_folders(scene.root).items() if k != scene.mask_dir},
     )
 
 

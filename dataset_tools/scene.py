@@ -3,14 +3,19 @@
 scene/
   images/ images_2/ ...   RGB images (jpg or png), optional downsampled copies
   sparse/0/               COLMAP model, binary or text
-  object_mask/            one 8-bit PNG of object IDs a view, same stem as the image
+  object_mask/            one 8-bit PNG of object IDs a view, same stem as the image: the
+                          masks that train (``hqmask build``'s, or another tool's)
+  gt_mask/                a synthetic scene's exact masks, in the same format: for scores only
   scene.json              optional: object names, split, provenance
+
+Every mask folder may say how it was made (:mod:`dataset_tools.mask_manifest`).
 """
 
 from __future__ import annotations
 
 import json
 import shutil
+import warnings
 from dataclasses import dataclass, field, replace
 from functools import cached_property
 from pathlib import Path
@@ -23,9 +28,12 @@ from dataset_tools import colmap
 from dataset_tools.cameras import DEFAULT_NEAR, PinholeCamera, SourceCamera
 from dataset_tools.image_files import encode_image, encode_png, image_size, read_image, read_mask
 from dataset_tools.infra.atomic import atomic_directory, write_bytes_atomic
-from dataset_tools.infra.errors import InputError
+from dataset_tools.infra.errors import InputError, OutputExists
+from dataset_tools.mask_manifest import read_manifest
 
 Split = Literal["train", "test", "all"]
+MASKS = "object_mask"  # the masks that train
+GT_MASKS = "gt_mask"  # the exact masks of a synthetic scene
 
 
 @dataclass
@@ -137,7 +145,7 @@ class Scene:
     views: list[View]
     points: SparsePoints
     image_dir: str = "images"
-    mask_dir: str | None = "object_mask"
+    mask_dir: str | None = MASKS
     test_names: frozenset[str] = frozenset()
     meta: dict = field(default_factory=dict)
 
@@ -194,6 +202,24 @@ def scene_near_plane(images: list[colmap.ColmapImage], xyz: np.ndarray, fraction
     return fraction * float(min(nearest)) if nearest else DEFAULT_NEAR
 
 
+def mask_folder(root: Path | str, masks: str) -> str:
+    """The name of the mask folder ``masks`` of the scene ``root``. A synthetic scene made
+    before ground truth had a folder of its own keeps it in ``object_mask/``, marked as ground
+    truth by its manifest: asked for ``gt_mask``, such a scene answers ``object_mask``, with a
+    note."""
+    root = Path(root)
+    if masks != GT_MASKS or (root / GT_MASKS).is_dir():
+        return masks
+    if (read_manifest(root / MASKS) or {}).get("truth"):
+        warnings.warn(
+            f"{root}: a synthetic scene from before gt_mask/; its ground truth is read from {MASKS}/ "
+            f"(make the scene again, or rename the folder to {GT_MASKS}/, to silence this note).",
+            stacklevel=2,
+        )
+        return MASKS
+    return masks
+
+
 def read_scene_json(root: Path) -> dict:
     path = Path(root) / "scene.json"
     if not path.exists():
@@ -211,7 +237,7 @@ def load_scene(
     root: Path | str,
     *,
     images: str = "images",
-    masks: str | None = "object_mask",
+    masks: str | None = MASKS,
     test_every: int = 8,
 ) -> Scene:
     """Load a scene folder.
@@ -221,6 +247,8 @@ def load_scene(
         images: image folder to read (``images`` or a downsampled ``images_N``).
         masks: object-ID map folder, or None to ignore masks. A missing folder, or a view
             without a mask file, means no supervision for that view, not an error.
+            ``gt_mask`` in a scene made before that name reads its ground truth from
+            ``object_mask`` (:func:`mask_folder`).
         test_every: LLFF hold-out period, used unless scene.json lists ``split.test``.
 
     Non-pinhole COLMAP cameras are undistorted on load into pinhole cameras (COLMAP's
@@ -236,6 +264,7 @@ def load_scene(
             f"{image_root}: image folder not found; put the views in {images}/ or pick another image folder."
         )
     model = colmap.read_model(root / "sparse" / "0")
+    masks = mask_folder(root, masks) if masks else None
     mask_root = root / masks if masks else None
     near = scene_near_plane(model.images, model.xyz)
     views = []
@@ -297,11 +326,12 @@ def save_scene(scene: Scene, out: Path | str, *, overwrite: bool = False, text: 
     """Write a scene as a complete scene folder of pinhole cameras at the loaded resolution.
 
     Files already pinhole are copied byte for byte; undistorted views are re-encoded with
-    their own suffix. The folder appears whole or not at all.
+    their own suffix; the loaded masks keep their folder's name. The folder appears whole or
+    not at all.
     """
     out = Path(out)
     if out.exists() and not overwrite:
-        raise InputError(f"{out}: already exists; choose another output folder or pass overwrite.")
+        raise OutputExists(out)
     with atomic_directory(out, overwrite=overwrite) as tmp:
         for v in scene.views:
             dst = tmp / "images" / v.name
@@ -312,7 +342,7 @@ def save_scene(scene: Scene, out: Path | str, *, overwrite: bool = False, text: 
                 write_bytes_atomic(dst, encode_image(v.load_image(), dst.suffix))
             mask = v.load_mask()
             if mask is not None:
-                write_bytes_atomic(tmp / "object_mask" / f"{v.stem}.png", encode_png(mask))
+                write_bytes_atomic(tmp / (scene.mask_dir or MASKS) / f"{v.stem}.png", encode_png(mask))
         colmap.write_model(
             tmp / "sparse" / "0",
             [v.name for v in scene.views],

@@ -7,6 +7,7 @@ from pathlib import Path
 import click
 
 from dataset_tools.infra.cli_support import engine_options, none_means_off, other_scene_option, run_cli
+from dataset_tools.scene import GT_MASKS
 
 
 @click.group(name="gseval", context_settings={"help_option_names": ["-h", "--help"]})
@@ -20,7 +21,7 @@ def cli() -> None:
 @click.option("--out", required=True, type=click.Path(path_type=Path), help="Report folder to write.")
 @click.option(
     "--gt-masks",
-    default="object_mask",
+    default=GT_MASKS,
     show_default=True,
     callback=none_means_off,
     help="Ground-truth mask folder of SCENE; none: image metrics only.",

@@ -24,7 +24,7 @@ from tqdm import tqdm
 from dataset_tools.infra.atomic import write_bytes_atomic
 from dataset_tools.infra.errors import InputError, OptionError
 from dataset_tools.label_maps import match_ids, overlap
-from dataset_tools.scene import View
+from dataset_tools.scene import View, mask_folder
 from eval.edit_scores import summarize_edits
 from eval.lpips import LPIPS
 from eval.metrics import binary_scores, psnr, ssim
@@ -142,7 +142,7 @@ def load_inputs(
     (a scene other than the run's unless ``other_scene``)."""
     run = load_run(run_dir, other_scene=other_scene)
     segmentation = run.labels()
-    if gt_masks is not None and not (scene_dir / gt_masks).is_dir():
+    if gt_masks is not None and not (scene_dir / mask_folder(scene_dir, gt_masks)).is_dir():
         raise OptionError(
             "no ground-truth masks for the metrics; pass the scene's ground-truth mask folder as {gt_masks}.",
             file=scene_dir / gt_masks,

@@ -18,7 +18,7 @@ from dataset_tools.image_files import colorize_labels, encode_png
 from dataset_tools.infra.atomic import atomic_directory, write_bytes_atomic
 from dataset_tools.infra.errors import InputError, OutputExists
 from dataset_tools.infra.overlap import refuse_overlap, run_inputs, scene_entries
-from dataset_tools.scene import View
+from dataset_tools.scene import GT_MASKS, View
 from dataset_tools.synth.edit_truth import read_edit_truth
 from eval.edit_scores import edit_rows, summarize_edits
 from eval.evaluate import PROTOCOLS, Evaluation, evaluate, load_inputs
@@ -292,7 +292,7 @@ def report_run(
     scene_dir: Path | str,
     out_dir: Path | str,
     *,
-    gt_masks: str | None = "object_mask",
+    gt_masks: str | None = GT_MASKS,
     split: str = "test",
     object_id: int | None = None,
     color: tuple[int, int, int] = (255, 40, 200),

@@ -77,7 +77,7 @@ class Run:
     def voting_masks(self, masks: str | None = None) -> str:
         """The mask folder that votes in ``gsseg segment``: ``masks``, else the one the run was
         trained on; a run trained on colour alone has none to fall back to (the scene's
-        ``object_mask`` may be another tool's masks, or a synthetic scene's ground truth)."""
+        ``object_mask`` may be another tool's masks)."""
         chosen = masks or self.config.masks
         if chosen is None:
             raise OptionError(

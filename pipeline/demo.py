@@ -34,7 +34,7 @@ from dataset_tools.image_files import IMAGE_SUFFIXES, image_size, write_downsamp
 from dataset_tools.infra.atomic import require_folder_path
 from dataset_tools.infra.errors import InputError, OptionError
 from dataset_tools.infra.overlap import refuse_overlap, scene_entries
-from dataset_tools.scene import linked_scene
+from dataset_tools.scene import GT_MASKS, linked_scene
 from dataset_tools.sfm import run_sfm
 from dataset_tools.synth import SynthConfig, generate_scene
 from eval.report import default_object, report_run
@@ -196,7 +196,7 @@ def _run_demo(
     if scene is None:
         result = generate_scene(DEMO_SCENE, out / "scene", progress=progress)
         write_downsampled(result.root / "images", result.root / DEMO_IMAGES, 2)
-        scene_dir, gt_masks, mask_images = result.root, "object_mask", "images"
+        scene_dir, gt_masks, mask_images = result.root, GT_MASKS, "images"
         synth_point = result.layout.objects[0].bounding_sphere[0]
         images = DEMO_IMAGES
     else:

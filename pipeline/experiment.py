@@ -21,7 +21,7 @@ import numpy as np
 from dataset_tools.corruption import corrupt_scene
 from dataset_tools.image_files import write_downsampled
 from dataset_tools.label_maps import consistent_fraction
-from dataset_tools.scene import load_scene, save_scene
+from dataset_tools.scene import GT_MASKS, load_scene, save_scene
 from dataset_tools.synth import SynthConfig, generate_scene
 from eval.evaluate import evaluate
 from eval.metrics import matched_miou, mean_iou, psnr, ssim
@@ -53,7 +53,7 @@ class SceneSpec:
 
 
 def synthetic_scene(root: Path, spec: SceneSpec, *, downsample: tuple[int, ...] = ()) -> Path:
-    """The scene folder of ``spec`` at ``root`` with its exact masks in ``object_mask/`` and an
+    """The scene folder of ``spec`` at ``root`` with its exact masks in ``gt_mask/`` and an
     ``images_N`` copy for every N of ``downsample``; made once, reused after."""
     root = Path(root)
     if not (root / "sparse").is_dir():
@@ -113,7 +113,7 @@ def associate_masks(scene: Path, source: str, out_masks: str, *, associate: str 
     return out_masks
 
 
-def mask_scores(scene: Path, masks: str, *, truth: str = "object_mask") -> dict[str, float]:
+def mask_scores(scene: Path, masks: str, *, truth: str = GT_MASKS) -> dict[str, float]:
     """A mask folder against the exact masks over every view: ID consistency (one matching
     of IDs for the scene) and the matched mIoU."""
     preds = [v.load_mask() for v in load_scene(scene, masks=masks).views]
@@ -138,7 +138,7 @@ def segmentation_scores(
     masks: str,
     settings: list[LabelOptions],
     *,
-    truth: str = "object_mask",
+    truth: str = GT_MASKS,
     backend: str | Backend = "cpu",
 ) -> list[dict]:
     """For each of ``settings``: the run's Gaussians labelled from ``masks`` as ``gsseg

@@ -37,6 +37,7 @@ import numpy as np
 
 from dataset_tools.infra.atomic import require_folder_path, write_bytes_atomic
 from dataset_tools.infra.engine import Engine
+from dataset_tools.scene import GT_MASKS
 from eval.report import markdown_table
 from gsseg.render import Backend, get_backend
 from gsseg.segment.segment_run import LabelOptions
@@ -53,7 +54,7 @@ from pipeline.experiment import (
 )
 
 TRAINING_MASKS = ("exact", "coarse", "noisy", "hqmask")
-MASK_FOLDERS = {"exact": "object_mask", "coarse": "coarse_hqmask", "noisy": "noisy", "hqmask": "noisy_hqmask"}
+MASK_FOLDERS = {"exact": GT_MASKS, "coarse": "coarse_hqmask", "noisy": "noisy", "hqmask": "noisy_hqmask"}
 METHODS = (("flashsplat", 0.0), ("classifier", 0.0), ("prior", 0.2))
 GAMMAS = (-1.0, 0.0, 0.2, 1.0)
 MASK_SCORES = ("noisy", "noisy_cleaned", "noisy_hqmask", "coarse", "coarse_hqmask")  # Table 2's rows

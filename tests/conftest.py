@@ -8,8 +8,9 @@ import shutil
 from pathlib import Path
 
 import pytest
+from helpers import scene_with_exact_masks
 
-from dataset_tools.synth import SynthConfig, SynthResult, generate_scene
+from dataset_tools.synth import SynthConfig, SynthResult
 
 BEER = Path(__file__).resolve().parents[2] / "shared" / "data" / "beer"
 SLOW_FIXTURES = {"trained", "segmented"}
@@ -23,9 +24,10 @@ def pytest_collection_modifyitems(items) -> None:
 
 @pytest.fixture(scope="session")
 def small_scene(tmp_path_factory) -> SynthResult:
-    """An 8-view 96x96 orbit scene with 4 objects (read-only: copy it before changing it)."""
-    return generate_scene(
-        SynthConfig(views=8, res=96, objects=4, seed=1), tmp_path_factory.mktemp("s") / "small", progress=False
+    """An 8-view 96x96 orbit scene with 4 objects, its ground truth copied as its training masks
+    (read-only: copy it before changing it)."""
+    return scene_with_exact_masks(
+        SynthConfig(views=8, res=96, objects=4, seed=1), tmp_path_factory.mktemp("s") / "small"
     )
 
 

@@ -1,7 +1,9 @@
-"""What several test modules share: command-line runners and small random Gaussian scenes."""
+"""What several test modules share: command-line runners, synthetic scenes with training
+masks, and small random Gaussian scenes."""
 
 from __future__ import annotations
 
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -10,6 +12,10 @@ import numpy as np
 import torch
 
 from dataset_tools.cameras import PinholeCamera
+from dataset_tools.infra.atomic import write_bytes_atomic
+from dataset_tools.mask_manifest import MANIFEST, manifest_bytes
+from dataset_tools.scene import GT_MASKS, MASKS
+from dataset_tools.synth import SynthConfig, SynthResult, generate_scene
 from gsseg.gaussians import Gaussians
 
 
@@ -21,6 +27,16 @@ def run(*args: str, **kwargs) -> subprocess.CompletedProcess:
 def script(name: str) -> str:
     """A console script installed beside this interpreter (works without an activated venv)."""
     return str(Path(sys.executable).parent / name)
+
+
+def scene_with_exact_masks(cfg: SynthConfig, out: Path) -> SynthResult:
+    """A synthetic scene whose training masks (``object_mask/``) are a copy of its ground truth
+    (``gt_mask/``): the masks a perfect proposer would build, so that a test of training,
+    segmentation or editing knows the answer."""
+    result = generate_scene(cfg, out, progress=False)
+    shutil.copytree(result.root / GT_MASKS, result.root / MASKS, ignore=shutil.ignore_patterns(MANIFEST))
+    write_bytes_atomic(result.root / MASKS / MANIFEST, manifest_bytes("tests", copy_of=GT_MASKS))
+    return result
 
 
 GEOMETRY = ("means", "log_scales", "quats", "opacity_logits")  # the Gaussian fields that place and shape them

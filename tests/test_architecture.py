@@ -160,14 +160,15 @@ def _is_run_file(node: ast.AST) -> bool:
 
 def run_file_access(source: str) -> list[int]:
     """Lines of ``source`` that open a run file: a run file's path opened or passed to a call
-    (``np.load(run.folder.labels)``), or a run file's name joined onto a path (``run /
-    "labels.npz"``)."""
+    (``np.load(run.folder.labels)``; an error's ``file=`` only names it), or a run file's name
+    joined onto a path (``run / "labels.npz"``)."""
     lines = []
     for node in ast.walk(ast.parse(source)):
         if isinstance(node, ast.Call):
             f = node.func
             opened = isinstance(f, ast.Attribute) and f.attr in OPENERS and _is_run_file(f.value)
-            if opened or any(_is_run_file(a) for a in [*node.args, *(k.value for k in node.keywords)]):
+            passed = [*node.args, *(k.value for k in node.keywords if k.arg != "file")]
+            if opened or any(_is_run_file(a) for a in passed):
                 lines.append(node.lineno)
         elif isinstance(node, ast.BinOp) and isinstance(node.op, ast.Div):
             if isinstance(node.right, ast.Constant) and node.right.value in RUN_FILE_NAMES:
@@ -199,6 +200,7 @@ def test_the_run_file_checker_sees_reads_writes_and_joined_names():
     assert run_file_access(opened) == [1, 2, 3, 4, 5]
     fine = (
         "raise InputError(f'{run.folder.labels} is missing')\n"
+        "raise OptionError('trained with {seed}', file=folder.config, seed=0)\n"
         "run.folder.labels.is_file()\n"
         "np.load(scene / 'points.npz')\n"
         "labels.read_text()\n"

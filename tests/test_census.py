@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import script
+from helpers import scene_with_exact_masks, script
 from PIL import Image
 
 import dataset_tools.cli
@@ -26,7 +26,7 @@ import eval.cli
 import gsseg.cli
 import hqmask.cli
 from dataset_tools.image_files import read_image, read_mask, write_png
-from dataset_tools.synth import SynthConfig, generate_scene
+from dataset_tools.synth import SynthConfig
 
 pytestmark = pytest.mark.slow  # 128 commands run in-process: about 3 minutes on 2 cores
 
@@ -69,7 +69,7 @@ def _damage_scenes(world: Path) -> None:
     cut.write_bytes(cut.read_bytes()[:40])
     (variant("bad_json") / "scene.json").write_text("{ not json")
     (variant("bad_split") / "scene.json").write_text(json.dumps({"split": {"test": ["nope.png"]}}))
-    other = generate_scene(SynthConfig(views=5, res=64, objects=2, seed=9), world / "other", progress=False).root
+    other = scene_with_exact_masks(SynthConfig(views=5, res=64, objects=2, seed=9), world / "other").root
     assert other.is_dir()
     same_names = variant("same_names")  # the same views, one photo changed
     image = read_image(first)
@@ -141,7 +141,7 @@ def world(tmp_path_factory) -> Path:
     from gsseg.train import TrainConfig, train
 
     world = tmp_path_factory.mktemp("world")
-    scene = generate_scene(SynthConfig(views=6, res=64, objects=3, seed=2), world / "scene", progress=False).root
+    scene = scene_with_exact_masks(SynthConfig(views=6, res=64, objects=3, seed=2), world / "scene").root
     train(scene, world / "run", TrainConfig(iters=5, backend="cpu"), progress=False)
     segment_run(world / "run", scene, backend="cpu", progress=False)
     report_run(world / "run", scene, world / "report", backend="cpu", progress=False)
@@ -162,7 +162,7 @@ CASES = [
     ("dataset_tools", "corrupt --scene {w}/nowhere --out-masks n", "scene folder not found"),
     ("dataset_tools", "corrupt --scene {w}/scene --out-masks ../escape", "plain folder name"),
     ("dataset_tools", "corrupt --scene {w}/scene --out-masks .", "plain folder name"),
-    ("dataset_tools", "corrupt --scene {w}/scene --out-masks object_mask", "which this command reads"),
+    ("dataset_tools", "corrupt --scene {w}/scene --out-masks gt_mask", "which this command reads"),
     ("dataset_tools", "corrupt --scene {w}/scene --out-masks n --severity extreme", "extreme"),
     ("dataset_tools", "corrupt --scene {w}/scene --out-masks n --model random", "random"),
     ("dataset_tools", "corrupt --scene {w}/scene --out-masks n --model proposer --coarse", "--coarse"),

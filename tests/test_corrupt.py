@@ -83,7 +83,7 @@ def test_coarse_masks_round_sharp_corners_but_keep_large_shapes():
 
 def test_same_name_as_exact_masks_is_refused(scene_copy):
     with pytest.raises(InputError, match="which this command reads"):
-        corrupt_scene(scene_copy, "object_mask", progress=False)
+        corrupt_scene(scene_copy, "gt_mask", progress=False)
 
 
 def test_existing_output_is_kept_without_force(scene_copy):

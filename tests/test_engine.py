@@ -20,7 +20,7 @@ from hqmask.build import CACHE, BuildConfig, build_masks, propose_view
 from hqmask.proposers import make_proposer
 
 # Ray workers import a task's function by name: a library function, not one of this module.
-CHECK_NAME = functools.partial(plain_name, option="--name")
+CHECK_NAME = functools.partial(plain_name, option="name")
 
 
 @pytest.fixture(scope="module")

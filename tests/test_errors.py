@@ -112,3 +112,17 @@ def test_the_flag_finder_sees_a_flag_and_skips_commands():
     source = 'raise E(f"{x}: pass " f"--force.")\nraise E("run `gsseg train " "--resume` again")\nraise E("a-b --c")'
     texts = dict(_error_texts(ast.parse(source)))
     assert [bool(FLAG.search(texts[line])) for line in (1, 2, 3)] == [True, False, True]
+
+
+def test_an_option_error_survives_pickling_with_its_data(tmp_path):
+    """A Ray task's error reaches the caller pickled."""
+    import pickle
+
+    for error in (
+        OutputExists(tmp_path, " or choose another {name}", option="force"),
+        OptionError("{res}: no.", res=8),
+    ):
+        again = pickle.loads(pickle.dumps(error))
+        assert type(again) is type(error) and str(again) == str(error)
+        assert (again.file, again.values, again.options) == (error.file, error.values, error.options)
+        assert again.worded(flag_spelling(_command)) == error.worded(flag_spelling(_command))

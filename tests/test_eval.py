@@ -221,7 +221,7 @@ def test_report_page_renders_in_chromium(segmented, small_scene, tmp_path):
     "case, message",
     [
         ("no-labels", "labels.npz does not exist; run `gsseg segment`"),
-        ("no-gt", "no ground-truth masks for the metrics; pass --gt-masks NAME"),
+        ("no-gt", "no ground-truth masks for the metrics; pass the scene's ground-truth mask folder as --gt-masks"),
         ("no-evaluation", "evaluation.json: missing; run `gseval report"),
     ],
 )

@@ -13,12 +13,13 @@ from dataset_tools import InputError, load_scene
 from dataset_tools.corruption import PERMUTE_ONLY, corrupt_mask
 from dataset_tools.image_files import write_png
 from dataset_tools.label_maps import consistent_fraction, match_ids, overlap
+from dataset_tools.scene import GT_MASKS
 from dataset_tools.synth import SynthConfig, generate_scene
 from hqmask.build import BuildConfig, build_masks, clean_scene_masks, read_cached_segments
 
 
 def permuted_masks(scene_dir: Path, name: str) -> None:
-    scene = load_scene(scene_dir)
+    scene = load_scene(scene_dir, masks=GT_MASKS)
     for k, v in enumerate(scene.views):
         write_png(
             scene_dir / name / f"{v.stem}.png", corrupt_mask(v.load_mask(), PERMUTE_ONLY, np.random.default_rng(k))
@@ -35,7 +36,7 @@ def test_association_undoes_per_view_permutations(tmp_path, method, path):
         BuildConfig(proposer="existing", from_masks="perm", associate=method, min_area=20, out_masks="out"),
         progress=False,
     )
-    gt = [v.load_mask() for v in load_scene(scene).views]
+    gt = [v.load_mask() for v in load_scene(scene, masks=GT_MASKS).views]
     before = [v.load_mask() for v in load_scene(scene, masks="perm").views]
     after = [v.load_mask() for v in load_scene(scene, masks="out").views]
     assert consistent_fraction(before, gt) < 0.6
@@ -48,7 +49,7 @@ def views_of_different_sizes(scene_dir: Path) -> None:
     from dataset_tools import colmap
     from dataset_tools.image_files import read_image, read_mask
 
-    scene = load_scene(scene_dir)
+    scene = load_scene(scene_dir, masks=GT_MASKS)
     cameras = []
     for k, v in enumerate(scene.views):
         cut = (k % 3) + 1 if k % 2 else 0
@@ -86,7 +87,7 @@ def test_views_of_different_sizes_build_with_each_association(tmp_path, method):
         scene, BuildConfig(proposer="existing", from_masks="perm", associate=method, out_masks="out"), progress=False
     )
     out = load_scene(scene, masks="out").views
-    gt = [v.load_mask() for v in load_scene(scene).views]
+    gt = [v.load_mask() for v in load_scene(scene, masks=GT_MASKS).views]
     assert len({v.load_mask().shape for v in out}) > 1
     assert all(v.load_mask().shape == g.shape for v, g in zip(out, gt))
     assert consistent_fraction([v.load_mask() for v in out], gt) >= 0.97
@@ -163,7 +164,7 @@ def test_tracks_splits_a_mask_that_merges_two_objects(tmp_path):
     """View 3 labels two touching objects with one ID; the other views tell them apart, and
     the SfM points inside the merged segment split it between them."""
     scene = generate_scene(SynthConfig(views=12, res=128, path="orbit", seed=1), tmp_path / "s", progress=False).root
-    views = load_scene(scene).views
+    views = load_scene(scene, masks=GT_MASKS).views
     gt = [v.load_mask() for v in views]
     counts = np.bincount(gt[3].ravel(), minlength=256)
     a, b = np.argsort(counts[1:])[-2:] + 1  # the two largest objects of view 3
@@ -188,7 +189,7 @@ def test_tracks_keeps_an_object_whose_mask_bleeds_into_the_floor(tmp_path):
     of the segment lie on the floor: the segment is split by nearest point, the object keeps
     its pixels and the floor goes back to background (not the whole segment to background)."""
     scene = generate_scene(SynthConfig(views=12, res=128, path="orbit", seed=1), tmp_path / "s", progress=False).root
-    views = load_scene(scene).views
+    views = load_scene(scene, masks=GT_MASKS).views
     gt = [v.load_mask() for v in views]
     counts = np.bincount(gt[3].ravel(), minlength=256)
     obj = int(np.argsort(counts[1:])[-2] + 1)  # the second largest object of view 3
@@ -218,7 +219,7 @@ def test_tracks_keeps_an_object_cut_in_half_in_most_views(tmp_path):
     that saw it whole keep all of it (at equal weights the object's segments there were
     split, their left halves given to background)."""
     scene = generate_scene(SynthConfig(views=12, res=128, path="forward", seed=1), tmp_path / "s", progress=False).root
-    views = load_scene(scene).views
+    views = load_scene(scene, masks=GT_MASKS).views
     gt = [v.load_mask() for v in views]
     obj = int(np.argsort(np.bincount(gt[3].ravel(), minlength=256)[1:])[-2] + 1)
     seen = [k for k in range(len(views)) if (gt[k] == obj).sum() >= 50]
@@ -249,7 +250,7 @@ def test_tracks_joins_the_pieces_of_a_mask_split_alike_in_two_views(tmp_path):
     centre, each half under a new ID: the halves of the two views link to each other, but
     every other view holds their points inside the whole object, so they are pieces of it."""
     scene = generate_scene(SynthConfig(views=12, res=128, path="orbit", seed=1), tmp_path / "s", progress=False).root
-    views = load_scene(scene).views
+    views = load_scene(scene, masks=GT_MASKS).views
     gt = [v.load_mask() for v in views]
     obj = int(np.argmax(np.bincount(gt[3].ravel(), minlength=256)[1:]) + 1)
     for k, v in enumerate(views):
@@ -292,10 +293,10 @@ def test_shuffled_file_names_give_the_same_masks(tmp_path, method):
         )
     ours = [v.load_mask() for v in load_scene(scene, masks="out").views]
     theirs = {v.image_path.read_bytes(): v.load_mask() for v in load_scene(shuffled, masks="out").views}
-    gt = [v.load_mask() for v in load_scene(scene).views]
-    same_order = [theirs[v.image_path.read_bytes()] for v in load_scene(scene).views]
-    name_in_copy = {v.image_path.read_bytes(): v.name for v in load_scene(shuffled).views}
-    assert sum(name_in_copy[v.image_path.read_bytes()] != v.name for v in load_scene(scene).views) >= 5
+    gt = [v.load_mask() for v in load_scene(scene, masks=GT_MASKS).views]
+    same_order = [theirs[v.image_path.read_bytes()] for v in load_scene(scene, masks=GT_MASKS).views]
+    name_in_copy = {v.image_path.read_bytes(): v.name for v in load_scene(shuffled, masks=GT_MASKS).views}
+    assert sum(name_in_copy[v.image_path.read_bytes()] != v.name for v in load_scene(scene, masks=GT_MASKS).views) >= 5
     assert consistent_fraction(same_order, gt) == consistent_fraction(ours, gt)
     mapping = match_ids(sum(overlap(a, b) for a, b in zip(ours, same_order)))
     assert all(np.array_equal(mapping[a], b) for a, b in zip(ours, same_order))
@@ -337,7 +338,7 @@ def test_every_mask_folder_says_how_it_was_made(small_scene, scene_copy):
     from dataset_tools.inspect_scene import summarize
     from dataset_tools.mask_manifest import read_manifest
 
-    assert read_manifest(small_scene.root / "object_mask")["truth"] is True
+    assert read_manifest(small_scene.root / GT_MASKS)["truth"] is True
     build_masks(scene_copy, BuildConfig(out_masks="built", consensus=2), progress=False)
     built = read_manifest(scene_copy / "built")
     assert built["made_by"] == "hqmask build" and built["format"] == 1

@@ -51,7 +51,7 @@ def test_a_scene_keeps_its_images_model_and_read_masks_and_a_reader_keeps_everyt
     assert kept == {"images", "images_2", "sparse", "scene.json", "object_mask"}
     (scene_copy / "hqmask").mkdir()
     (scene_copy / ".hqmask_cache").mkdir()
-    assert {p.name for _, p in scene_entries(scene_copy)} == kept | {"hqmask"}
+    assert {p.name for _, p in scene_entries(scene_copy)} == kept | {"hqmask", "gt_mask"}
     refuse_overlap(scene_copy / "renders", scene_entries(scene_copy))  # a new folder inside: allowed
     refuse_overlap(scene_copy / "hqmask", scene_inputs(scene_copy, ["object_mask"]))  # a mask folder rebuilt
 

@@ -190,3 +190,20 @@ def test_masks_of_undistorted_views_go_back_to_the_file_frame(beer, tmp_path):
     write_png(tmp_path / "m.png", stored)
     view.mask_path = tmp_path / "m.png"
     assert np.mean(view.load_mask() == ids) > 0.98
+
+
+def test_a_synthetic_scene_from_before_gt_mask_reads_its_truth_with_a_note(small_scene, tmp_path):
+    """Old synthetic scenes kept their exact masks in ``object_mask/`` (marked as ground truth
+    by the manifest): asked for ``gt_mask``, they answer with those, and say so."""
+    from dataset_tools.scene import GT_MASKS, MASKS
+
+    old = tmp_path / "old"
+    shutil.copytree(small_scene.root, old, ignore=shutil.ignore_patterns(MASKS))
+    (old / GT_MASKS).rename(old / MASKS)
+    with pytest.warns(UserWarning, match="from before gt_mask/"):
+        scene = load_scene(old, masks=GT_MASKS)
+    assert scene.mask_dir == MASKS
+    expected = load_scene(small_scene.root, masks=GT_MASKS).views[2].load_mask()
+    np.testing.assert_array_equal(scene.views[2].load_mask(), expected)
+    (old / MASKS / "manifest.json").unlink()  # masks of another tool: never taken for the truth
+    assert load_scene(old, masks=GT_MASKS).mask_dir is None

@@ -226,7 +226,7 @@ def test_segment_votes_with_the_masks_the_run_was_trained_on(segmented, scene_co
     (scene_copy / "object_mask").rename(scene_copy / "hqmask")
     result = segment_run(run, scene_copy, backend="cpu", progress=False)
     np.testing.assert_array_equal(result.labels, RunFolder(segmented).read_labels().labels)
-    with pytest.raises(InputError, match="object_mask holds no masks"):
+    with pytest.raises(InputError, match="object_mask: holds no masks"):
         segment_run(run, scene_copy, masks="object_mask", backend="cpu", progress=False)
 
 

@@ -2,11 +2,13 @@
 
 import filecmp
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from dataset_tools import InputError, load_scene
+from dataset_tools.scene import GT_MASKS
 from dataset_tools.synth import SynthConfig, generate_scene
 from dataset_tools.synth.generator import observe
 
@@ -15,11 +17,14 @@ def files_of(root):
     return sorted(p.relative_to(root) for p in root.rglob("*") if p.is_file())
 
 
-def test_same_seed_same_bytes(small_scene, tmp_path):
-    again = generate_scene(SynthConfig(views=8, res=96, objects=4, seed=1), tmp_path / "again", progress=False)
-    names = files_of(small_scene.root)
-    assert names == files_of(again.root)
-    _, mismatch, errors = filecmp.cmpfiles(small_scene.root, again.root, [str(n) for n in names], shallow=False)
+def test_same_seed_same_bytes(tmp_path):
+    first, again = (
+        generate_scene(SynthConfig(views=8, res=96, objects=4, seed=1), tmp_path / name, progress=False)
+        for name in ("first", "again")
+    )
+    names = files_of(first.root)
+    assert names == files_of(again.root) and Path(GT_MASKS) / "0000.png" in names
+    _, mismatch, errors = filecmp.cmpfiles(first.root, again.root, [str(n) for n in names], shallow=False)
     assert mismatch == [] and errors == []
 
 
@@ -45,7 +50,7 @@ def test_pycolmap_reads_the_model_and_observations_reproject(small_scene):
 @pytest.mark.parametrize("path", ["orbit", "forward"])
 def test_point_ids_agree_with_masks_in_observing_views(tmp_path, path):
     res = generate_scene(SynthConfig(views=12, res=128, objects=6, path=path, seed=4), tmp_path / path, progress=False)
-    scene = load_scene(res.root)
+    scene = load_scene(res.root, masks=GT_MASKS)
     agree = total = 0
     for v in scene.views:
         mask = v.load_mask()

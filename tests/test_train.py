@@ -61,13 +61,13 @@ def test_resume_keeps_its_options_and_its_scene(small_scene, tmp_path):
     cfg = TrainConfig(iters=20, backend="cpu", seed=2)
     train(small_scene.root, tmp_path / "run", cfg, stop_after=5, progress=False)
     for asked, message in (
-        (TrainConfig(iters=20, backend="cpu", seed=3), "seed = 2, not 3"),
-        (TrainConfig(iters=20, backend="cpu", seed=2, masks=None), "masks = 'object_mask'"),
+        (TrainConfig(iters=20, backend="cpu", seed=3), "trained with seed=2, not 3"),
+        (TrainConfig(iters=20, backend="cpu", seed=2, masks=None), "trained with masks='object_mask', not None"),
         (TrainConfig(iters=10, backend="cpu", seed=2), "only lengthen it, not shorten it to 10"),
     ):
         with pytest.raises(InputError, match=message):
             train(small_scene.root, tmp_path / "run", asked, resume=True, progress=False)
-    with pytest.raises(InputError, match="seed = 2, not 0"):  # asked on a command line, though the default
+    with pytest.raises(InputError, match="trained with seed=2, not 0"):  # asked on a command line, though the default
         train(small_scene.root, tmp_path / "run", TrainConfig(), resume=True, given={"seed"}, progress=False)
     moved = shutil.copytree(small_scene.root, tmp_path / "moved")
     train(moved, tmp_path / "run", TrainConfig(), resume=True, stop_after=10, progress=False)

@@ -29,7 +29,7 @@ from dataset_tools.infra.errors import InputError, OptionError, OutputExists
 from dataset_tools.infra.names import plain_name
 from dataset_tools.infra.overlap import refuse_overlap, scene_inputs
 from dataset_tools.label_maps import matched_error
-from dataset_tools.scene import load_scene
+from dataset_tools.scene import GT_MASKS, load_scene
 
 FAMILIES = ("blobs", "proposer")
 RUNS_STREAM = 2**31  # the seed stream of the proposer family's runs, apart from every view's
@@ -55,7 +55,7 @@ def corrupt_scene(
     model: str = "blobs",
     coarse: bool = False,
     seed: int = 0,
-    masks: str = "object_mask",
+    masks: str = GT_MASKS,
     overwrite: bool = False,
     progress: bool = True,
 ) -> dict:

@@ -66,9 +66,19 @@ class OptionError(InputError):
             raise ValueError(f"values for options the message does not name: {sorted(unknown)}")
         super().__init__(self.worded())
 
+    def __reduce__(self):  # pickled with its data (a Ray task's error crosses processes)
+        return _restore, (type(self), self.__dict__)
+
     def worded(self, spelling: Spelling = python_spelling) -> str:
         text = _OPTION.sub(lambda m: spelling(m[1], self.values.get(m[1], NO_VALUE)), self.message)
         return text if self.file is None else f"{self.file}: {text}"
+
+
+def _restore(cls: type[OptionError], state: dict) -> OptionError:
+    error = Exception.__new__(cls)
+    error.__dict__.update(state)
+    error.args = (error.worded(),)
+    return error
 
 
 class OutputExists(OptionError):

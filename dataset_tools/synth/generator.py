@@ -17,7 +17,7 @@ from dataset_tools.image_files import encode_png
 from dataset_tools.infra.atomic import atomic_directory, write_bytes_atomic
 from dataset_tools.infra.errors import OptionError, OutputExists
 from dataset_tools.mask_manifest import MANIFEST, manifest_bytes
-from dataset_tools.scene import llff_test_names
+from dataset_tools.scene import GT_MASKS, llff_test_names
 from dataset_tools.synth import camera_paths
 from dataset_tools.synth.primitives import Box, Cylinder, Plane, Primitive, Sphere
 from dataset_tools.synth.textures import Texture
@@ -276,7 +276,7 @@ def observe(
 def generate_scene(cfg: SynthConfig, out: Path | str, *, overwrite: bool = False, progress: bool = True) -> SynthResult:
     """Ray-cast a synthetic scene and write it as a scene folder at ``out``.
 
-    Writes images/*.png, object_mask/*.png (exact IDs: 0 background, 1..K objects; its
+    Writes images/*.png, gt_mask/*.png (exact IDs: 0 background, 1..K objects; its
     manifest.json marks them as ground truth),
     sparse/0 (PINHOLE cameras, points3D sampled on visible surfaces, with the tracks of
     every view that sees them) and scene.json (objects, options, LLFF split).
@@ -298,14 +298,14 @@ def generate_scene(cfg: SynthConfig, out: Path | str, *, overwrite: bool = False
         for name, pose in zip(tqdm(names, desc="ray-casting views", disable=not progress), poses):
             rgb, ids, depth, pts = render_view(layout, cam, pose, cfg.supersample)
             write_bytes_atomic(tmp / "images" / name, encode_png(rgb))
-            write_bytes_atomic(tmp / "object_mask" / name, encode_png(ids))
+            write_bytes_atomic(tmp / GT_MASKS / name, encode_png(ids))
             depths.append(depth)
             hit = np.flatnonzero(np.isfinite(depth.ravel()))
             pick = np.sort(rng.choice(hit, size=min(cfg.points_per_view, len(hit)), replace=False))
             samples.append(pts[pick])
             sample_ids.append(ids.ravel()[pick])
             sample_rgb.append(rgb.reshape(-1, 3)[pick])
-        write_bytes_atomic(tmp / "object_mask" / MANIFEST, manifest_bytes("dataset_tools synth", truth=True))
+        write_bytes_atomic(tmp / GT_MASKS / MANIFEST, manifest_bytes("dataset_tools synth", truth=True))
         xyz, point_ids, point_rgb = np.concatenate(samples), np.concatenate(sample_ids), np.concatenate(sample_rgb)
         obs = [observe(xyz, cam, pose, depth) for pose, depth in zip(poses, depths)]
         n_obs = np.bincount(np.concatenate([rows for rows, _ in obs]), minlength=len(xyz))
