@@ -36,7 +36,8 @@ from hqmask.association.anchors import sighting, triangulate
 from hqmask.cleanup import clean_mask
 from hqmask.consensus import multiview_consensus
 from hqmask.depth_prior import depth_from_anchors, depth_from_points
-from hqmask.proposers import Proposer, make_proposer
+from hqmask.proposers.base import Proposer
+from hqmask.proposers.registry import make_proposer
 from hqmask.support_plane import SupportPlane, support_plane
 
 ASSOCIATIONS = ("auto", "flow", "tracks")

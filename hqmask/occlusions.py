@@ -39,7 +39,7 @@ def depth_jumps(depth: np.ndarray, jump: float) -> DepthJumps:
 
     A pixel is on a jump when the log depths of its 3x3 neighbourhood (after a 5x5 median,
     which removes single-pixel speckle of the render) span more than ``jump``: a jump of
-    e^jump - 1 (22% at the default 0.2 of :class:`hqmask.proposers.GraphProposer`) spread
+    e^jump - 1 (22% at the default 0.2 of :class:`hqmask.proposers.graph.GraphProposer`) spread
     over up to 2 pixels, as the alpha-blended depth of a render smears an occluding contour.
     It is on the near side when its own log depth lies within ``jump / 2`` of the
     neighbourhood's least.

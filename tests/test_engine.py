@@ -17,7 +17,7 @@ from dataset_tools.infra.errors import InputError
 from dataset_tools.infra.names import plain_name
 from dataset_tools.scene import load_scene
 from hqmask.build import CACHE, BuildConfig, build_masks, propose_view
-from hqmask.proposers import make_proposer
+from hqmask.proposers.registry import make_proposer
 
 # Ray workers import a task's function by name: a library function, not one of this module.
 CHECK_NAME = functools.partial(plain_name, option="name")

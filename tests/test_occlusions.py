@@ -13,7 +13,7 @@ from dataset_tools.depth_maps import read_depth, write_depth
 from dataset_tools.synth.generator import render_view
 from hqmask.build import CACHE, BuildConfig, build_masks
 from hqmask.occlusions import cut_at_edges, depth_jumps
-from hqmask.proposers import GraphProposer
+from hqmask.proposers.graph import GraphProposer
 
 
 def test_a_step_in_depth_is_an_edge_and_a_tilted_plane_is_not():
@@ -219,7 +219,7 @@ def test_colour_merge_is_scikit_images_region_adjacency_cut(small_scene):
     a random label map: the same region map, label for label."""
     from skimage import color, graph, segmentation
 
-    from hqmask.proposers import merge_by_mean_colour
+    from hqmask.proposers.graph import merge_by_mean_colour
 
     rng = np.random.default_rng(0)
     cases = []

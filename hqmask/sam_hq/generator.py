@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hqmask.proposals import Proposals
+from hqmask.proposers.base import Proposals
 from hqmask.sam_hq.mask_ops import (
     box_nms,
     crop_boxes,

@@ -1,50 +1,26 @@
-"""Mask proposers: one image in, candidate object masks with scores out.
+"""The ``graph`` proposer, weight-free and the default.
 
-- ``graph``: weight-free default. Felzenszwalb's graph segmentation, regions merged by mean
-  colour on a region adjacency graph (:func:`merge_by_mean_colour`), and background removed: regions that
-  touch the image border, and regions whose colour is close to a large border region (a
-  tiled floor whose inner tiles do not reach the border), are background. Adjacent
-  foreground regions of similar hue are joined into one object. Given the view's depth (a
-  first 3D-GS pass rendered, ``hqmask build --depth``), regions are first cut where the depth
-  jumps and never joined across a jump (:mod:`hqmask.occlusions`).
-- ``existing``: masks already on disk (e.g. a corrupted folder), one proposal per ID.
-- ``sam-hq``: SAM-HQ's automatic mask generator through ONNX Runtime (``--model DIR``).
+Felzenszwalb's graph segmentation, regions merged by mean colour on a region adjacency graph
+(:func:`merge_by_mean_colour`), and background removed: regions that touch the image border,
+and regions whose colour is close to a large border region (a tiled floor whose inner tiles
+do not reach the border), are background. Adjacent foreground regions of similar hue are
+joined into one object. Given the view's depth (a first 3D-GS pass rendered, ``hqmask build
+--depth``), regions are first cut where the depth jumps and never joined across a jump
+(:mod:`hqmask.occlusions`).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 from scipy import ndimage
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from dataset_tools.infra.errors import OptionError
 from dataset_tools.scene import View
 from hqmask.occlusions import DepthJumps, cut_at_edges, depth_jumps
-from hqmask.proposals import Proposals, Proposer
-
-
-def _from_label_map(ids: np.ndarray) -> Proposals:
-    labels = np.unique(ids)
-    labels = labels[labels > 0]
-    return Proposals(ids[None] == labels[:, None, None], np.ones(len(labels)))
-
-
-class ExistingMasks:
-    """Proposals read from a mask folder of the scene: one proposal per ID of the view's map."""
-
-    cache_name = None
-
-    def propose(
-        self, image: np.ndarray, view: View, depth: np.ndarray | None = None, height: np.ndarray | None = None
-    ) -> Proposals:
-        ids = view.load_mask()
-        if ids is None:
-            return Proposals(np.zeros((0, *image.shape[:2]), bool), np.zeros(0))
-        return _from_label_map(ids)
+from hqmask.proposers.base import Proposals
 
 
 def _in_front(seg: np.ndarray, occluding: np.ndarray, share: float) -> np.ndarray:
@@ -240,48 +216,3 @@ class GraphProposer:
         obj = uf.roots()
         obj[background] = -1
         return obj
-
-
-class SamHQProposer:
-    """SAM-HQ's automatic mask generator (ONNX Runtime); proposals scored by predicted IoU."""
-
-    def __init__(self, generator):
-        """``generator``: a :class:`hqmask.sam_hq.AutomaticMaskGenerator`."""
-        self.generator = generator
-        points = generator.config.points_per_side
-        self.cache_name = f"sam-hq-{generator.model.fingerprint}-p{points}"
-
-    def propose(
-        self, image: np.ndarray, view: View, depth: np.ndarray | None = None, height: np.ndarray | None = None
-    ) -> Proposals:
-        return self.generator.generate(image).proposals()
-
-
-def make_proposer(
-    name: str,
-    model_dir: str | None = None,
-    *,
-    device: str = "auto",
-    threads: int = 0,
-    points_per_side: int = 32,
-    embedding_cache: Path | None = None,
-) -> Proposer:
-    """The proposer called ``name``: ``graph``, ``existing`` or ``sam-hq``.
-
-    The keyword options configure ``sam-hq``: ONNX Runtime device and threads, the point grid
-    of the automatic generator, and a folder to cache image embeddings in.
-    """
-    if name == "graph":
-        return GraphProposer()
-    if name == "existing":
-        return ExistingMasks()
-    if name == "sam-hq":
-        from hqmask.sam_hq import EXPORT_HINT, AutomaticMaskGenerator, GeneratorConfig, SamHQ
-
-        if not model_dir:
-            raise OptionError(
-                f"{{proposer}} needs {{model}}, a SAM-HQ ONNX model folder; {EXPORT_HINT}.", proposer="sam-hq"
-            )
-        model = SamHQ(model_dir, device=device, threads=threads, cache_dir=embedding_cache)
-        return SamHQProposer(AutomaticMaskGenerator(model, GeneratorConfig(points_per_side=points_per_side)))
-    raise OptionError("{proposer}: unknown proposer; use graph, sam-hq or existing.", proposer=name)
