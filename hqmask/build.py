@@ -133,7 +133,7 @@ def read_geometry(scene: Scene, folder: Path) -> SceneGeometry:
     for depth in depths:
         digest.update(depth.tobytes())
     if plane is not None:
-        digest.update(np.array([*plane.normal, plane.offset, plane.scale]).tobytes())
+        digest.update(np.array([*plane.normal, plane.offset, plane.scale, *plane.centre, plane.reach]).tobytes())
     return SceneGeometry(depths, plane, heights, digest.hexdigest())
 
 

@@ -3,7 +3,8 @@
 The mask proposer takes regions that touch the image border for background. Where an object
 fills the frame (a model on a table seen from close by) that rule takes the object too; the
 height of each pixel's surface above the support tells them apart: the table lies on it, the
-model rises from it.
+model rises from it. What rises far from the scene's points (a backdrop, the wall of a room
+behind the table) is no part of it: beyond the plane's reach a surface has no height.
 """
 
 from __future__ import annotations
@@ -19,16 +20,20 @@ from dataset_tools.scene import View
 class SupportPlane:
     """A world plane ``normal @ x + offset == 0`` (``normal`` (3,) a unit vector pointing to the
     cameras' side); heights are measured in units of ``scale``, the median distance of the
-    scene's points from their median."""
+    scene's points from their median ``centre`` (3,). A surface farther than ``reach`` scales
+    from the centre along the plane lies beyond the scene."""
 
     normal: np.ndarray
     offset: float
     scale: float
+    centre: np.ndarray
+    reach: float = 3.0
 
     def heights(self, view: View, depth: np.ndarray) -> np.ndarray:
         """(H, W) float32 height above the plane of the surface each pixel of ``view`` sees
-        (``depth`` (H, W), 0 where nothing is opaque, where the height is NaN), in units of
-        :attr:`scale`."""
+        (``depth`` (H, W), 0 where nothing is opaque), in units of :attr:`scale`: NaN where
+        nothing is seen, -inf where the surface lies beyond the scene's reach (nothing of the
+        scene rises there)."""
         cam = view.camera
         H, W = depth.shape
         u, v = np.meshgrid(np.arange(W) + 0.5, np.arange(H) + 0.5)
@@ -36,6 +41,8 @@ class SupportPlane:
         R, t = view.cam_from_world[:3, :3], view.cam_from_world[:3, 3]
         x_world = (x_cam - t) @ R  # R^T (x - t), row-wise
         height = (x_world @ self.normal + self.offset) / self.scale
+        along = (x_world - self.centre) - np.multiply.outer((x_world - self.centre) @ self.normal, self.normal)
+        height = np.where(np.linalg.norm(along, axis=-1) > self.reach * self.scale, -np.inf, height)
         return np.where(depth > 0, height, np.nan).astype(np.float32)
 
 
@@ -61,7 +68,8 @@ def support_plane(
     """
     if len(points) < 50 or not len(centres):
         return None
-    scale = float(np.median(np.linalg.norm(points - np.median(points, 0), axis=1)))
+    centre = np.median(points, 0)
+    scale = float(np.median(np.linalg.norm(points - centre, axis=1)))
     if scale <= 0:
         return None
     rng = np.random.default_rng(seed)
@@ -83,4 +91,4 @@ def support_plane(
         count = int((np.abs(height) < tolerance * scale).sum())
         if count > best_count:
             best, best_count = (normal, offset), count
-    return None if best is None else SupportPlane(best[0], best[1], scale)
+    return None if best is None else SupportPlane(best[0], best[1], scale, centre)

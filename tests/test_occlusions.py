@@ -213,6 +213,41 @@ def test_what_rises_from_the_floor_is_an_object_even_at_the_border():
     assert len(masks) == 1 and masks[0][60, 10] and not masks[0][60, 100]
 
 
+def test_what_rises_far_behind_the_scene_stays_background():
+    """A backdrop (height -inf: beyond the scene's reach) touching the frame beside a model that
+    rises from the floor: the model is an object, the backdrop is not."""
+    image, depth = _drawn(
+        [("rect", (0, 0, 127, 40), (20, 20, 25), 9.0), ("rect", (0, 60, 50, 127), (170, 60, 50), 3.0)]
+    )
+    height = np.zeros(depth.shape, np.float32)
+    height[image[..., 0] == 170] = 0.6
+    height[image[..., 0] == 20] = -np.inf
+    masks = GraphProposer().propose(image, None, depth, height).masks
+    assert len(masks) == 1 and masks[0][90, 10] and not masks[0][20, 60]
+    height[image[..., 0] == 20] = 2.0  # the same backdrop within reach rises like the model
+    assert len(GraphProposer().propose(image, None, depth, height).masks) == 2
+
+
+def test_heights_beyond_the_reach_of_the_scene_are_minus_infinity():
+    """A camera 4 units above the floor z = 0 looking straight down at the scene's centre: the
+    floor under it is at height 0, a floor point farther than ``reach`` scales along the plane
+    is -inf, a pixel where nothing is opaque is NaN."""
+    from types import SimpleNamespace
+
+    from dataset_tools.cameras import PinholeCamera
+    from hqmask.support_plane import SupportPlane
+
+    plane = SupportPlane(np.array([0.0, 0.0, 1.0]), 0.0, scale=1.0, centre=np.zeros(3), reach=3.0)
+    camera = PinholeCamera(64, 64, 8.0, 8.0, 32.0, 32.0)  # a pixel spans half a unit of floor at depth 4
+    down = np.array([[1.0, 0, 0, 0], [0, -1, 0, 0], [0, 0, -1, 4.0]])  # camera at z = 4, looking along -z
+    depth = np.full((64, 64), 4.0, np.float32)
+    depth[0, 0] = 0.0
+    heights = plane.heights(SimpleNamespace(camera=camera, cam_from_world=down), depth)
+    assert heights[32, 32] == pytest.approx(0.0, abs=1e-5) and heights[32, 37] == pytest.approx(0.0, abs=1e-5)
+    assert np.isneginf(heights[32, 38]) and np.isneginf(heights[5, 5]) and np.isnan(heights[0, 0])  # 3.26 units out
+    assert np.isfinite(heights[32, 26]) and np.isneginf(heights[32, 25])  # 2.76 and 3.26 units out
+
+
 def test_colour_merge_is_scikit_images_region_adjacency_cut(small_scene):
     """:func:`merge_by_mean_colour` against scikit-image's ``rag_mean_color`` +
     ``cut_threshold`` (the reference) on Felzenszwalb regions of two rendered views and of

@@ -33,9 +33,9 @@ def _in_front(seg: np.ndarray, occluding: np.ndarray, share: float) -> np.ndarra
 
 def _standing(seg: np.ndarray, height: np.ndarray, least: float) -> np.ndarray:
     """(n,) bool: regions of ``seg`` whose median height above the support plane (``height``
-    (H, W), NaN where nothing is seen) is at least ``least``."""
+    (H, W), NaN where nothing is seen, -inf beyond the scene) is at least ``least``."""
     n = int(seg.max()) + 1
-    seen = np.isfinite(height)
+    seen = ~np.isnan(height)
     rise = ndimage.median(np.where(seen, height, 0.0), np.where(seen, seg, -1), np.arange(n))
     return np.nan_to_num(np.asarray(rise, float), nan=-np.inf) >= least
 
