@@ -1,4 +1,5 @@
-"""The scene folder of DESIGN.md: loading, saving, splits and lazy image access.
+"""The scene folder, the format every stage reads and writes: loading, saving, splits and
+lazy image access.
 
 scene/
   images/ images_2/ ...   RGB images (jpg or png), optional downsampled copies

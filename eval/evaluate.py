@@ -2,7 +2,7 @@
 
 - ``visible`` (occlusion-aware): the whole scene is rendered and each pixel takes the label
   whose Gaussians carry the largest blended weight.
-- ``extracted`` (the seed's): each object's Gaussians are rendered alone and thresholded
+- ``extracted`` (the paper's): each object's Gaussians are rendered alone and thresholded
   (alpha >= 0.5, which is what thresholding a render on white measures, free of the object's
   colour).
 

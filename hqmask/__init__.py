@@ -1,1 +1,1 @@
-"""Stage A: clean, view-consistent object-ID maps for every view of a scene."""
+"""The masks: clean, view-consistent object-ID maps for every view of a scene."""

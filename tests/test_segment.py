@@ -1,4 +1,4 @@
-"""Stage C: contribution matrix, reassignment, prompts and edits."""
+"""Segmentation: contribution matrix, reassignment, prompts and edits."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Stage C: prior-guided label reassignment from the contribution matrix, prompts."""
+"""Segmentation: prior-guided label reassignment from the contribution matrix, and prompts."""
 
 from gsseg.segment.prompts import object_at_point, pick_object, point_from_click
 from gsseg.segment.reassign import METHODS, MODES, Segmentation, classifier_prior, reassign
