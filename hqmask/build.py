@@ -30,7 +30,7 @@ from dataset_tools.infra.locks import exclusive_folder
 from dataset_tools.infra.names import plain_name
 from dataset_tools.infra.overlap import refuse_overlap, scene_entries, scene_inputs
 from dataset_tools.mask_manifest import MANIFEST, manifest_bytes
-from dataset_tools.scene import Scene, View, load_scene
+from dataset_tools.scene import Scene, View, load_scene, mask_folder
 from hqmask.association import associate_flow, associate_tracks
 from hqmask.association.anchors import sighting, triangulate
 from hqmask.cleanup import clean_mask
@@ -223,7 +223,7 @@ def build_masks(
             proposer=cfg.proposer,
         )
     out_dir = scene_dir / cfg.out_masks
-    reads = scene_inputs(scene_dir, [cfg.from_masks])
+    reads = scene_inputs(scene_dir, [cfg.from_masks and mask_folder(scene_dir, cfg.from_masks)])
     if cfg.depth is not None:
         reads.append(("the depth maps", Path(cfg.depth)))
     refuse_overlap(out_dir, reads)

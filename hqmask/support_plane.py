@@ -41,7 +41,8 @@ class SupportPlane:
         R, t = view.cam_from_world[:3, :3], view.cam_from_world[:3, 3]
         x_world = (x_cam - t) @ R  # R^T (x - t), row-wise
         height = (x_world @ self.normal + self.offset) / self.scale
-        along = (x_world - self.centre) - np.multiply.outer((x_world - self.centre) @ self.normal, self.normal)
+        from_centre = x_world - self.centre
+        along = from_centre - np.multiply.outer(from_centre @ self.normal, self.normal)  # its part in the plane
         height = np.where(np.linalg.norm(along, axis=-1) > self.reach * self.scale, -np.inf, height)
         return np.where(depth > 0, height, np.nan).astype(np.float32)
 

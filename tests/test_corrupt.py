@@ -135,3 +135,17 @@ def test_runs_are_planned_from_the_seed_and_last_at_most_their_share():
     runs = plan_runs([1, 2, 3], 40, model, np.random.default_rng(5))
     assert runs == plan_runs([1, 2, 3], 40, model, np.random.default_rng(5))
     assert len(runs) == 12 and all(1 <= r.stop - r.start <= 10 for r in runs)
+
+
+def test_the_truth_of_a_scene_from_before_gt_mask_is_an_input_too(small_scene, tmp_path):
+    """An old synthetic scene keeps its truth in ``object_mask/``: corrupting it into that folder
+    is writing over what the command reads, refused as such even with ``overwrite``."""
+    import shutil
+    import warnings
+
+    old = tmp_path / "old"
+    shutil.copytree(small_scene.root, old, ignore=shutil.ignore_patterns("object_mask"))
+    (old / "gt_mask").rename(old / "object_mask")
+    with warnings.catch_warnings(), pytest.raises(InputError, match="which this command reads"):
+        warnings.simplefilter("ignore")
+        corrupt_scene(old, "object_mask", overwrite=True, progress=False)

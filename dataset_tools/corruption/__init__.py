@@ -29,7 +29,7 @@ from dataset_tools.infra.errors import InputError, OptionError, OutputExists
 from dataset_tools.infra.names import plain_name
 from dataset_tools.infra.overlap import refuse_overlap, scene_inputs
 from dataset_tools.label_maps import matched_error
-from dataset_tools.scene import GT_MASKS, load_scene
+from dataset_tools.scene import GT_MASKS, load_scene, mask_folder
 
 FAMILIES = ("blobs", "proposer")
 RUNS_STREAM = 2**31  # the seed stream of the proposer family's runs, apart from every view's
@@ -69,7 +69,8 @@ def corrupt_scene(
     """
     scene_dir = Path(scene_dir)
     _check(model, severity, coarse)
-    refuse_overlap(scene_dir / plain_name(out_masks, "out_masks"), scene_inputs(scene_dir, [masks]))
+    read = mask_folder(scene_dir, masks)  # an old scene's truth lies in object_mask/
+    refuse_overlap(scene_dir / plain_name(out_masks, "out_masks"), scene_inputs(scene_dir, [read]))
     scene = load_scene(scene_dir, masks=masks)
     if scene.mask_dir is None:
         raise InputError(
