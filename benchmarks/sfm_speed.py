@@ -1,13 +1,14 @@
 """Benchmark: structure from motion time against the number of photos, exhaustive matching
 against retrieval matching (``--matcher retrieval``, each photo with its 20 most alike), on
-the 96 photos of ``gaussctrl_bear`` (512x512) and evenly spaced subsets of them. Both
+the 96 photos of ``gaussctrl_bear`` (512x512) and evenly spaced subsets of them, or any folder
+of photos with SIFT on images at most ``--max-image-size`` pixels (as ``sfm`` takes it). Both
 matchers run on the same SIFT features (extracted once per photo set); for each: the seconds
 of every step, the images registered, and the retrieval model's cameras against the
 exhaustive one's (median and largest rotation error in degrees, centre error as a share of
 the cameras' extent, after a robust alignment). Prints and writes JSON.
 
     python -m benchmarks.sfm_speed [--photos ../shared/data/real/gaussctrl_bear/photos]
-        [--counts 24,48,96] [--work /tmp/sfm_speed] [--out FILE]
+        [--counts 24,48,96] [--max-image-size 3200] [--work /tmp/sfm_speed] [--tag T] [--out FILE]
 """
 
 from __future__ import annotations
@@ -37,27 +38,32 @@ def subset(photos: Path, count: int, out: Path) -> Path:
     return out
 
 
-def timed_sfm(photos: Path, scene: Path, matcher: str, features_from: Path | None = None) -> dict:
-    """SfM with ``matcher`` into ``scene`` (made afresh; the features of ``features_from`` reused
+def timed_sfm(photos: Path, scene: Path, config: SfmConfig, features_from: Path | None = None) -> dict:
+    """SfM with ``config`` into ``scene`` (made afresh; the features of ``features_from`` reused
     when given) and the seconds of each step, features included when reused."""
     shutil.rmtree(scene, ignore_errors=True)
     if features_from is not None:
         (scene / ".sfm").mkdir(parents=True)
         for name in ("database.db", "steps.json"):
             shutil.copy(features_from / ".sfm" / name, scene / ".sfm" / name)
-    result = run_sfm(photos, scene, SfmConfig(matcher=matcher), progress=False)
+    result = run_sfm(photos, scene, config, progress=False)
     steps = json.loads((scene / ".sfm" / "steps.json").read_text())
     if features_from is not None:
         steps["features"] = json.loads((features_from / ".sfm" / "steps.json").read_text())["features"]
     seconds = {f"{s}_s": float(steps[s]["seconds"]) for s in STEPS}
-    pairs = (scene / ".sfm" / "pairs.txt").read_text().count("\n") if matcher != "exhaustive" else None
+    pairs = (scene / ".sfm" / "pairs.txt").read_text().count("\n") if config.matcher != "exhaustive" else None
     return {"registered": result.registered, "images": result.images, "pairs": pairs, **seconds}
 
 
-def compare(photos: Path, work: Path) -> dict:
+def compare(photos: Path, work: Path, max_image_size: int) -> dict:
     """Exhaustive and retrieval matching of the same photos, and their cameras against each other."""
-    exhaustive = timed_sfm(photos, work / "exhaustive", "exhaustive")
-    retrieval = timed_sfm(photos, work / "retrieval", "retrieval", features_from=work / "exhaustive")
+    exhaustive = timed_sfm(photos, work / "exhaustive", SfmConfig("exhaustive", max_image_size=max_image_size))
+    retrieval = timed_sfm(
+        photos,
+        work / "retrieval",
+        SfmConfig("retrieval", max_image_size=max_image_size),
+        features_from=work / "exhaustive",
+    )
     made = {v.name: v.cam_from_world for v in load_scene(work / "retrieval", masks=None).views}
     ref = {v.name: v.cam_from_world for v in load_scene(work / "exhaustive", masks=None).views}
     names = sorted(made.keys() & ref.keys())
@@ -66,6 +72,7 @@ def compare(photos: Path, work: Path) -> dict:
     exhaustive["pairs"] = n * (n - 1) // 2
     return {
         "photos": n,
+        "size": [(cam := load_scene(work / "exhaustive", masks=None).views[0].camera).width, cam.height],
         "exhaustive": exhaustive,
         "retrieval": retrieval,
         "rotation_deg_median": float(np.median(rot)),
@@ -79,15 +86,18 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--photos", type=Path, default=Path("../shared/data/real/gaussctrl_bear/photos"))
     parser.add_argument("--counts", default="24,48,96")
+    parser.add_argument("--max-image-size", type=int, default=SfmConfig.max_image_size)
     parser.add_argument("--work", type=Path, default=Path("/tmp/sfm_speed"))
+    parser.add_argument("--tag", default="", help="Suffix of the JSON file's name.")
     parser.add_argument("--out", default=None, help="JSON file (default: benchmarks/results/sfm_speed.json).")
     args = parser.parse_args()
     rows = []
     for count in (int(c) for c in args.counts.split(",")):
         work = args.work / str(count)
-        rows.append(compare(subset(args.photos, count, work / "photos"), work))
+        rows.append(compare(subset(args.photos, count, work / "photos"), work, args.max_image_size))
         print(json.dumps(rows[-1], indent=2))
-    record.save("sfm_speed", {"source": str(args.photos), "rows": rows}, out=args.out)
+    source = {"source": str(args.photos), "max_image_size": args.max_image_size}
+    record.save("sfm_speed", {**source, "rows": rows}, out=args.out, tag=args.tag)
 
 
 def report(r: dict) -> tuple[str, str]:
@@ -99,9 +109,17 @@ def report(r: dict) -> tuple[str, str]:
         f"({x['retrieval']['registered']}/{x['photos']} registered)"
         for x in r["rows"]
     )
+
+    def size(x: dict) -> str:
+        if "size" not in x:
+            return "-"
+        sift = min(1.0, r.get("max_image_size", 3200) / max(x["size"]))
+        return f"{x['size'][0]}x{x['size'][1]} ({round(sift * x['size'][0])}x{round(sift * x['size'][1])})"
+
     rows = [
         [
             str(x["photos"]),
+            size(x),
             matcher,
             f"{x[matcher]['registered']}/{x['photos']}",
             f"{x[matcher]['pairs']:,}",
@@ -118,6 +136,7 @@ def report(r: dict) -> tuple[str, str]:
     table = markdown_table(
         [
             "photos",
+            "photo size (SIFT's)",
             "matcher",
             "registered",
             "pairs matched",

@@ -31,6 +31,7 @@ import shutil
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from types import ModuleType
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -302,7 +303,7 @@ def run_sfm(
     new_out, new_work = not out.exists(), not work.exists()
     try:
         with exclusive(work / "lock", out, "this scene"):
-            return _run_sfm_locked(pycolmap, photos, out, work, video, cfg, overwrite, progress)
+            return _SfmJob(pycolmap, photos, out, work, video, cfg, _Steps(work), progress).run(overwrite)
     except InputError:  # a refusal leaves nothing behind; an interruption keeps the finished steps
         if new_work:
             shutil.rmtree(work, ignore_errors=True)
@@ -311,194 +312,223 @@ def run_sfm(
         raise
 
 
-def _run_sfm_locked(
-    pycolmap, photos: Path, out: Path, work: Path, video: bool, cfg: SfmConfig, overwrite: bool, progress: bool
-) -> SfmResult:
-    start = time.perf_counter()
-    steps = _Steps(work)
-    pycolmap.logging.minloglevel = 2  # warnings and errors only; progress is shown here
-    # On several threads COLMAP's CPU SIFT gives slightly different keypoints from run to run,
-    # its matcher writes the verified pairs in another order, and its bundle adjustment (Ceres)
-    # rounds differently: one thread gives the same model again.
-    threads = 1 if cfg.deterministic else -1
-    bar = tqdm(total=len(STEPS) + 1, desc="sfm", unit="step", disable=not progress)
+@dataclass
+class _SfmJob:
+    """One call of :func:`run_sfm`, holding the lock on ``work``: a method per step, each
+    skipped when ``steps`` records it finished with the same options."""
 
-    # 1. images
-    found = None if video else _input_images(photos)
-    _check_free_space(photos, out, cfg.frames if video else len(found))
-    options = {
-        "source": str(photos.resolve()),
-        "frames": cfg.frames if video else None,
-        "content": content_digest([photos] if video else [photos / n for n in found]),
-    }
-    image_dir = work / "frames" if video else photos
-    if not steps.finished("images", options):
-        shutil.rmtree(work / "frames", ignore_errors=True)
-        names = sample_frames(photos, image_dir, cfg.frames, progress=progress) if video else found
-        steps.record("images", options, names=names, sizes=_image_sizes(image_dir, names))
-    names = steps.done["images"]["names"]
-    sizes = steps.done["images"].get("sizes", [])
-    bar.set_postfix_str(f"{len(names)} images")
-    bar.update(1)
+    pycolmap: ModuleType
+    photos: Path
+    out: Path
+    work: Path
+    video: bool
+    cfg: SfmConfig
+    steps: _Steps
+    progress: bool
 
-    # 2. features
-    database = work / "database.db"
-    single = video if cfg.single_camera is None else cfg.single_camera
-    mixed = len(sizes) > 1
-    if mixed and single:
-        raise InputError(
-            f"{photos}: the images have {len(sizes)} sizes ({', '.join(f'{w}x{h}' for w, h in sizes)}) "
-            "and one camera cannot fit them; resize them to one size or let each size have its camera."
-        )
-    with Image.open(image_dir / names[0]) as im:
-        side = min(max(im.size), cfg.max_image_size)
-    peak = cfg.peak_threshold or sift_peak_threshold(side)
-    options = {
-        "camera_model": cfg.camera_model,
-        "single_camera": single,
-        "max_image_size": cfg.max_image_size,
-        "peak_threshold": peak,
-        "deterministic": cfg.deterministic,
-        "camera_per_image": mixed,
-    }
-    if not steps.finished("features", options):
-        database.unlink(missing_ok=True)
-        extraction = pycolmap.FeatureExtractionOptions(
-            max_image_size=cfg.max_image_size, use_gpu=False, num_threads=threads
-        )
-        extraction.sift.peak_threshold = peak
-        pycolmap.extract_features(
-            database,
-            image_dir,
-            image_names=names,
-            camera_mode=_camera_mode(pycolmap, single, mixed),
-            reader_options=pycolmap.ImageReaderOptions(camera_model=cfg.camera_model),
-            extraction_options=extraction,
-            device=pycolmap.Device.cpu,
-        )
-        steps.record("features", options)
-    bar.update(1)
+    @property
+    def threads(self) -> int:
+        # On several threads COLMAP's CPU SIFT gives slightly different keypoints from run to run,
+        # its matcher writes the verified pairs in another order, and its bundle adjustment (Ceres)
+        # rounds differently: one thread gives the same model again.
+        return 1 if self.cfg.deterministic else -1
 
-    # 3. matches
-    matcher = (
-        cfg.matcher
-        if cfg.matcher != "auto"
-        else "sequential"
-        if video
-        else ("retrieval" if len(names) > EXHAUSTIVE_UP_TO else "exhaustive")
-    )
-    options = {
-        "matcher": matcher,
-        "overlap": cfg.overlap,
-        "keyframes": cfg.keyframes,
-        "neighbours": cfg.neighbours,
-        "seed": cfg.seed,
-    }
-    if not steps.finished("matches", options):
-        _rebuild_database_without_matches(pycolmap, database)
-        matching = pycolmap.FeatureMatchingOptions(use_gpu=False, num_threads=threads)
+    @property
+    def image_dir(self) -> Path:
+        return self.work / "frames" if self.video else self.photos
+
+    @property
+    def database(self) -> Path:
+        return self.work / "database.db"
+
+    def images(self) -> tuple[list[str], list[tuple[int, int]]]:
+        """The photos as they are, or a video's frames: their names and distinct sizes."""
+        found = None if self.video else _input_images(self.photos)
+        _check_free_space(self.photos, self.out, self.cfg.frames if self.video else len(found))
+        options = {
+            "source": str(self.photos.resolve()),
+            "frames": self.cfg.frames if self.video else None,
+            "content": content_digest([self.photos] if self.video else [self.photos / n for n in found]),
+        }
+        if not self.steps.finished("images", options):
+            shutil.rmtree(self.work / "frames", ignore_errors=True)
+            names = (
+                sample_frames(self.photos, self.image_dir, self.cfg.frames, progress=self.progress)
+                if self.video
+                else found
+            )
+            self.steps.record("images", options, names=names, sizes=_image_sizes(self.image_dir, names))
+        done = self.steps.done["images"]
+        return done["names"], [tuple(s) for s in done.get("sizes", [])]
+
+    def features(self, names: list[str], sizes: list[tuple[int, int]]) -> int:
+        """SIFT on every image into the database; returns the longest side SIFT saw."""
+        single = self.video if self.cfg.single_camera is None else self.cfg.single_camera
+        mixed = len(sizes) > 1
+        if mixed and single:
+            raise InputError(
+                f"{self.photos}: the images have {len(sizes)} sizes ({', '.join(f'{w}x{h}' for w, h in sizes)}) "
+                "and one camera cannot fit them; resize them to one size or let each size have its camera."
+            )
+        with Image.open(self.image_dir / names[0]) as im:
+            side = min(max(im.size), self.cfg.max_image_size)
+        peak = self.cfg.peak_threshold or sift_peak_threshold(side)
+        options = {
+            "camera_model": self.cfg.camera_model,
+            "single_camera": single,
+            "max_image_size": self.cfg.max_image_size,
+            "peak_threshold": peak,
+            "deterministic": self.cfg.deterministic,
+            "camera_per_image": mixed,
+        }
+        if not self.steps.finished("features", options):
+            self.database.unlink(missing_ok=True)
+            extraction = self.pycolmap.FeatureExtractionOptions(
+                max_image_size=self.cfg.max_image_size, use_gpu=False, num_threads=self.threads
+            )
+            extraction.sift.peak_threshold = peak
+            self.pycolmap.extract_features(
+                self.database,
+                self.image_dir,
+                image_names=names,
+                camera_mode=_camera_mode(self.pycolmap, single, mixed),
+                reader_options=self.pycolmap.ImageReaderOptions(camera_model=self.cfg.camera_model),
+                extraction_options=extraction,
+                device=self.pycolmap.Device.cpu,
+            )
+            self.steps.record("features", options)
+        return side
+
+    def matches(self, names: list[str]) -> str:
+        """Matched and verified image pairs in the database; returns the matcher used."""
+        cfg, pycolmap = self.cfg, self.pycolmap
+        if cfg.matcher != "auto":
+            matcher = cfg.matcher
+        elif self.video:
+            matcher = "sequential"
+        else:
+            matcher = "retrieval" if len(names) > EXHAUSTIVE_UP_TO else "exhaustive"
+        options = {
+            "matcher": matcher,
+            "overlap": cfg.overlap,
+            "keyframes": cfg.keyframes,
+            "neighbours": cfg.neighbours,
+            "seed": cfg.seed,
+        }
+        if self.steps.finished("matches", options):
+            return matcher
+        _rebuild_database_without_matches(pycolmap, self.database)
+        matching = pycolmap.FeatureMatchingOptions(use_gpu=False, num_threads=self.threads)
         verification = pycolmap.TwoViewGeometryOptions()
         verification.ransac.random_seed = cfg.seed
         if matcher == "exhaustive":
             pycolmap.match_exhaustive(
-                database, matching_options=matching, verification_options=verification, device=pycolmap.Device.cpu
+                self.database,
+                matching_options=matching,
+                verification_options=verification,
+                device=pycolmap.Device.cpu,
             )
         else:
             pairs = (
                 sequential_pairs(len(names), cfg)
                 if matcher == "sequential"
-                else retrieval_pairs(pycolmap, database, names, cfg)
+                else retrieval_pairs(pycolmap, self.database, names, cfg)
             )
-            _write_pairs(names, pairs, work / "pairs.txt")
+            _write_pairs(names, pairs, self.work / "pairs.txt")
             pycolmap.match_image_pairs(
-                database,
+                self.database,
                 matching_options=matching,
-                pairing_options=pycolmap.ImportedPairingOptions(match_list_path=str(work / "pairs.txt")),
+                pairing_options=pycolmap.ImportedPairingOptions(match_list_path=str(self.work / "pairs.txt")),
                 verification_options=verification,
                 device=pycolmap.Device.cpu,
             )
-        steps.record("matches", options)
-    bar.update(1)
+        self.steps.record("matches", options)
+        return matcher
 
-    # 4. mapping
-    scale = pixel_scale(side) if cfg.scale_thresholds else 1.0
-    options = {"mapper": cfg.mapper, "seed": cfg.seed, "threshold_scale": scale}
-    if not steps.finished("mapping", options):
-        shutil.rmtree(work / "sparse", ignore_errors=True)
-        (work / "sparse").mkdir()
-        if cfg.mapper == "incremental":
-            models = pycolmap.incremental_mapping(
-                database, image_dir, work / "sparse", incremental_options(scale, cfg.seed, threads)
+    def mapping(self, names: list[str], side: int) -> dict:
+        """Cameras and points; the model with the most images is kept. Returns its record."""
+        cfg, pycolmap, sparse = self.cfg, self.pycolmap, self.work / "sparse"
+        scale = pixel_scale(side) if cfg.scale_thresholds else 1.0
+        options = {"mapper": cfg.mapper, "seed": cfg.seed, "threshold_scale": scale}
+        if not self.steps.finished("mapping", options):
+            shutil.rmtree(sparse, ignore_errors=True)
+            sparse.mkdir()
+            if cfg.mapper == "incremental":
+                mapper = incremental_options(scale, cfg.seed, self.threads)
+                models = pycolmap.incremental_mapping(self.database, self.image_dir, sparse, mapper)
+            else:
+                mapper = pycolmap.GlobalPipelineOptions(random_seed=cfg.seed, num_threads=self.threads)
+                models = pycolmap.global_mapping(self.database, self.image_dir, sparse, mapper)
+            sizes = {int(k): m.num_reg_images() for k, m in models.items()}
+            if not sizes:
+                raise InputError(
+                    f"{self.photos}: no two images could be matched into a model; the photos need more "
+                    "overlap (take them 10-20 degrees apart around the object, with texture in view)."
+                )
+            best = max(sizes, key=lambda k: (sizes[k], -k))
+            registered = sizes[best]
+            if registered < max(3, MIN_REGISTERED_SHARE * len(names)):
+                raise InputError(
+                    f"{self.photos}: {registered} of {len(names)} images registered; the photos need more "
+                    "overlap (take them 10-20 degrees apart around the object, with texture in view)."
+                )
+            model = models[best]
+            poses = {im.name: im.cam_from_world().matrix() for im in model.images.values() if im.has_pose}
+            self.steps.record(
+                "mapping",
+                options,
+                model=str(best),
+                registered=registered,
+                other_models=sorted((s for k, s in sizes.items() if k != best), reverse=True),
+                points=model.num_points3D(),
+                mean_reprojection_error=model.compute_mean_reprojection_error(),
+                flips=turned_frames(poses, names) if self.video else [],
             )
-        else:
-            models = pycolmap.global_mapping(
-                database,
-                image_dir,
-                work / "sparse",
-                pycolmap.GlobalPipelineOptions(random_seed=cfg.seed, num_threads=threads),
-            )
-        sizes = {int(k): m.num_reg_images() for k, m in models.items()}
-        if not sizes:
-            raise InputError(
-                f"{photos}: no two images could be matched into a model; the photos need more overlap "
-                "(take them 10-20 degrees apart around the object, with texture in view)."
-            )
-        best = max(sizes, key=lambda k: (sizes[k], -k))
-        registered = sizes[best]
-        if registered < max(3, MIN_REGISTERED_SHARE * len(names)):
-            raise InputError(
-                f"{photos}: {registered} of {len(names)} images registered; the photos need more overlap "
-                "(take them 10-20 degrees apart around the object, with texture in view)."
-            )
-        model = models[best]
-        poses = {image.name: image.cam_from_world().matrix() for image in model.images.values() if image.has_pose}
-        steps.record(
-            "mapping",
-            options,
-            model=str(best),
-            registered=registered,
-            other_models=sorted((s for k, s in sizes.items() if k != best), reverse=True),
-            points=model.num_points3D(),
-            mean_reprojection_error=model.compute_mean_reprojection_error(),
-            flips=turned_frames(poses, names) if video else [],
-        )
-    mapped = steps.done["mapping"]
-    bar.update(1)
+        return self.steps.done["mapping"]
 
-    # 5. undistort
-    options = {"model": mapped["model"]}
-    if not steps.finished("undistort", options):
-        shutil.rmtree(work / "undistorted", ignore_errors=True)
-        pycolmap.undistort_images(
-            work / "undistorted", work / "sparse" / mapped["model"], image_dir, output_type="COLMAP"
-        )
-        steps.record("undistort", options)
-    bar.update(1)
+    def undistort(self, mapped: dict) -> None:
+        """The kept model undistorted to PINHOLE cameras."""
+        options = {"model": mapped["model"]}
+        if not self.steps.finished("undistort", options):
+            shutil.rmtree(self.work / "undistorted", ignore_errors=True)
+            self.pycolmap.undistort_images(
+                self.work / "undistorted", self.work / "sparse" / mapped["model"], self.image_dir, output_type="COLMAP"
+            )
+            self.steps.record("undistort", options)
 
-    _write_scene(
-        work,
-        out,
-        {
-            "sfm": {
-                **asdict(cfg),
+    def run(self, overwrite: bool) -> SfmResult:
+        """Every step, then the scene folder."""
+        start = time.perf_counter()
+        self.pycolmap.logging.minloglevel = 2  # warnings and errors only; progress is shown here
+        with tqdm(total=len(STEPS) + 1, desc="sfm", unit="step", disable=not self.progress) as bar:
+            names, sizes = self.images()
+            bar.set_postfix_str(f"{len(names)} images")
+            bar.update(1)
+            side = self.features(names, sizes)
+            bar.update(1)
+            matcher = self.matches(names)
+            bar.update(1)
+            mapped = self.mapping(names, side)
+            bar.update(1)
+            self.undistort(mapped)
+            bar.update(1)
+            provenance = {
+                **asdict(self.cfg),
                 "matcher_used": matcher,
-                "source": str(photos.resolve()),
+                "source": str(self.photos.resolve()),
                 "images": len(names),
                 **{k: v for k, v in mapped.items() if k != "options"},
             }
-        },
-        overwrite,
-    )
-    bar.update(1)
-    bar.close()
-    return SfmResult(
-        out,
-        len(names),
-        mapped["registered"],
-        time.perf_counter() - start,
-        mapped["other_models"],
-        mapped.get("flips", []),
-    )
+            _write_scene(self.work, self.out, {"sfm": provenance}, overwrite)
+            bar.update(1)
+        return SfmResult(
+            self.out,
+            len(names),
+            mapped["registered"],
+            time.perf_counter() - start,
+            mapped["other_models"],
+            mapped.get("flips", []),
+        )
 
 
 def _camera_mode(pycolmap, single: bool, mixed: bool) -> pycolmap.CameraMode:
