@@ -268,43 +268,59 @@ def load_scene(
     masks = mask_folder(root, masks) if masks else None
     mask_root = root / masks if masks else None
     near = scene_near_plane(model.images, model.xyz)
-    views = []
-    for im in model.images:
-        path = image_root / im.name
-        if not path.is_file():
-            raise InputError(
-                f"{path}: image listed in the COLMAP model is missing on disk; restore it or "
-                "remove the image from sparse/0."
-            )
-        width, height = image_size(path)
-        src = colmap.resize_source_camera(im.camera, width, height)
-        aspect_in, aspect_cam = width / height, im.camera.width / im.camera.height
-        if abs(aspect_in - aspect_cam) > 0.02 * aspect_cam:
-            raise InputError(
-                f"{path}: image is {width}x{height} but its COLMAP camera is "
-                f"{im.camera.width}x{im.camera.height}; the image folder does not match the model."
-            )
-        camera = replace(colmap.pinhole_camera(src), near=near)
-        uv = im.uv * [width / im.camera.width, height / im.camera.height]
-        distorted = src.model not in ("PINHOLE", "SIMPLE_PINHOLE")
-        if distorted:
-            uv = colmap.undistort_points(uv, src, camera)
-        mask_path = (mask_root / f"{Path(im.name).with_suffix('')}.png") if mask_root else None
-        views.append(
-            View(
-                name=im.name,
-                camera=camera,
-                cam_from_world=im.cam_from_world,
-                image_path=path,
-                mask_path=mask_path if mask_path is not None and mask_path.is_file() else None,
-                point_ids=im.point_ids,
-                uv=uv,
-                source_camera=src if distorted else None,
-                mask_full_size=(im.camera.width, im.camera.height),
-            )
-        )
+    views = [_pinhole_view(im, image_root, mask_root, near) for im in model.images]
     meta = read_scene_json(root)
-    names = [v.name for v in views]
+    return Scene(
+        root=root,
+        views=views,
+        points=SparsePoints(model.xyz, model.rgb),
+        image_dir=images,
+        mask_dir=masks if mask_root is not None and mask_root.is_dir() else None,
+        test_names=_test_names(root, meta, [v.name for v in views], test_every),
+        meta=meta,
+    )
+
+
+def _pinhole_view(im: colmap.ColmapImage, image_root: Path, mask_root: Path | None, near: float) -> View:
+    """The view of COLMAP image ``im`` at the size of its file in ``image_root``: a pinhole
+    camera with near plane ``near``, the observations undistorted with it when ``im``'s camera
+    is not pinhole, and its mask in ``mask_root`` when the file is there."""
+    path = image_root / im.name
+    if not path.is_file():
+        raise InputError(
+            f"{path}: image listed in the COLMAP model is missing on disk; restore it or "
+            "remove the image from sparse/0."
+        )
+    width, height = image_size(path)
+    src = colmap.resize_source_camera(im.camera, width, height)
+    aspect_in, aspect_cam = width / height, im.camera.width / im.camera.height
+    if abs(aspect_in - aspect_cam) > 0.02 * aspect_cam:
+        raise InputError(
+            f"{path}: image is {width}x{height} but its COLMAP camera is "
+            f"{im.camera.width}x{im.camera.height}; the image folder does not match the model."
+        )
+    camera = replace(colmap.pinhole_camera(src), near=near)
+    uv = im.uv * [width / im.camera.width, height / im.camera.height]
+    distorted = src.model not in ("PINHOLE", "SIMPLE_PINHOLE")
+    if distorted:
+        uv = colmap.undistort_points(uv, src, camera)
+    mask_path = (mask_root / f"{Path(im.name).with_suffix('')}.png") if mask_root else None
+    return View(
+        name=im.name,
+        camera=camera,
+        cam_from_world=im.cam_from_world,
+        image_path=path,
+        mask_path=mask_path if mask_path is not None and mask_path.is_file() else None,
+        point_ids=im.point_ids,
+        uv=uv,
+        source_camera=src if distorted else None,
+        mask_full_size=(im.camera.width, im.camera.height),
+    )
+
+
+def _test_names(root: Path, meta: dict, names: list[str], test_every: int) -> frozenset[str]:
+    """The held-out views: scene.json's ``split.test`` when it lists them, else every
+    ``test_every``-th of ``names`` (LLFF's hold-out)."""
     listed = meta.get("split", {}).get("test")
     test_names = frozenset(listed) if listed is not None else llff_test_names(names, test_every)
     unknown = test_names - set(names)
@@ -312,15 +328,7 @@ def load_scene(
         raise InputError(
             f"{root / 'scene.json'}: split.test names views that do not exist ({sorted(unknown)[:3]}); fix the list."
         )
-    return Scene(
-        root=root,
-        views=views,
-        points=SparsePoints(model.xyz, model.rgb),
-        image_dir=images,
-        mask_dir=masks if mask_root is not None and mask_root.is_dir() else None,
-        test_names=test_names,
-        meta=meta,
-    )
+    return test_names
 
 
 def save_scene(scene: Scene, out: Path | str, *, overwrite: bool = False, text: bool = False) -> Path:
