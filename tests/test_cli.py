@@ -116,3 +116,31 @@ def test_failed_work_is_one_line_and_exit_1_and_bad_input_exit_2():
     assert "step_0000010.pt" in message
     refused = "x.png: not an image; pass a PNG."
     assert _failure(InputError(refused), "gsseg") == (f"error: {refused}", 2)
+
+
+def test_a_note_on_the_command_line_is_one_line(monkeypatch, capfd):
+    """A library's ``UserWarning`` reaches the command line as one ``warning: ...`` line, not
+    Python's file, line number and source; other warnings go where they went before (here,
+    pytest's record), and the entry point leaves the warning machinery as it found it."""
+    import warnings
+
+    import click
+
+    from dataset_tools.infra.cli_support import run_cli
+
+    @click.group()
+    def group():
+        pass
+
+    @group.command()
+    def note():
+        warnings.warn("scene/: an old scene; make it again.", stacklevel=1)
+        warnings.warn("old call", DeprecationWarning, stacklevel=1)
+
+    before = warnings.showwarning
+    monkeypatch.setattr(sys, "argv", ["prog", "note"])
+    with pytest.warns(DeprecationWarning, match="old call") as record:
+        run_cli(group, "prog")()
+    assert capfd.readouterr().err == "warning: scene/: an old scene; make it again.\n"
+    assert [w.category for w in record] == [DeprecationWarning]
+    assert warnings.showwarning is before

@@ -7,6 +7,7 @@ from __future__ import annotations
 import errno
 import functools
 import sys
+import warnings
 from collections.abc import Callable
 from importlib.metadata import PackageNotFoundError, version
 
@@ -157,19 +158,31 @@ def engine_options(command: Callable) -> Callable:
     )(with_engine)
 
 
+def _show_warning(show: Callable, message, category: type[Warning], *args, **kwargs) -> None:
+    """A ``UserWarning`` as one ``warning: ...`` line on stderr (above any progress bar), without
+    Python's file, line and source; any other category as ``show`` (Python's own) prints it."""
+    if issubclass(category, UserWarning):
+        tqdm.write(f"warning: {message}", file=sys.stderr)
+    else:
+        show(message, category, *args, **kwargs)
+
+
 def run_cli(group: click.Group, prog_name: str) -> Callable[[], None]:
     """An entry point that runs ``group`` and turns an ``InputError`` (worded with the flags of
     the command, :func:`word_errors_by_flags`) or an ``OSError`` into ``error: ...`` on stderr
     and exit code 2, without a traceback; interrupted work exits 130
     with its own message (a checkpoint written, how to continue). Threads are configured
-    first (:func:`dataset_tools.infra.threads.configure_threads`)."""
+    first (:func:`dataset_tools.infra.threads.configure_threads`); the library's notes
+    (``UserWarning``) print as ``warning: ...`` lines."""
     group = click.version_option(package_version(), "--version", prog_name=prog_name)(group)
     word_errors_by_flags(group)
 
     def main() -> None:
         configure_threads()
         try:
-            group.main(prog_name=prog_name, standalone_mode=False)
+            with warnings.catch_warnings():
+                warnings.showwarning = functools.partial(_show_warning, warnings.showwarning)
+                group.main(prog_name=prog_name, standalone_mode=False)
         except (
             InputError,
             RunFailed,
