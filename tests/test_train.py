@@ -21,7 +21,7 @@ from gsseg.train import trainer as trainer_module
 from gsseg.train.optim import GaussianOptimizer
 from gsseg.train.strategy import DensifyOptions, DensifyStats, densify_and_prune
 from gsseg.train.views import TrainViews, view_bytes
-from gsseg.train_config import LearningRates
+from gsseg.train_config import SCHEDULES, LearningRates
 
 
 def _history(run):
@@ -84,14 +84,23 @@ def test_resume_keeps_its_options_and_its_scene(small_scene, tmp_path):
 
 
 @pytest.mark.parametrize(
-    "iters, resets", [(None, [1000]), (3000, [1000]), (1500, []), (1000, []), (6000, [2000]), (12000, [4000])]
+    "schedule, iters, resets",
+    [
+        ("gpu", None, [3000, 6000, 9000, 12000]),
+        ("gpu", 15000, [3000, 6000]),
+        ("gpu", 3000, []),
+        ("gpu", 60000, [6000, 12000, 18000, 24000]),
+        *(("cpu", iters, []) for iters in (None, 1000, 1500, 3000, 6000, 30000)),
+    ],
 )
-def test_a_shorter_run_drops_opacity_resets_rather_than_compress_them(iters, resets):
+def test_a_shorter_run_drops_opacity_resets_rather_than_compress_them(schedule, iters, resets):
     """A reset needs about as many steps to recover from whatever the run's length: its period
-    stretches with ``--iters`` but never shrinks, and resets come only while densifying."""
-    timing = TrainConfig(iters=iters).timing
+    stretches with ``--iters`` but never shrinks, and resets come only while densifying. The CPU
+    schedule, too short to win a reset back, has none."""
+    timing = TrainConfig(schedule=schedule, iters=iters).timing
     assert [s for s in range(1, timing.iters + 1) if timing.resets_opacity_at(s)] == resets
-    assert timing.densify_until == round(2000 * timing.iters / 3000)  # the rest still scales
+    base = SCHEDULES[schedule]
+    assert timing.densify_until == round(base.densify_until * timing.iters / base.iters)  # the rest still scales
 
 
 def test_config_keeps_what_a_run_was_trained_with():
