@@ -24,7 +24,7 @@ from eval.edit_scores import edit_rows, summarize_edits
 from eval.evaluate import PROTOCOLS, Evaluation, evaluate, load_inputs
 from eval.lpips import LPIPS
 from eval.renders import ViewRenders
-from gsseg.edits import apply_edit
+from gsseg.edits import apply_edit, edit_background
 from gsseg.render import Backend, get_backend
 from gsseg.run import Run
 from gsseg.run_folder import RunFolder
@@ -70,7 +70,7 @@ def edit_panels(
     out: dict[str, list[np.ndarray]] = {}
     for op in ("remove", "extract", "recolor"):
         edited = apply_edit(run.gaussians, selected, op, tuple(c / 255 for c in color)).to(backend.device)
-        background = "white" if op == "extract" else "environment"
+        background = edit_background([op])
         out[op] = [run.render_rgb(v, gaussians=edited, background=background, backend=backend) for v in views]
     return out
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -19,7 +20,7 @@ from dataset_tools.scene import Scene
 from gsseg.gaussians import Gaussians
 from gsseg.ply import write_ply
 from gsseg.render import Backend, get_backend
-from gsseg.run import Run, load_run
+from gsseg.run import Background, Run, load_run
 from gsseg.run_folder import write_edit_record
 from gsseg.segment.clicks import Click, select_by_points
 from gsseg.segment.prompts import pick_object, point_from_click
@@ -44,6 +45,13 @@ def recolor(g: Gaussians, selected: torch.Tensor, rgb: tuple[float, float, float
     out.sh_dc[selected] = rgb_to_sh_dc(new)
     out.sh_rest[selected] = g.sh_rest[selected] * ratio
     return out
+
+
+def edit_background(ops: Iterable[str]) -> Background:
+    """What a model edited by ``ops`` is rendered over: white once an extraction has taken
+    objects out of their scene (the learned environment is no part of them, and an exported
+    object shows on any viewer's plain background), else the run's environment."""
+    return "white" if "extract" in ops else "environment"
 
 
 def check_edit(op: str, color: tuple | None) -> None:
@@ -186,6 +194,7 @@ def edit_run(
         run.folder.edit(name or f"{op}_{chosen.name}"),
         record,
         scene=scene,
+        background=edit_background([op]),
         split=split,
         fps=fps,
         backend=backend,
@@ -201,6 +210,7 @@ def write_edit(
     record: dict,
     *,
     scene: Scene,
+    background: Background = "environment",
     split: str = "test",
     fps: int = 8,
     backend: str | Backend = "auto",
@@ -208,8 +218,9 @@ def write_edit(
     progress: bool = True,
 ) -> Path:
     """Write the edit folder ``out`` (inside ``RUN/edits/``) of the ``edited`` model:
-    ``gaussians.ply``, ``renders/<view>.png`` of ``scene``'s ``split`` views, ``video.mp4`` and
-    ``edit.json`` (``record``); whole or not at all."""
+    ``gaussians.ply``, ``renders/<view>.png`` of ``scene``'s ``split`` views over
+    ``background`` (:func:`edit_background`), ``video.mp4`` and ``edit.json`` (``record``);
+    whole or not at all."""
     refuse_overlap(out, scene_entries(scene.root))
     remove_stale_temporaries(out.parent / "*")  # what killed edits left in RUN/edits/
     if out.exists() and not overwrite:
@@ -218,7 +229,7 @@ def write_edit(
         write_ply(edited, tmp / "gaussians.ply")
         frames = []
         for view in tqdm(scene.split(split), desc="rendering edit", unit="view", disable=not progress):
-            frame = run.render_rgb(view, gaussians=edited, backend=backend)
+            frame = run.render_rgb(view, gaussians=edited, background=background, backend=backend)
             write_png(tmp / "renders" / f"{view.stem}.png", frame)
             frames.append(frame)
         _write_video(tmp / "video.mp4", frames, fps)

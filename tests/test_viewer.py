@@ -21,6 +21,7 @@ from plyfile import PlyData
 from scipy import ndimage
 from scipy.spatial.transform import Rotation
 
+from dataset_tools.image_files import read_image
 from dataset_tools.infra.errors import InputError
 from dataset_tools.scene import load_scene
 from eval.standard_render import read_splats, render_reference
@@ -201,6 +202,34 @@ def test_edits_undo_and_save_write_what_gsseg_edit_writes(segmented, small_scene
     assert session.undo().op == "remove" and session.current()[0] is base and session.undo() is None
     with pytest.raises(InputError, match="select an object first"):
         session.edit("extract")
+
+
+@pytest.mark.slow
+def test_an_extracted_object_shows_on_white_a_removal_over_the_environment(segmented, small_scene, tmp_path):
+    """The learned environment is no part of an extracted object: `gsseg edit --op extract`,
+    the viewer after an extraction and its saved edit show it on white, as the report does and
+    as any viewer shows the exported object; a removal keeps the environment behind."""
+    from gsseg.edits import apply_edit, edit_run
+
+    run_dir = _copy(segmented, tmp_path)
+    run = load_run(run_dir)
+    obj = int(run.labels().objects[0])
+    view = run.scene(small_scene.root).split("test")[0]
+    alone = apply_edit(run.gaussians, run.labels().selection(obj), "extract")
+    empty = run.render(view, gaussians=alone, background="black", backend="cpu").alpha.squeeze(-1).numpy() < 1e-4
+    kept = apply_edit(run.gaussians, run.labels().selection(obj), "remove")
+    behind = run.render_rgb(view, gaussians=kept, backend="cpu")
+    assert empty.mean() > 0.3 and (behind[empty] < 250).any()  # the environment is no white
+    for op in ("extract", "remove"):
+        out = edit_run(run_dir, op, object_id=obj, scene_dir=small_scene.root, backend="cpu", progress=False)
+        frame = read_image(out / "renders" / f"{view.stem}.png")
+        expected = np.full_like(behind[empty], 255) if op == "extract" else behind[empty]
+        np.testing.assert_array_equal(frame[empty], expected)
+    session = ViewerSession(load_run(run_dir), scene_dir=small_scene.root, backend="cpu")
+    session.selected = obj
+    session.edit("extract")
+    assert (session.frame(ViewCamera(view.camera, view.cam_from_world))[empty] == 255).all()
+    assert (read_image(session.save("viewer") / "renders" / f"{view.stem}.png")[empty] == 255).all()
 
 
 @pytest.mark.slow

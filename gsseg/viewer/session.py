@@ -17,7 +17,7 @@ from scipy.spatial.transform import Rotation
 from dataset_tools.cameras import PinholeCamera
 from dataset_tools.image_files import label_palette
 from dataset_tools.infra.errors import InputError
-from gsseg.edits import apply_edit, check_edit, write_edit
+from gsseg.edits import apply_edit, check_edit, edit_background, write_edit
 from gsseg.gaussians import Gaussians
 from gsseg.render import get_backend
 from gsseg.render.contributions import Contributions
@@ -264,7 +264,9 @@ class ViewerSession:
         selection = self.selection()
         if seg is not None and (self.show_segments or selection is not None):
             g = _painted(g, seg, self.show_segments, selection)
-        return self.run.render_rgb(view, gaussians=g, backend=self.backend)
+        with self._lock:
+            background = edit_background(s.op for s in self.steps)
+        return self.run.render_rgb(view, gaussians=g, background=background, backend=self.backend)
 
     def save(self, name: str, *, split: str = "test", overwrite: bool = False) -> Path:
         """Write the current model as ``RUN/edits/NAME/`` (as ``gsseg edit`` does)."""
@@ -293,6 +295,7 @@ class ViewerSession:
             self.run.folder.edit(name),
             record,
             scene=self.scene,
+            background=edit_background(s.op for s in steps),
             split=split,
             backend=self.backend,
             overwrite=overwrite,
