@@ -24,6 +24,7 @@ from eval.edit_scores import edit_rows, summarize_edits
 from eval.evaluate import PROTOCOLS, Evaluation, evaluate, load_inputs
 from eval.lpips import LPIPS
 from eval.renders import ViewRenders
+from eval.training_curve import psnr_levels
 from gsseg.edits import apply_edit, edit_background
 from gsseg.render import Backend, get_backend
 from gsseg.run import Run
@@ -108,8 +109,10 @@ def truth_rows(
     return out
 
 
-def training_plot(history: list[dict]) -> bytes | None:
-    """PNG of the training loss and PSNR against the step (None without a history)."""
+def training_plot(history: list[dict], levels: tuple[np.ndarray, np.ndarray] | None = None) -> bytes | None:
+    """PNG of the training loss and PSNR against the step (None without a history); ``levels``:
+    (W,) steps and (W,) dB of the PSNR with each view's own level taken out
+    (:func:`eval.training_curve.psnr_levels`), drawn over it."""
     if not history:
         return None
     import matplotlib
@@ -124,7 +127,10 @@ def training_plot(history: list[dict]) -> bytes | None:
     a.plot(steps, [h["obj"] for h in history], label="object CE")
     a.set(xlabel="step", ylabel="loss", yscale="log", title="training loss")
     a.legend()
-    b.plot(steps, [h["psnr"] for h in history])
+    b.plot(steps, [h["psnr"] for h in history], lw=0.6, alpha=0.6, label="the view of each step")
+    if levels is not None:
+        b.plot(*levels, lw=2, color="black", label="each view's level taken out")
+        b.legend()
     b.set(xlabel="step", ylabel="dB", title="training-view PSNR")
     fig.tight_layout()
     buf = io.BytesIO()
@@ -227,14 +233,16 @@ def write_report(
     selected: int,
     title: str,
     truth: dict[str, np.ndarray] | None = None,
+    levels: tuple[np.ndarray, np.ndarray] | None = None,
     overwrite: bool = False,
 ) -> Path:
     """Write ``out_dir`` (atomically) with metrics.json, report.md, report.html and images/;
-    ``truth``: image rows of the edits beside their ground truth (:func:`truth_rows`)."""
+    ``truth``: image rows of the edits beside their ground truth (:func:`truth_rows`);
+    ``levels``: the training curve of the model alone (:func:`training_plot`)."""
     sections = _sections(ev)
     rows = {r.stem: encode_png(image_row(r, ev.id_map, edits, i)) for i, r in enumerate(renders)}
     truth_pngs = {stem: encode_png(row) for stem, row in (truth or {}).items()}
-    curve = training_plot(history)
+    curve = training_plot(history, levels)
     gt = ev.id_map.get(selected)
     edit_note = f"edits of object {selected}" + (f" (ground-truth match: object {gt})" if gt is not None else "")
     panels = " | ".join(p for p in PANELS if p != "ground truth" or ev.objects)
@@ -332,6 +340,8 @@ def report_run(
     edits = edit_panels(run, segmentation, views, selected, color, backend)
     truth = truth_rows(scene_dir, views, ev.id_map.get(selected), edits) if ev.edits else None
     history = run.folder.read_history()
+    train_views = len(run.scene(scene_dir).split("train"))
+    levels = psnr_levels(history, train_views, run.config.seed, max(10, history[-1]["step"] // 30)) if history else None
     write_report(
         ev,
         renders,
@@ -341,6 +351,7 @@ def report_run(
         selected=selected,
         title=f"gsseg report: {run_dir.name}",
         truth=truth,
+        levels=levels,
         overwrite=overwrite,
     )
     with run.folder.lock():

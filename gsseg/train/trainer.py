@@ -99,7 +99,7 @@ class _State:
         self.history, self.step = ckpt["history"], ckpt["step"]
 
 
-def _view_at(step: int, n_views: int, seed: int) -> int:
+def view_at_step(step: int, n_views: int, seed: int) -> int:
     """The view trained at 1-based ``step``: epochs of seeded permutations, so that the order
     depends on the step alone and a resumed run sees the same views."""
     epoch, k = divmod(step - 1, n_views)
@@ -390,7 +390,7 @@ def _train_locked(
     extent = camera_extent(scene.views)
     views = TrainViews(
         train_views,
-        lambda step: _view_at(step, len(train_views), cfg.seed),
+        lambda step: view_at_step(step, len(train_views), cfg.seed),
         mode=cache_views,
         device=backend.device,
         progress=progress,
