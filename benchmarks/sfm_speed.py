@@ -57,11 +57,11 @@ def timed_sfm(photos: Path, scene: Path, config: SfmConfig, features_from: Path 
 
 def compare(photos: Path, work: Path, max_image_size: int) -> dict:
     """Exhaustive and retrieval matching of the same photos, and their cameras against each other."""
-    exhaustive = timed_sfm(photos, work / "exhaustive", SfmConfig("exhaustive", max_image_size=max_image_size))
+    exhaustive = timed_sfm(photos, work / "exhaustive", SfmConfig(matcher="exhaustive", max_image_size=max_image_size))
     retrieval = timed_sfm(
         photos,
         work / "retrieval",
-        SfmConfig("retrieval", max_image_size=max_image_size),
+        SfmConfig(matcher="retrieval", max_image_size=max_image_size),
         features_from=work / "exhaustive",
     )
     made = {v.name: v.cam_from_world for v in load_scene(work / "retrieval", masks=None).views}
