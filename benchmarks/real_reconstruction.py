@@ -46,7 +46,6 @@ def run_scene(name: str, real: Path, work: Path, iters: int | None, max_gaussian
     renders = [run.render_rgb(v) for v in views]
     truth = [v.load_image() for v in views]
     history = run.folder.read_history()
-    n_train = len(run.scene().split("train"))
     return {
         "scene": name,
         "images": images,
@@ -57,7 +56,7 @@ def run_scene(name: str, real: Path, work: Path, iters: int | None, max_gaussian
         "gaussians": len(run.gaussians),
         "test_psnr": float(np.mean([psnr(a, b) for a, b in zip(renders, truth)])),
         "test_ssim": float(np.mean([ssim(a, b) for a, b in zip(renders, truth)])),
-        **curve_summary(history, n_train, run.config.seed),
+        **curve_summary(history, len(run.record.train_views), run.config.seed),
         "curve": "view levels",
         "sfm_s": sfm_s,
         "train_s": train_s,

@@ -65,14 +65,15 @@ def compare(photos: Path, work: Path, max_image_size: int) -> dict:
         features_from=work / "exhaustive",
     )
     made = {v.name: v.cam_from_world for v in load_scene(work / "retrieval", masks=None).views}
-    ref = {v.name: v.cam_from_world for v in load_scene(work / "exhaustive", masks=None).views}
+    reference = load_scene(work / "exhaustive", masks=None)
+    ref = {v.name: v.cam_from_world for v in reference.views}
     names = sorted(made.keys() & ref.keys())
     rot, ctr = camera_errors([made[n] for n in names], [ref[n] for n in names])
     n = exhaustive["images"]
     exhaustive["pairs"] = n * (n - 1) // 2
     return {
         "photos": n,
-        "size": [(cam := load_scene(work / "exhaustive", masks=None).views[0].camera).width, cam.height],
+        "size": [reference.views[0].camera.width, reference.views[0].camera.height],
         "exhaustive": exhaustive,
         "retrieval": retrieval,
         "rotation_deg_median": float(np.median(rot)),
@@ -113,7 +114,7 @@ def report(r: dict) -> tuple[str, str]:
     def size(x: dict) -> str:
         if "size" not in x:
             return "-"
-        sift = min(1.0, r.get("max_image_size", 3200) / max(x["size"]))
+        sift = min(1.0, r.get("max_image_size", SfmConfig.max_image_size) / max(x["size"]))
         return f"{x['size'][0]}x{x['size'][1]} ({round(sift * x['size'][0])}x{round(sift * x['size'][1])})"
 
     rows = [

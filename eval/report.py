@@ -340,8 +340,8 @@ def report_run(
     edits = edit_panels(run, segmentation, views, selected, color, backend)
     truth = truth_rows(scene_dir, views, ev.id_map.get(selected), edits) if ev.edits else None
     history = run.folder.read_history()
-    train_views = len(run.scene(scene_dir).split("train"))
-    levels = psnr_levels(history, train_views, run.config.seed, max(10, history[-1]["step"] // 30)) if history else None
+    trained = len(run.record.train_views)
+    levels = psnr_levels(history, trained, run.config.seed, max(10, history[-1]["step"] // 30)) if history else None
     write_report(
         ev,
         renders,
