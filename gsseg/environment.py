@@ -20,7 +20,6 @@ import math
 
 import numpy as np
 import torch
-import torch.nn.functional as F
 
 from dataset_tools.cameras import PinholeCamera
 from dataset_tools.infra.errors import OptionError
@@ -38,6 +37,30 @@ def ray_directions(camera: PinholeCamera, cam_from_world: torch.Tensor) -> torch
     )
     d_cam = torch.stack([(u - camera.cx) / camera.fx, (v - camera.cy) / camera.fy, torch.ones_like(u)], -1)
     return torch.nn.functional.normalize(d_cam @ R, dim=-1)  # R.T @ d for every pixel
+
+
+class _ProfileLerp(torch.autograd.Function):
+    """(1 - w) profile[lo] + w profile[hi] for (N,) bin indices and (N, 1) weights; the
+    backward pass sums each bin's gradient with ``torch.bincount``, which on the CPU adds in
+    pixel order, so that the bits do not depend on the threads (indexing's backward adds in
+    whatever order the threads reach a bin), and without ``F.embedding``'s sort of the indices
+    (the lookup with its gradient at 497x372 pixels: 5.5 ms against 28 on 2 cores)."""
+
+    @staticmethod
+    def forward(ctx, profile, lo, hi, w):
+        ctx.save_for_backward(lo, hi, w)
+        ctx.bins = profile.shape[0]
+        return (1 - w) * profile[lo] + w * profile[hi]
+
+    @staticmethod
+    def backward(ctx, grad):
+        lo, hi, w = ctx.saved_tensors
+        lower, upper = (1 - w) * grad, w * grad
+        sums = [
+            torch.bincount(lo, lower[:, c], minlength=ctx.bins) + torch.bincount(hi, upper[:, c], minlength=ctx.bins)
+            for c in range(grad.shape[1])
+        ]
+        return torch.stack(sums, dim=1), None, None, None
 
 
 def mean_up(cam_from_world: list[np.ndarray]) -> np.ndarray:
@@ -85,9 +108,7 @@ class Environment(torch.nn.Module):
         lo = x.floor().clamp(0, bins - 1)
         w = (x - lo).clamp(0.0, 1.0)[:, None]
         lo = lo.long()
-        # embedding, not indexing: its CPU backward sums each bin's gradient in pixel order,
-        # where indexing's adds with atomics in whatever order the threads reach them.
-        return (1 - w) * F.embedding(lo, self.profile) + w * F.embedding((lo + 1).clamp_max(bins - 1), self.profile)
+        return _ProfileLerp.apply(self.profile, lo, (lo + 1).clamp_max(bins - 1), w)
 
     def forward(self, camera: PinholeCamera, cam_from_world: torch.Tensor) -> torch.Tensor:
         """The background image of one camera, (H, W, 3)."""

@@ -245,3 +245,44 @@ def test_the_training_ssim_is_kornias_in_value_and_gradient():
             grads.append((value.detach(), x.grad))
         torch.testing.assert_close(grads[0][0], grads[1][0], atol=1e-10, rtol=0)
         torch.testing.assert_close(grads[0][1], grads[1][1], atol=1e-8, rtol=0)
+
+
+@pytest.mark.parametrize("shape", [(37, 52, 3), (6, 9, 1), (12, 6, 2), (64, 71, 3)])
+def test_the_cpu_ssim_kernels_give_the_reference_value_and_gradient(shape):
+    """The numba mean SSIM against :func:`ssim_map` (itself kornia's) in float32, on sizes
+    from the smallest that reflect padding allows to ones with a wide interior."""
+    from gsseg.train.losses import ssim_map
+    from gsseg.train.ssim_cpu import mean_ssim_cpu
+
+    gen = torch.Generator().manual_seed(1)
+    a = torch.rand(shape, generator=gen)
+    b = (a + 0.3 * torch.rand(shape, generator=gen) - 0.15).clamp(0, 1)
+    results = []
+    for fn in (mean_ssim_cpu, lambda x, y: ssim_map(x.permute(2, 0, 1)[None], y.permute(2, 0, 1)[None]).mean()):
+        x = a.clone().requires_grad_(True)
+        value = fn(x, b)
+        (3.0 * value).backward()
+        results.append((value.detach(), x.grad))
+    torch.testing.assert_close(results[0][0], results[1][0], atol=2e-6, rtol=0)
+    scale = results[1][1].abs().max()
+    torch.testing.assert_close(results[0][1] / scale, results[1][1] / scale, atol=2e-5, rtol=0)
+
+
+def test_reflect_taps_are_the_padded_filter_and_its_transpose():
+    """The tables of :func:`reflect_taps` as dense matrices: the forward one is np.pad's reflect
+    followed by the window, the transposed one its transpose."""
+    from gsseg.train.ssim_cpu import SSIM_WINDOW, gaussian_window, reflect_taps
+
+    g, r = gaussian_window().astype(np.float64), SSIM_WINDOW // 2
+    for n in (6, 11, 23):
+        dense = np.zeros((n, n))
+        for i in range(n):
+            unit = np.zeros(n)
+            unit[i] = 1.0
+            dense[:, i] = np.convolve(np.pad(unit, r, mode="reflect"), g, mode="valid")
+        for transpose, expected in ((False, dense), (True, dense.T)):
+            index, weights, lo, hi = reflect_taps(n, transpose)
+            table = np.zeros((n, n))
+            np.add.at(table, (np.repeat(np.arange(n), index.shape[1]), index.ravel()), weights.ravel())
+            np.testing.assert_allclose(table, expected, atol=1e-7)
+            assert all(np.count_nonzero(weights[i]) == SSIM_WINDOW for i in range(lo, hi))
