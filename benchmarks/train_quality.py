@@ -24,6 +24,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from benchmarks import record
+from dataset_tools.scene import GT_MASKS
 from eval.report import markdown_table
 from gsseg.render import BACKENDS
 from gsseg.run_folder import RunFolder
@@ -85,7 +86,9 @@ def main() -> None:
             runs = []
             for seed in train_seeds:
                 name = f"orbit_{backend}" + (f"_seed{seed}" if seed else "")
-                cfg = TrainConfig(iters=args.iters, backend=backend, seed=seed, environment_profile=args.profile)
+                cfg = TrainConfig(
+                    iters=args.iters, masks=GT_MASKS, backend=backend, seed=seed, environment_profile=args.profile
+                )
                 runs.append(results.setdefault(name, train_and_score(synth, work / name, cfg)))
                 if args.coupled:
                     coupled = replace(cfg, geometry_from_masks=True)
@@ -97,7 +100,7 @@ def main() -> None:
                     for stat, fn in (("mean", lambda xs: sum(xs) / len(xs)), ("min", min), ("max", max))
                 }
         if args.gpu_schedule:
-            cfg = TrainConfig(schedule="gpu", backend="gsplat", environment_profile=args.profile)
+            cfg = TrainConfig(schedule="gpu", masks=GT_MASKS, backend="gsplat", environment_profile=args.profile)
             results["orbit_gsplat_gpu_schedule"] = train_and_score(synth, work / "orbit_gpu", cfg)
         if args.beer:
             for backend in backends:
