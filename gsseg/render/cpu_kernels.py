@@ -445,14 +445,14 @@ def accumulate_weights(means2d, conics, opacities, offsets, ids, width, height, 
     return out
 
 
-def compiled_on_disk() -> bool:
-    """Whether numba's cache on disk holds the kernels a training step runs (binning, blending
-    and its backward pass), so that the first step of a process loads them instead of
-    compiling them (about half a minute). True when numba's cache cannot be inspected."""
+STEP_KERNELS = (bin_gaussians, blend_forward, blend_backward)  # the kernels of a render and its backward pass
+
+
+def compiled_on_disk(kernels: tuple = STEP_KERNELS) -> bool:
+    """Whether numba's cache on disk holds ``kernels`` (numba functions compiled with
+    ``cache=True``), so that their first call in a process loads them instead of compiling
+    them. True when numba's cache cannot be inspected."""
     try:
-        return all(
-            k.signatures or Path(k._cache._cache_file._index_path).is_file()
-            for k in (bin_gaussians, blend_forward, blend_backward)
-        )
+        return all(k.signatures or Path(k._cache._cache_file._index_path).is_file() for k in kernels)
     except AttributeError:  # another numba's internals
         return True

@@ -32,10 +32,11 @@ from dataset_tools.scene import Scene, View, load_scene
 from gsseg.environment import Environment, background_image, mean_up, profile_bins
 from gsseg.gaussians import Gaussians, gaussians_from_points, make_classifier, random_points
 from gsseg.render import Backend, RenderOutput, get_backend, render
-from gsseg.render.cpu_kernels import compiled_on_disk
+from gsseg.render.cpu_kernels import STEP_KERNELS, compiled_on_disk
 from gsseg.run_folder import RunFolder, write_torch
 from gsseg.train.losses import knn_identity_loss, object_loss, photometric_loss, psnr
 from gsseg.train.optim import GaussianOptimizer
+from gsseg.train.ssim_cpu import mean_ssim_cpu, ssim_backward, ssim_forward
 from gsseg.train.strategy import DensifyOptions, DensifyStrategy
 from gsseg.train.views import TrainView, TrainViews, camera_extent
 from gsseg.train_config import RunRecord, TrainConfig, scene_difference
@@ -416,12 +417,12 @@ def _train_locked(
 
 
 def _warm_up(backend: Backend, progress: bool) -> None:
-    """Compile (or load from numba's cache) the CPU kernels on a tiny render and its backward
-    pass before the progress bar starts, saying so on the first run, so that the bar's
-    estimate times training steps alone."""
+    """Compile (or load from numba's cache) the CPU kernels on a tiny render, its SSIM and
+    their backward pass before the progress bar starts, saying so on the first run,
+    so that the bar's estimate times training steps alone."""
     if backend.name != "cpu":
         return
-    if progress and not compiled_on_disk():
+    if progress and not compiled_on_disk((*STEP_KERNELS, ssim_forward, ssim_backward)):
         tqdm.write("compiling the CPU kernels (first run only, about half a minute)", file=sys.stderr)
     xyz = np.array([[0.0, 0.0, 2.0], [0.2, 0.0, 2.5], [0.0, 0.2, 3.0], [-0.2, 0.0, 2.2]])
     tiny = gaussians_from_points(xyz, np.full((4, 3), 128, np.uint8), initial_opacity=0.5)
@@ -434,7 +435,7 @@ def _warm_up(backend: Backend, progress: bool) -> None:
         feature_geometry_grad=False,
         backend=backend,
     )
-    (out.rgb.sum() + out.features.sum()).backward()
+    (mean_ssim_cpu(out.rgb, torch.zeros_like(out.rgb)) + out.features.sum()).backward()
 
 
 def _loop(
