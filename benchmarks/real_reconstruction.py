@@ -71,7 +71,8 @@ def run_scene(name: str, real: Path, work: Path, training: Training) -> dict:
         train(scene_dir, run_dir, cfg)
     train_s = time.perf_counter() - start
     run = load_run(run_dir)
-    views = run.scene().split("test")
+    scene = run.scene()
+    views = scene.split("test")
     renders = [run.render_rgb(v) for v in views]
     truth = [v.load_image() for v in views]
     history = run.folder.read_history()
@@ -79,7 +80,7 @@ def run_scene(name: str, real: Path, work: Path, training: Training) -> dict:
         "scene": name,
         "images": images,
         "size": [views[0].camera.width, views[0].camera.height],
-        "views": len(run.scene().views),
+        "views": len(scene.views),
         "test_views": len(views),
         "schedule": run.config.schedule,
         "backend": get_backend(run.config.backend).name,

@@ -172,6 +172,9 @@ def ssim_backward(a, b, d_mu, d_aa, d_ab, row_taps_t, col_taps_t, n_ch, g, scale
     return grad
 
 
+SSIM_KERNELS = (ssim_forward, ssim_backward)  # the kernels of the loss and its gradient
+
+
 class _MeanSSIM(torch.autograd.Function):
     @staticmethod
     def forward(ctx, rendered, target):

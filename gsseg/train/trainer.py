@@ -36,7 +36,7 @@ from gsseg.render.cpu_kernels import STEP_KERNELS, compiled_on_disk
 from gsseg.run_folder import RunFolder, write_torch
 from gsseg.train.losses import knn_identity_loss, object_loss, photometric_loss, psnr
 from gsseg.train.optim import GaussianOptimizer
-from gsseg.train.ssim_cpu import mean_ssim_cpu, ssim_backward, ssim_forward
+from gsseg.train.ssim_cpu import SSIM_KERNELS, mean_ssim_cpu
 from gsseg.train.strategy import DensifyOptions, DensifyStrategy
 from gsseg.train.views import TrainView, TrainViews, camera_extent
 from gsseg.train_config import RunRecord, TrainConfig, scene_difference
@@ -422,7 +422,7 @@ def _warm_up(backend: Backend, progress: bool) -> None:
     so that the bar's estimate times training steps alone."""
     if backend.name != "cpu":
         return
-    if progress and not compiled_on_disk((*STEP_KERNELS, ssim_forward, ssim_backward)):
+    if progress and not compiled_on_disk(STEP_KERNELS + SSIM_KERNELS):
         tqdm.write("compiling the CPU kernels (first run only, about half a minute)", file=sys.stderr)
     xyz = np.array([[0.0, 0.0, 2.0], [0.2, 0.0, 2.5], [0.0, 0.2, 3.0], [-0.2, 0.0, 2.2]])
     tiny = gaussians_from_points(xyz, np.full((4, 3), 128, np.uint8), initial_opacity=0.5)
