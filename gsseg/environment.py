@@ -23,6 +23,7 @@ import torch
 
 from dataset_tools.cameras import PinholeCamera
 from dataset_tools.infra.errors import OptionError
+from gsseg.environment_cpu import environment_image_cpu
 from gsseg.gaussians import OBJ_FEAT_DIM, Gaussians
 from gsseg.sh import eval_sh, num_coeffs, rgb_to_sh_dc
 
@@ -111,7 +112,16 @@ class Environment(torch.nn.Module):
         return _ProfileLerp.apply(self.profile, lo, (lo + 1).clamp_max(bins - 1), w)
 
     def forward(self, camera: PinholeCamera, cam_from_world: torch.Tensor) -> torch.Tensor:
-        """The background image of one camera, (H, W, 3)."""
+        """The background image of one camera, (H, W, 3): for float32 on the CPU by the numba
+        kernels of :mod:`gsseg.environment_cpu` (the same image and gradients without the
+        per-pixel tables), else by :meth:`image_torch`."""
+        if self.coeffs.device.type == "cpu" and self.coeffs.dtype == torch.float32:
+            up = self.up if self.profile is not None else None
+            return environment_image_cpu(self.coeffs[0], self.profile, up, camera, cam_from_world)
+        return self.image_torch(camera, cam_from_world)
+
+    def image_torch(self, camera: PinholeCamera, cam_from_world: torch.Tensor) -> torch.Tensor:
+        """The background image of one camera, (H, W, 3), in tensor operations."""
         dirs = ray_directions(camera, cam_from_world).to(self.coeffs.device).reshape(-1, 3)
         colour = eval_sh(self.degree, self.coeffs[0], dirs)
         if self.profile is not None:

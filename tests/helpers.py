@@ -1,13 +1,15 @@
 """What several test modules share: command-line runners, synthetic scenes with training
-masks, and small random Gaussian scenes."""
+masks, small random Gaussian scenes, and numba's thread count."""
 
 from __future__ import annotations
 
 import shutil
 import subprocess
 import sys
+from contextlib import contextmanager
 from pathlib import Path
 
+import numba
 import numpy as np
 import torch
 
@@ -86,3 +88,14 @@ def output_weights(width: int, height: int, seed: int, dtype: torch.dtype) -> di
         "depth": (height, width),
     }
     return {k: torch.as_tensor(rng.standard_normal(s), dtype=dtype) for k, s in shapes.items()}
+
+
+@contextmanager
+def numba_threads(n: int):
+    """numba's parallel kernels on ``n`` threads within the block."""
+    before = numba.get_num_threads()
+    numba.set_num_threads(min(n, numba.config.NUMBA_NUM_THREADS))
+    try:
+        yield
+    finally:
+        numba.set_num_threads(before)

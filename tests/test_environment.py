@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
+from helpers import numba_threads
 
 from dataset_tools.cameras import PinholeCamera
 from dataset_tools.infra.errors import InputError
@@ -85,6 +86,35 @@ def test_profile_gradient_is_the_in_order_sum_of_its_pixels():
     np.add.at(lower, lo, ((1 - w) * grad).numpy())
     np.add.at(upper, np.minimum(lo + 1, bins - 1), (w * grad).numpy())
     assert np.array_equal(env.profile.grad.numpy(), lower + upper)
+
+
+@pytest.mark.parametrize("degree, bins", [(3, 40), (1, 0), (3, 0)])
+def test_cpu_kernels_match_the_tensor_image_and_gradients(degree, bins):
+    """The numba image of a rotated camera with random coefficients and profile (some colours
+    clamped at 0) equals :meth:`Environment.image_torch`, and so do the gradients of a loss on
+    it; the gradients have the same bits on one thread as on two."""
+    camera = PinholeCamera(width=37, height=29, fx=30.0, fy=31.0, cx=17.0, cy=15.5)
+    pose = torch.as_tensor(look_at(np.array([0.3, -2.0, 0.5]), np.zeros(3)), dtype=torch.float32)
+    env = Environment(degree, up=np.array([0.1, 0.2, 0.97]) / np.linalg.norm([0.1, 0.2, 0.97]), bins=bins)
+    gen = torch.Generator().manual_seed(degree + bins)
+    with torch.no_grad():
+        env.coeffs.copy_(1.5 * torch.randn(env.coeffs.shape, generator=gen))
+        if bins:
+            env.profile.copy_(torch.randn(env.profile.shape, generator=gen))
+    weights = torch.randn(camera.height, camera.width, 3, generator=gen)
+    results = []
+    for image_of, threads in ((env.image_torch, 2), (env, 2), (env, 1)):
+        env.zero_grad()
+        with numba_threads(threads):
+            image = image_of(camera, pose)
+            (image * weights).sum().backward()
+        results.append((image.detach(), [p.grad.clone() for p in env.parameters()]))
+    (ref, ref_grads), (image, grads), (_, one_thread_grads) = results
+    assert image.shape == (29, 37, 3) and (bins > 0 or (ref == 0).any())
+    torch.testing.assert_close(image, ref, atol=2e-5, rtol=0)
+    for grad, ref_grad, one in zip(grads, ref_grads, one_thread_grads, strict=True):
+        torch.testing.assert_close(grad, ref_grad, atol=1e-4, rtol=1e-5)
+        assert torch.equal(grad, one)
 
 
 @pytest.mark.slow

@@ -82,6 +82,44 @@ def test_features_without_geometry_grad_train_only_the_features(backend):
                 torch.testing.assert_close(detached_grad, coupled_grad, atol=1e-5, rtol=1e-4)
 
 
+@pytest.mark.parametrize("seed, size", [(5, (40, 32)), (6, (90, 70))])
+def test_features_at_sampled_pixels_match_the_full_render(seed, size):
+    """``feature_pixels`` (repeats and any order allowed) gives the full render's features at
+    those pixels, and the gradient a loss on them sends to ``obj_feat`` is the same; colour,
+    alpha, depth and the geometry's gradients do not change. On the cpu backend the features
+    are blended at those pixels alone."""
+    cam, pose = look_down_z(*size)
+    g = random_gaussians(400, seed, scales=(0.005, 0.08))
+    pixels = torch.randint(0, cam.width * cam.height, (300,), generator=torch.Generator().manual_seed(seed))
+    pixels[-5:] = pixels[:5]  # repeats
+    weights = output_weights(cam.width, cam.height, seed, torch.float32)
+    feature_weights = torch.randn(len(pixels), g.obj_feat.shape[1], generator=torch.Generator().manual_seed(seed))
+    results = {}
+    for backend, at in (("torch", False), ("cpu", False), ("cpu", True)):
+        params = Gaussians(**{k: v.clone().requires_grad_(True) for k, v in g.tensors().items()})
+        out = render(
+            params, cam, pose, feature_geometry_grad=False, feature_pixels=pixels if at else None, backend=backend
+        )
+        features = out.features if at else out.features.reshape(-1, out.features.shape[-1])[pixels]
+        loss = (features * feature_weights).sum() + sum(
+            (getattr(out, k) * weights[k]).sum() for k in ("rgb", "alpha", "depth")
+        )
+        loss.backward()
+        results[backend, at] = out, features, {k: v.grad for k, v in params.tensors().items()}
+    full, full_features, full_grads = results["cpu", False]
+    _, ref_features, ref_grads = results["torch", False]
+    out, features, grads = results["cpu", True]
+    assert features.shape == (len(pixels), g.obj_feat.shape[1]) and full_features.abs().max() > 0
+    torch.testing.assert_close(features, full_features, atol=1e-6, rtol=0)
+    torch.testing.assert_close(features, ref_features, atol=1e-4, rtol=0)
+    for name in ("rgb", "alpha", "depth"):
+        assert torch.equal(getattr(out, name), getattr(full, name)), name
+    for name, expected in full_grads.items():
+        torch.testing.assert_close(grads[name], expected, atol=1e-6, rtol=1e-5)
+        rel = (grads[name] - ref_grads[name]).norm() / ref_grads[name].norm()
+        assert rel < 1e-3, (name, rel.item())
+
+
 def test_cpu_exponential_matches_math_exp():
     """The kernels' polynomial exponential, over the range of powers they evaluate."""
     x = np.linspace(float(cpu_kernels.POWER_FLOOR), 0.0, 401).astype(np.float32)

@@ -27,7 +27,8 @@ class RenderOutput:
 
     Attributes:
         rgb: (H, W, 3) colour, composited over the background.
-        features: (H, W, F) blended object features (F = 0 when not asked for).
+        features: (H, W, F) blended object features (F = 0 when not asked for), or (P, F) at
+            the pixels asked for.
         alpha: (H, W) accumulated opacity.
         depth: (H, W) alpha-weighted camera depth, sum_i alpha_i T_i z_i.
         means2d: screen centres, (N, 2) or (1, N, 2); after ``backward`` its ``.grad`` is the
@@ -65,6 +66,7 @@ def render(
     background: torch.Tensor | None = None,
     with_features: bool = True,
     feature_geometry_grad: bool = True,
+    feature_pixels: torch.Tensor | None = None,
     backend: str | Backend = "cpu",
 ) -> RenderOutput:
     """Render colour, object features, alpha and depth of ``gaussians`` in one camera.
@@ -82,6 +84,9 @@ def render(
             rotations, scales, opacities, and ``means2d``, hence densification); when False
             the features are blended as over the geometry detached
             (:meth:`Backend.rasterize_beside`), and their gradients reach only ``obj_feat``.
+        feature_pixels: (P,) flat pixel indices (y W + x): the features at these pixels alone,
+            (P, F), which the ``cpu`` backend blends there alone when ``feature_geometry_grad``
+            is False (a loss on sampled pixels then pays for those pixels' features only).
         backend: a :class:`Backend` or its name (see :func:`get_backend`).
 
     Returns:
@@ -99,12 +104,14 @@ def render(
     backend = get_backend(backend)
     if with_features and not feature_geometry_grad:
         raster, features = backend.rasterize_beside(
-            g.means, g.quats, g.scales, g.opacities, colors, g.obj_feat, cam_from_world, camera
+            g.means, g.quats, g.scales, g.opacities, colors, g.obj_feat, cam_from_world, camera, feature_pixels
         )
     else:
         values = torch.cat([colors, g.obj_feat], dim=1) if with_features else colors
         raster = backend.rasterize(g.means, g.quats, g.scales, g.opacities, values, cam_from_world, camera)
         features = raster.image[..., 3:]
+        if feature_pixels is not None:
+            features = features.reshape(-1, features.shape[-1])[feature_pixels]
     rgb = raster.image[..., :3]
     if background is not None:
         rgb = rgb + (1 - raster.alpha[..., None]) * background.to(rgb)

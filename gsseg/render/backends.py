@@ -25,7 +25,7 @@ from gsseg.render import cpu_kernels
 from gsseg.render.blend_rules import ALPHA_MAX
 from gsseg.render.cpu_blend import as_float32_array, bin_tiles, blend_cpu
 from gsseg.render.gsplat_blend import GSPLAT_ALPHA_MAX, gsplat_available, rasterize_gsplat
-from gsseg.render.projection import TILE_SIZE, project_gaussians
+from gsseg.render.projection import TILE_SIZE, Projection, project_gaussians
 from gsseg.render.torch_blend import blend_torch
 
 
@@ -92,13 +92,17 @@ class Backend:
         beside: torch.Tensor,
         cam_from_world: torch.Tensor,
         camera: PinholeCamera,
+        pixels: torch.Tensor | None = None,
     ) -> tuple[Raster, torch.Tensor]:
         """:meth:`rasterize` ``values`` (N, C), and ``beside`` (N, E) blended by the same
         Gaussians with gradients that reach ``beside`` alone, not the geometry: the raster and
-        the (H, W, E) image of ``beside``. By default a second pass over the detached geometry."""
+        the (H, W, E) image of ``beside``, or its (P, E) values at the flat pixel indices
+        ``pixels`` (P,) (y W + x) when they are given. By default a second pass over the
+        detached geometry, at every pixel."""
         raster = self.rasterize(means, quats, scales, opacities, values, cam_from_world, camera)
         detached = (x.detach() for x in (means, quats, scales, opacities))
-        return raster, self.rasterize(*detached, beside, cam_from_world, camera).image
+        image = self.rasterize(*detached, beside, cam_from_world, camera).image
+        return raster, image if pixels is None else image.reshape(-1, image.shape[-1])[pixels]
 
     def contributions(
         self,
@@ -131,35 +135,41 @@ class Backend:
 class _Projecting(Backend):
     """The backends that share :func:`project_gaussians` and blend on their own."""
 
-    def blend(self, means2d, conics, opacities, values, depths, radii, width, height, *, geometry_channels=None):
-        """(H, W, C) image and (H, W) alpha of ``values`` (N, C); only the first
-        ``geometry_channels`` channels (all when None) pass gradients to the geometry, where
-        the backend can keep the others off it."""
+    def blend(self, means2d, conics, opacities, values, depths, radii, width, height):
+        """(H, W, C) image and (H, W) alpha of ``values`` (N, C), differentiable."""
         raise NotImplementedError
 
     def rasterize(self, means, quats, scales, opacities, values, cam_from_world, camera):
-        return self._project_and_blend(means, quats, scales, opacities, values, None, cam_from_world, camera)[0]
-
-    def _project_and_blend(self, means, quats, scales, opacities, values, beside, cam_from_world, camera):
-        """The raster of ``values`` (N, C) with depth, and the (H, W, E) image of ``beside``
-        (N, E; None: none) blended in the same pass, its gradients kept off the geometry."""
-        proj = project_gaussians(means, quats, scales, cam_from_world, camera, opacities)
-        if proj.means2d.requires_grad:
-            proj.means2d.retain_grad()
-        c = values.shape[1]
+        proj = _projected(means, quats, scales, opacities, cam_from_world, camera)
         image, alpha = self.blend(
             proj.means2d,
             proj.conics,
             opacities,
-            torch.cat([values, proj.depths[:, None], *([] if beside is None else [beside])], dim=1),
+            _with_depth(values, proj),
             proj.depths,
             proj.radii,
             camera.width,
             camera.height,
-            geometry_channels=None if beside is None else c + 1,
         )
-        raster = Raster(image[..., :c], alpha, image[..., c], proj.means2d, proj.radii)
-        return raster, None if beside is None else image[..., c + 1 :]
+        return _raster(image, alpha, proj)
+
+
+def _projected(means, quats, scales, opacities, cam_from_world, camera) -> Projection:
+    """:func:`project_gaussians`, keeping the gradient of ``means2d`` that densification reads."""
+    proj = project_gaussians(means, quats, scales, cam_from_world, camera, opacities)
+    if proj.means2d.requires_grad:
+        proj.means2d.retain_grad()
+    return proj
+
+
+def _with_depth(values: torch.Tensor, proj: Projection) -> torch.Tensor:
+    """(N, C + 1): the values to blend, then the depth."""
+    return torch.cat([values, proj.depths[:, None]], dim=1)
+
+
+def _raster(image: torch.Tensor, alpha: torch.Tensor, proj: Projection) -> Raster:
+    """The raster of a blend of :func:`_with_depth` values."""
+    return Raster(image[..., :-1], alpha, image[..., -1], proj.means2d, proj.radii)
 
 
 class CpuBackend(_Projecting):
@@ -167,13 +177,27 @@ class CpuBackend(_Projecting):
 
     name = "cpu"
 
-    def blend(self, *args, geometry_channels=None):
-        return blend_cpu(*args, geometry_channels)
+    def blend(self, *args):
+        return blend_cpu(*args)[:2]
 
-    def rasterize_beside(self, means, quats, scales, opacities, values, beside, cam_from_world, camera):
+    def rasterize_beside(self, means, quats, scales, opacities, values, beside, cam_from_world, camera, pixels=None):
         """One projection and one blend of ``values``, depth and ``beside`` together, whose
-        backward pass lets only ``values`` and depth reach the geometry."""
-        return self._project_and_blend(means, quats, scales, opacities, values, beside, cam_from_world, camera)
+        backward pass lets only ``values`` and depth reach the geometry; with ``pixels``,
+        ``beside`` is blended at those pixels alone."""
+        proj = _projected(means, quats, scales, opacities, cam_from_world, camera)
+        image, alpha, beside_image = blend_cpu(
+            proj.means2d,
+            proj.conics,
+            opacities,
+            _with_depth(values, proj),
+            proj.depths,
+            proj.radii,
+            camera.width,
+            camera.height,
+            beside,
+            pixels,
+        )
+        return _raster(image, alpha, proj), beside_image
 
     @torch.no_grad()
     def contributions(self, means, quats, scales, opacities, cam_from_world, camera, rows, n_rows):
@@ -200,9 +224,7 @@ class TorchBackend(_Projecting):
 
     name = "torch"
 
-    def blend(self, *args, geometry_channels=None):
-        if geometry_channels is not None:  # its rasterize_beside blends such channels in a pass of their own
-            raise NotImplementedError("the torch backend keeps channels off the geometry by a second pass")
+    def blend(self, *args):
         return blend_torch(*args)
 
 

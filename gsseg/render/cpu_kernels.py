@@ -11,6 +11,10 @@ branch-free loops over pixels that LLVM compiles to SIMD code. Those loops
   both to vectorise them;
 - visit only the rows of the tile that the Gaussian's footprint reaches.
 
+Channels that only some pixels need (the object features of the pixels a loss samples) are
+blended at those pixels alone: each tile keeps the sorted list of its selected pixels, and
+every Gaussian adds into the selected pixels of the rows it reaches.
+
 Per-pixel values are float32, as on the GPU; per-Gaussian gradients are summed in float64.
 Work is split over tiles; the backward pass gives every worker its own gradient buffer,
 summed afterwards, so results do not depend on thread timing.
@@ -197,6 +201,29 @@ def _add_weighted(acc, feat, j, weight, lo, hi):
             row[p] += weight[p] * f
 
 
+@numba.njit(inline="always")
+def _selected_rows(sel_offsets, sel_lanes, t, tile, row_start):
+    """Fill row_start (tile + 1,): row_start[r] is the first entry of tile t's selected pixels
+    (sel_lanes[sel_offsets[t]:sel_offsets[t + 1]], sorted pixel indices within the tile) in
+    row r or below, so that the selected pixels in [lo, hi) are the entries
+    [row_start[lo // tile], row_start[hi // tile])."""
+    q, end = sel_offsets[t], sel_offsets[t + 1]
+    for r in range(tile + 1):
+        while q < end and sel_lanes[q] < r * tile:
+            q += 1
+        row_start[r] = q
+
+
+@numba.njit(cache=True, fastmath=_FAST, error_model="numpy")
+def _add_weighted_at(out, feat, g, weight, sel_lanes, q_lo, q_hi):
+    """out[q] += weight[sel_lanes[q]] * feat[g] for the selected pixels q in [q_lo, q_hi);
+    out is (M, E)."""
+    for q in range(q_lo, q_hi):
+        w = weight[sel_lanes[q]]
+        for ch in range(np.uint64(out.shape[1])):
+            out[q, ch] += w * feat[g, ch]
+
+
 @numba.njit(cache=True, fastmath=_FAST, error_model="numpy")
 def _unblend_step(j, lo, hi, n_last, alpha, trans, weight):
     """The backward pass's step to the tile's j-th Gaussian: keep alpha where the pixel's
@@ -233,6 +260,20 @@ def _feature_grads(feat, j, d_pix, weight, lo, hi, f_dot, tg, n_geo):
 
 
 @numba.njit(cache=True, fastmath=_FAST, error_model="numpy")
+def _feature_grads_at(j, weight, sel_lanes, q_lo, q_hi, d_sel, tg, col, sums):
+    """Gradient of the tile's j-th Gaussian's selected-pixel features: tg[j, col + ch] +=
+    sum_q weight[sel_lanes[q]] d_sel[q, ch] over the selected pixels q in [q_lo, q_hi),
+    summed in ``sums`` (E,) float32."""
+    sums[:] = 0.0
+    for q in range(q_lo, q_hi):
+        w = weight[sel_lanes[q]]
+        for ch in range(np.uint64(sums.shape[0])):
+            sums[ch] += w * d_sel[q, ch]
+    for ch in range(sums.shape[0]):
+        tg[j, col + ch] += sums[ch]
+
+
+@numba.njit(cache=True, fastmath=_FAST, error_model="numpy")
 def _shape_grads(loc, j, px, py, lo, hi, alpha, gauss, trans, weight, f_dot, behind, d_out, tg):
     """Gradients of the tile's j-th Gaussian's mean, conic and opacity, summed over the
     pixels in [lo, hi) into tg[j, :6], through dL/dalpha, which needs the blended colour
@@ -263,10 +304,15 @@ def _shape_grads(loc, j, px, py, lo, hi, alpha, gauss, trans, weight, f_dot, beh
 
 
 @numba.njit(parallel=True, cache=True)
-def blend_forward(means2d, conics, opacities, features, offsets, ids, width, height, tile):
-    """Blend every tile. Returns image (H, W, C) float32, final transmittance (H, W) float32
-    and n_contrib (H, W) int32: how many entries of the tile list the pixel went through
-    up to its last blended Gaussian."""
+def blend_forward(
+    means2d, conics, opacities, features, sel_features, offsets, ids, sel_offsets, sel_lanes, width, height, tile
+):
+    """Blend every tile: ``features`` (N, C) at every pixel, ``sel_features`` (N, E) at the
+    selected pixels alone (tile t's are sel_lanes[sel_offsets[t]:sel_offsets[t + 1]], its
+    pixel indices in row-major order, sorted). Returns image (H, W, C) float32, final
+    transmittance (H, W) float32, n_contrib (H, W) int32 (how many entries of the tile
+    list the pixel went through up to its last blended Gaussian) and the selected pixels'
+    blend of ``sel_features`` (M, E) float32, in the order of ``sel_lanes``."""
     n_ch = features.shape[1]
     n_tiles_x = (width + tile - 1) // tile
     n_tiles = offsets.shape[0] - 1
@@ -274,12 +320,15 @@ def blend_forward(means2d, conics, opacities, features, offsets, ids, width, hei
     image = np.zeros((height, width, n_ch), np.float32)
     final_t = np.ones((height, width), np.float32)
     n_contrib = np.zeros((height, width), np.int32)
+    sel_image = np.zeros((sel_lanes.shape[0], sel_features.shape[1]), np.float32)
     for t in numba.prange(n_tiles):
         start, end = offsets[t], offsets[t + 1]
         if start == end:
             continue
         loc = _gather_tile(ids, start, end, means2d, conics, opacities)
         feat = _gather_rows(ids, start, end, features)
+        row_start = np.empty(tile + 1, np.int64)
+        _selected_rows(sel_offsets, sel_lanes, t, tile, row_start)
         px, py = np.empty(n_pix, np.float32), np.empty(n_pix, np.float32)
         inside = np.empty(n_pix, np.bool_)
         x0, y0 = _tile_pixels(t, n_tiles_x, tile, width, height, px, py, inside)
@@ -296,6 +345,9 @@ def blend_forward(means2d, conics, opacities, features, offsets, ids, width, hei
             blended, ended = _blend_step(j, lo, hi, alpha, trans, live, weight, last)
             if blended > 0:
                 _add_weighted(acc, feat, j, weight, lo, hi)
+                q_lo, q_hi = row_start[lo // tile], row_start[hi // tile]
+                if q_lo < q_hi:
+                    _add_weighted_at(sel_image, sel_features, ids[start + j], weight, sel_lanes, q_lo, q_hi)
             n_live -= ended
             if n_live == 0:
                 break
@@ -306,7 +358,7 @@ def blend_forward(means2d, conics, opacities, features, offsets, ids, width, hei
                     image[y, x, ch] = acc[ch, p]
                 final_t[y, x] = trans[p]
                 n_contrib[y, x] = last[p]
-    return image, final_t, n_contrib
+    return image, final_t, n_contrib, sel_image
 
 
 @numba.njit(parallel=True, cache=True)
@@ -315,8 +367,11 @@ def blend_backward(
     conics,
     opacities,
     features,
+    sel_features,
     offsets,
     ids,
+    sel_offsets,
+    sel_lanes,
     width,
     height,
     tile,
@@ -324,19 +379,22 @@ def blend_backward(
     n_contrib,
     grad_image,
     grad_alpha,
+    grad_sel,
     n_geo,
     n_workers,
 ):
-    """Gradients of a loss with respect to means2d (N, 2), conics (N, 3), opacities (N,)
-    and features (N, C), given its gradients grad_image (H, W, C) and grad_alpha (H, W).
+    """Gradients of a loss with respect to means2d (N, 2), conics (N, 3), opacities (N,),
+    features (N, C) and sel_features (N, E), given its gradients grad_image (H, W, C),
+    grad_alpha (H, W) and grad_sel (M, E) (the selected pixels' of :func:`blend_forward`).
     Only the first ``n_geo`` channels' gradients reach means2d, conics and opacities (the
-    others' reach their features alone, as if blended over the geometry detached).
+    others', and those of ``sel_features``, reach their features alone, as if blended over
+    the geometry detached).
 
     Walks each tile's list back to front, recovering every pixel's transmittance by
     division as the 3D-GS backward pass does. Worker w handles tiles w, w + n_workers, ...
     """
     n = means2d.shape[0]
-    n_ch = features.shape[1]
+    n_ch, n_sel_ch = features.shape[1], sel_features.shape[1]
     n_tiles_x = (width + tile - 1) // tile
     n_tiles = offsets.shape[0] - 1
     n_pix = tile * tile
@@ -344,6 +402,7 @@ def blend_backward(
     g_conics = np.zeros((n_workers, n, 3), np.float64)
     g_opac = np.zeros((n_workers, n), np.float64)
     g_feat = np.zeros((n_workers, n, n_ch), np.float64)
+    g_sel = np.zeros((n_workers, n, n_sel_ch), np.float64)
     for w_id in numba.prange(n_workers):
         px, py = np.empty(n_pix, np.float32), np.empty(n_pix, np.float32)
         inside = np.empty(n_pix, np.bool_)
@@ -352,6 +411,8 @@ def blend_backward(
         behind, d_out = np.empty(n_pix, np.float32), np.empty(n_pix, np.float32)
         n_last = np.empty(n_pix, np.int32)
         d_pix = np.empty((n_ch, n_pix), np.float32)
+        row_start = np.empty(tile + 1, np.int64)
+        sel_sums = np.empty(n_sel_ch, np.float32)
         for t in range(w_id, n_tiles, n_workers):
             start, end = offsets[t], offsets[t + 1]
             if start == end:
@@ -359,6 +420,7 @@ def blend_backward(
             loc = _gather_tile(ids, start, end, means2d, conics, opacities)
             feat = _gather_rows(ids, start, end, features)
             x0, y0 = _tile_pixels(t, n_tiles_x, tile, width, height, px, py, inside)
+            _selected_rows(sel_offsets, sel_lanes, t, tile, row_start)
             n_max = 0
             for p in range(n_pix):
                 y, x = min(y0 + p // tile, height - 1), min(x0 + p % tile, width - 1)
@@ -369,8 +431,9 @@ def blend_backward(
                     d_pix[ch, p] = grad_image[y, x, ch]
                 n_max = max(n_max, n_last[p])
             behind[:] = 0.0
-            # Tile-local gradients: mean x, y, conic a, b, c, opacity, then the features.
-            tg = np.zeros((end - start, 6 + n_ch), np.float64)
+            # Tile-local gradients: mean x, y, conic a, b, c, opacity, the features, then
+            # the selected pixels' features.
+            tg = np.zeros((end - start, 6 + n_ch + n_sel_ch), np.float64)
             for j in range(n_max - 1, -1, -1):
                 lo, hi = _reached(loc, j, y0, tile, height, px, py, alpha, gauss)
                 if lo == hi:
@@ -378,6 +441,9 @@ def blend_backward(
                 if _unblend_step(j, lo, hi, n_last, alpha, trans, weight) == 0:
                     continue
                 _feature_grads(feat, j, d_pix, weight, lo, hi, f_dot, tg, n_geo)
+                q_lo, q_hi = row_start[lo // tile], row_start[hi // tile]
+                if q_lo < q_hi:
+                    _feature_grads_at(j, weight, sel_lanes, q_lo, q_hi, grad_sel, tg, 6 + n_ch, sel_sums)
                 _shape_grads(loc, j, px, py, lo, hi, alpha, gauss, trans, weight, f_dot, behind, d_out, tg)
             for j in range(end - start):
                 g = ids[start + j]
@@ -388,7 +454,9 @@ def blend_backward(
                 g_opac[w_id, g] += tg[j, 5]
                 for ch in range(n_ch):
                     g_feat[w_id, g, ch] += tg[j, 6 + ch]
-    return g_means.sum(0), g_conics.sum(0), g_opac.sum(0), g_feat.sum(0)
+                for ch in range(n_sel_ch):
+                    g_sel[w_id, g, ch] += tg[j, 6 + n_ch + ch]
+    return g_means.sum(0), g_conics.sum(0), g_opac.sum(0), g_feat.sum(0), g_sel.sum(0)
 
 
 @numba.njit(parallel=True, cache=True)

@@ -38,20 +38,20 @@ def ssim_map(a: torch.Tensor, b: torch.Tensor, c1: float = 0.01**2, c2: float = 
     return ((2 * mu_a * mu_b + c1) * (2 * cov + c2)) / ((mu_a**2 + mu_b**2 + c1) * (var_a + var_b + c2))
 
 
-def object_loss(
-    features: torch.Tensor,
-    mask: torch.Tensor,
-    classifier: torch.nn.Linear,
-    pixels: int = 0,
-    generator: torch.Generator | None = None,
-) -> torch.Tensor:
-    """Mean cross-entropy of the classifier on rendered features (H, W, F) against IDs (H, W),
-    over every pixel, or over ``pixels`` pixels drawn without replacement when 0 < pixels < H W."""
-    features, mask = features.reshape(-1, features.shape[-1]), mask.reshape(-1)
-    if 0 < pixels < len(mask):
-        pick = torch.randperm(len(mask), generator=generator, device=mask.device)[:pixels]
-        features, mask = features[pick], mask[pick]
-    return torch.nn.functional.cross_entropy(classifier(features), mask)
+def sample_pixels(
+    n_pixels: int, count: int, generator: torch.Generator | None = None, device: torch.device | str = "cpu"
+) -> torch.Tensor | None:
+    """``count`` flat indices (count,) of an image of ``n_pixels`` pixels drawn without
+    replacement, for the object loss; None (every pixel) unless 0 < count < n_pixels."""
+    if 0 < count < n_pixels:
+        return torch.randperm(n_pixels, generator=generator, device=device)[:count]
+    return None
+
+
+def object_loss(features: torch.Tensor, labels: torch.Tensor, classifier: torch.nn.Linear) -> torch.Tensor:
+    """Mean cross-entropy of the classifier on rendered features (..., F) against the mask's
+    IDs (...) at the same pixels."""
+    return F.cross_entropy(classifier(features.reshape(-1, features.shape[-1])), labels.reshape(-1))
 
 
 def psnr(rendered: torch.Tensor, target: torch.Tensor) -> float:

@@ -30,11 +30,12 @@ from dataset_tools.infra.interrupts import Interrupted, stop_requests
 from dataset_tools.infra.overlap import refuse_overlap, scene_entries
 from dataset_tools.scene import Scene, View, load_scene
 from gsseg.environment import Environment, background_image, mean_up, profile_bins
+from gsseg.environment_cpu import ENVIRONMENT_KERNELS
 from gsseg.gaussians import Gaussians, gaussians_from_points, make_classifier, random_points
 from gsseg.render import Backend, RenderOutput, get_backend, render
 from gsseg.render.cpu_kernels import STEP_KERNELS, compiled_on_disk
 from gsseg.run_folder import RunFolder, write_torch
-from gsseg.train.losses import knn_identity_loss, object_loss, photometric_loss, psnr
+from gsseg.train.losses import knn_identity_loss, object_loss, photometric_loss, psnr, sample_pixels
 from gsseg.train.optim import GaussianOptimizer
 from gsseg.train.ssim_cpu import SSIM_KERNELS, mean_ssim_cpu
 from gsseg.train.strategy import DensifyOptions, DensifyStrategy
@@ -278,8 +279,12 @@ def _loss_and_backward(
     obj_pixels: int,
     generator: torch.Generator,
 ) -> tuple[dict, RenderOutput]:
-    """Render one view, compute the loss and back-propagate it (unless it is not finite)."""
+    """Render one view, compute the loss and back-propagate it (unless it is not finite). The
+    object loss sees ``obj_pixels`` pixels drawn at random (0: every pixel), whose features
+    alone are rendered where the backend can."""
     use_mask = view.mask is not None and cfg.gamma_obj != 0
+    labels = view.mask.reshape(-1) if use_mask else None
+    pixels = sample_pixels(len(labels), obj_pixels, generator, labels.device) if use_mask else None
     out = render(
         state.gaussians.gaussians,
         view.camera,
@@ -288,14 +293,14 @@ def _loss_and_backward(
         background=background_image(state.environment, view.camera, view.cam_from_world),
         with_features=use_mask,
         feature_geometry_grad=cfg.geometry_from_masks,
+        feature_pixels=pixels,
         backend=backend,
     )
     rgb_loss = photometric_loss(out.rgb, view.image, cfg.lambda_dssim)
-    obj = (
-        object_loss(out.features, view.mask, state.classifier, obj_pixels, generator)
-        if use_mask
-        else torch.zeros((), device=rgb_loss.device)
-    )
+    if use_mask:
+        obj = object_loss(out.features, labels if pixels is None else labels[pixels], state.classifier)
+    else:
+        obj = torch.zeros((), device=rgb_loss.device)
     loss = rgb_loss + cfg.gamma_obj * obj
     if cfg.knn_reg > 0:
         g = state.gaussians.gaussians
@@ -417,22 +422,25 @@ def _train_locked(
 
 
 def _warm_up(backend: Backend, progress: bool) -> None:
-    """Compile (or load from numba's cache) the CPU kernels on a tiny render, its SSIM and
-    their backward pass before the progress bar starts, saying so on the first run,
-    so that the bar's estimate times training steps alone."""
+    """Compile (or load from numba's cache) the CPU kernels on a tiny render over an
+    environment, its SSIM and their backward pass before the progress bar starts, saying so
+    on the first run, so that the bar's estimate times training steps alone."""
     if backend.name != "cpu":
         return
-    if progress and not compiled_on_disk(STEP_KERNELS + SSIM_KERNELS):
+    if progress and not compiled_on_disk(STEP_KERNELS + SSIM_KERNELS + ENVIRONMENT_KERNELS):
         tqdm.write("compiling the CPU kernels (first run only, about half a minute)", file=sys.stderr)
     xyz = np.array([[0.0, 0.0, 2.0], [0.2, 0.0, 2.5], [0.0, 0.2, 3.0], [-0.2, 0.0, 2.2]])
     tiny = gaussians_from_points(xyz, np.full((4, 3), 128, np.uint8), initial_opacity=0.5)
     tiny = Gaussians(**{k: v.clone().requires_grad_(True) for k, v in tiny.tensors().items()})
+    camera, pose = PinholeCamera(16, 16, 16.0, 16.0, 8.0, 8.0), torch.eye(4)[:3]
     out = render(
         tiny,
-        PinholeCamera(16, 16, 16.0, 16.0, 8.0, 8.0),
-        torch.eye(4)[:3],
+        camera,
+        pose,
+        background=Environment(up=np.array([0.0, -1.0, 0.0]), bins=4)(camera, pose),
         with_features=True,
         feature_geometry_grad=False,
+        feature_pixels=torch.arange(0, 256, 7),
         backend=backend,
     )
     (mean_ssim_cpu(out.rgb, torch.zeros_like(out.rgb)) + out.features.sum()).backward()
