@@ -7,7 +7,7 @@ the forward pass and of the backward pass, the losses, the optimiser, densificat
 loop around the steps. Prints and writes JSON.
 
     python -m benchmarks.train_profile [--real ../shared/data/real] [--scene statue]
-        [--iters 1500] [--max-gaussians 30000] [--work /tmp/train_profile] [--out FILE]
+        [--iters 1200] [--max-gaussians 30000] [--work /tmp/train_profile] [--out FILE]
 
 cProfile counts wall time per Python function; the numba kernels and torch's operators run
 inside the functions that call them, so the phases hold them. Its own cost is a few
@@ -27,8 +27,9 @@ from benchmarks import record
 from benchmarks.real_scenes import posed_scene
 from eval.report import markdown_table
 from gsseg.train import TrainConfig, train
+from gsseg.train_config import DEMO_ITERS, DEMO_MAX_GAUSSIANS
 from hqmask.build import BuildConfig, build_masks
-from pipeline.demo import DEMO_ITERS, DEMO_MAX_GAUSSIANS, MASKS, demo_images
+from pipeline.demo import MASKS, demo_images
 
 # (file path suffix, function name) of the functions whose cumulative time the phases are made of
 FUNCTIONS = {

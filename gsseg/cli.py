@@ -9,6 +9,7 @@ import numpy as np
 from click.core import ParameterSource
 
 from dataset_tools.infra.cli_support import none_means_off, other_scene_option, run_cli
+from gsseg.train_config import DEMO_ITERS, DEMO_MAX_GAUSSIANS
 
 
 @click.group(name="gsseg", context_settings={"help_option_names": ["-h", "--help"]})
@@ -342,9 +343,13 @@ def export(
     "go through `python -m dataset_tools sfm` first).",
 )
 @click.option("--images", default=None, help="Image folder of --scene (default: the largest copy at most 640 px).")
-@click.option("--iters", type=int, default=1500, show_default=True, help="Training iterations.")
+@click.option("--iters", type=int, default=DEMO_ITERS, show_default=True, help="Training iterations.")
 @click.option(
-    "--max-gaussians", type=int, default=30_000, show_default=True, help="Densification stops at this many Gaussians."
+    "--max-gaussians",
+    type=int,
+    default=DEMO_MAX_GAUSSIANS,
+    show_default=True,
+    help="Densification stops at this many Gaussians.",
 )
 @click.option("--backend", type=click.Choice(["auto", "cpu", "torch", "gsplat"]), default="auto", show_default=True)
 @click.option("--force", is_flag=True, help="Replace the outputs in --out.")

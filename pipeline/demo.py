@@ -45,14 +45,13 @@ from gsseg.run import Run, load_run
 from gsseg.segment.prompts import pick_object, point_from_click
 from gsseg.segment.segment_run import LabelOptions, segment_run
 from gsseg.train import TrainConfig, train
+from gsseg.train_config import DEMO_ITERS, DEMO_MAX_GAUSSIANS
 from hqmask.build import BuildConfig, build_masks
 
 # Masks are proposed at 256x256, where the graph proposer separates these objects well;
 # training, segmentation and the report use the 128x128 copies (images_2).
 DEMO_SCENE = SynthConfig(views=24, res=256, objects=4, seed=1)
 DEMO_IMAGES = "images_2"
-DEMO_ITERS = 1500
-DEMO_MAX_GAUSSIANS = 30_000  # about two per pixel of a 128x128 view; keeps the demo under 10 min on 2 cores
 DEMO_MAX_SIDE = 640  # on your scene: the largest image copy at most this large
 MASKS = "hqmask"
 DEPTH_MASKS = "hqmask_depth"  # the masks built again at the trained model's depth jumps

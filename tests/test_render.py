@@ -13,6 +13,8 @@ from helpers import GEOMETRY, look_down_z, output_weights, random_gaussians, wei
 from dataset_tools.cameras import PinholeCamera
 from gsseg.gaussians import Gaussians
 from gsseg.render import BACKENDS, cpu_kernels, get_backend, render
+from gsseg.render.cpu_projection import project_gaussians_cpu
+from gsseg.render.projection import project_gaussians
 
 OUTPUTS = ("rgb", "features", "alpha", "depth")
 
@@ -118,6 +120,41 @@ def test_features_at_sampled_pixels_match_the_full_render(seed, size):
         torch.testing.assert_close(grads[name], expected, atol=1e-6, rtol=1e-5)
         rel = (grads[name] - ref_grads[name]).norm() / ref_grads[name].norm()
         assert rel < 1e-3, (name, rel.item())
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_cpu_projection_matches_the_tensor_projection(seed):
+    """The numba projection of Gaussians in front of, beside (past the Jacobian's clamp at
+    1.3x the field of view) and behind the camera equals :func:`project_gaussians` in float64,
+    and so do the gradients of a loss on the drawn Gaussians' outputs."""
+    cam, pose = look_down_z(40, 32)
+    g = random_gaussians(300, seed, torch.float64, scales=(0.005, 0.3))
+    with torch.no_grad():
+        g.means[:40, 0] *= 3.0  # beside the field of view
+        g.means[40:60, 2] = -3.6 - torch.rand(20, dtype=torch.float64)  # behind the camera
+    weights = {
+        k: torch.randn(s, generator=torch.Generator().manual_seed(seed))
+        for k, s in (("means2d", (300, 2)), ("conics", (300, 3)), ("depths", (300,)))
+    }
+    results = []
+    for project, dtype in ((project_gaussians, torch.float64), (project_gaussians_cpu, torch.float32)):
+        params = [x.detach().to(dtype).requires_grad_(True) for x in (g.means, g.quats, g.scales)]
+        proj = project(*params, pose.to(dtype), cam, g.opacities.detach().to(dtype))
+        drawn = (proj.radii > 0).to(dtype)
+        loss = sum(
+            (getattr(proj, k) * w.to(dtype)).sum(-1) if w.dim() > 1 else getattr(proj, k) * w.to(dtype)
+            for k, w in weights.items()
+        )
+        loss = (loss * drawn).sum()
+        loss.backward()
+        results.append((proj, [p.grad.double() for p in params]))
+    (ref, ref_grads), (out, grads) = results
+    assert (ref.radii > 0).sum() > 150 and (ref.radii[40:60] == 0).all() and (ref.radii[:40] > 0).any()
+    assert torch.equal(out.radii, ref.radii) or (out.radii - ref.radii).abs().max() <= 1
+    for name in ("means2d", "conics", "depths"):
+        torch.testing.assert_close(getattr(out, name).double(), getattr(ref, name), rtol=1e-5, atol=1e-5)
+    for grad, ref_grad in zip(grads, ref_grads, strict=True):
+        torch.testing.assert_close(grad, ref_grad, rtol=1e-4, atol=1e-4 * ref_grad.abs().max().item())
 
 
 def test_cpu_exponential_matches_math_exp():

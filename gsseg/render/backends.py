@@ -24,6 +24,7 @@ from dataset_tools.infra.errors import InputError, OptionError
 from gsseg.render import cpu_kernels
 from gsseg.render.blend_rules import ALPHA_MAX
 from gsseg.render.cpu_blend import as_float32_array, bin_tiles, blend_cpu
+from gsseg.render.cpu_projection import project_gaussians_cpu
 from gsseg.render.gsplat_blend import GSPLAT_ALPHA_MAX, gsplat_available, rasterize_gsplat
 from gsseg.render.projection import TILE_SIZE, Projection, project_gaussians
 from gsseg.render.torch_blend import blend_torch
@@ -133,14 +134,19 @@ class Backend:
 
 
 class _Projecting(Backend):
-    """The backends that share :func:`project_gaussians` and blend on their own."""
+    """The backends that project as :func:`project_gaussians` does and blend on their own."""
+
+    @staticmethod
+    def project(means, quats, scales, cam_from_world, camera, opacities) -> Projection:
+        """The screen-space footprints of the Gaussians, differentiable."""
+        return project_gaussians(means, quats, scales, cam_from_world, camera, opacities)
 
     def blend(self, means2d, conics, opacities, values, depths, radii, width, height):
         """(H, W, C) image and (H, W) alpha of ``values`` (N, C), differentiable."""
         raise NotImplementedError
 
     def rasterize(self, means, quats, scales, opacities, values, cam_from_world, camera):
-        proj = _projected(means, quats, scales, opacities, cam_from_world, camera)
+        proj = self._projected(means, quats, scales, opacities, cam_from_world, camera)
         image, alpha = self.blend(
             proj.means2d,
             proj.conics,
@@ -153,13 +159,12 @@ class _Projecting(Backend):
         )
         return _raster(image, alpha, proj)
 
-
-def _projected(means, quats, scales, opacities, cam_from_world, camera) -> Projection:
-    """:func:`project_gaussians`, keeping the gradient of ``means2d`` that densification reads."""
-    proj = project_gaussians(means, quats, scales, cam_from_world, camera, opacities)
-    if proj.means2d.requires_grad:
-        proj.means2d.retain_grad()
-    return proj
+    def _projected(self, means, quats, scales, opacities, cam_from_world, camera) -> Projection:
+        """:meth:`project`, keeping the gradient of ``means2d`` that densification reads."""
+        proj = self.project(means, quats, scales, cam_from_world, camera, opacities)
+        if proj.means2d.requires_grad:
+            proj.means2d.retain_grad()
+        return proj
 
 
 def _with_depth(values: torch.Tensor, proj: Projection) -> torch.Tensor:
@@ -173,9 +178,11 @@ def _raster(image: torch.Tensor, alpha: torch.Tensor, proj: Projection) -> Raste
 
 
 class CpuBackend(_Projecting):
-    """numba kernels: 16x16 tiles, pixels as SIMD lanes (see :mod:`gsseg.render.cpu_kernels`)."""
+    """numba kernels: the projection (:mod:`gsseg.render.cpu_projection`) and the blending,
+    16x16 tiles with pixels as SIMD lanes (:mod:`gsseg.render.cpu_kernels`)."""
 
     name = "cpu"
+    project = staticmethod(project_gaussians_cpu)
 
     def blend(self, *args):
         return blend_cpu(*args)[:2]
@@ -184,7 +191,7 @@ class CpuBackend(_Projecting):
         """One projection and one blend of ``values``, depth and ``beside`` together, whose
         backward pass lets only ``values`` and depth reach the geometry; with ``pixels``,
         ``beside`` is blended at those pixels alone."""
-        proj = _projected(means, quats, scales, opacities, cam_from_world, camera)
+        proj = self._projected(means, quats, scales, opacities, cam_from_world, camera)
         image, alpha, beside_image = blend_cpu(
             proj.means2d,
             proj.conics,
@@ -202,7 +209,7 @@ class CpuBackend(_Projecting):
     @torch.no_grad()
     def contributions(self, means, quats, scales, opacities, cam_from_world, camera, rows, n_rows):
         """A forward-only numba pass that adds alpha_i T_i into the row of each pixel."""
-        proj = project_gaussians(means, quats, scales, cam_from_world, camera, opacities)
+        proj = self.project(means, quats, scales, cam_from_world, camera, opacities)
         offsets, ids = bin_tiles(proj.means2d, proj.radii, proj.depths, camera.width, camera.height)
         arrays = [as_float32_array(x) for x in (proj.means2d, proj.conics, opacities)]
         out = cpu_kernels.accumulate_weights(
