@@ -11,6 +11,7 @@ import torch
 from scipy.special import lpmv
 
 from gsseg.sh import eval_sh, sh_basis
+from gsseg.sh_cpu import eval_sh_cpu
 
 
 def fibonacci_sphere(n: int) -> np.ndarray:
@@ -75,3 +76,27 @@ def test_eval_sh_gradients_match_finite_differences():
         assert torch.autograd.gradcheck(
             lambda c, d: eval_sh(degree, c, d), (coeffs[0].clone().requires_grad_(), dirs.clone().requires_grad_())
         )
+
+
+@pytest.mark.parametrize("degree", [0, 1, 2, 3])
+def test_cpu_kernels_match_the_tensor_colours_and_gradients(degree):
+    """:func:`eval_sh_cpu` equals :func:`eval_sh` in float64, some colours clamped at 0, and so
+    do the gradients of a loss on the colours with respect to the coefficients and to the
+    directions (unit or not: the basis polynomials' own gradient)."""
+    gen = torch.Generator().manual_seed(degree)
+    dirs = torch.nn.functional.normalize(torch.randn(500, 3, generator=gen, dtype=torch.float64), dim=-1)
+    coeffs = torch.randn(500, 16, 3, generator=gen, dtype=torch.float64)
+    weights = torch.randn(500, 3, generator=gen, dtype=torch.float64)
+    results = []
+    for evaluate, dtype in ((eval_sh, torch.float64), (eval_sh_cpu, torch.float32)):
+        c, d = (x.detach().to(dtype).requires_grad_(True) for x in (coeffs, dirs))
+        colours = evaluate(degree, c, d)
+        (colours * weights.to(dtype)).sum().backward()
+        d_grad = torch.zeros_like(dirs) if d.grad is None else d.grad.double()  # degree 0: no path to d
+        results.append((colours.double(), c.grad.double(), d_grad))
+    (ref, ref_c, ref_d), (out, grad_c, grad_d) = results
+    assert (ref == 0).any() and ref.max() > 0
+    torch.testing.assert_close(out, ref, atol=1e-5, rtol=1e-5)
+    torch.testing.assert_close(grad_c, ref_c, atol=1e-5, rtol=1e-5)
+    torch.testing.assert_close(grad_d, ref_d, atol=1e-4, rtol=1e-4)
+    assert (grad_c[:, (degree + 1) ** 2 :] == 0).all() and (degree == 0) == (ref_d == 0).all()

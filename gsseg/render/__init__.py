@@ -17,6 +17,7 @@ from dataset_tools.cameras import PinholeCamera
 from gsseg.gaussians import Gaussians
 from gsseg.render.backends import BACKENDS, Backend, get_backend
 from gsseg.sh import eval_sh
+from gsseg.sh_cpu import eval_sh_cpu
 
 __all__ = ["BACKENDS", "Backend", "RenderOutput", "get_backend", "render", "surface_depth", "to_uint8"]
 
@@ -100,7 +101,8 @@ def render(
         raise ValueError(f"render: background has shape {tuple(background.shape)}, expected (3,) or (H, W, 3)")
     R, t = cam_from_world[:3, :3].to(g.means), cam_from_world[:3, 3].to(g.means)
     dirs = torch.nn.functional.normalize(g.means + (R.T @ t), dim=-1)  # centre - camera centre
-    colors = eval_sh(sh_degree, g.sh, dirs)
+    on_cpu = g.means.device.type == "cpu" and g.means.dtype == torch.float32
+    colors = (eval_sh_cpu if on_cpu else eval_sh)(sh_degree, g.sh, dirs)  # the same colours
     backend = get_backend(backend)
     if with_features and not feature_geometry_grad:
         raster, features = backend.rasterize_beside(

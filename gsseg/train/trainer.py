@@ -36,6 +36,7 @@ from gsseg.render import Backend, RenderOutput, get_backend, render
 from gsseg.render.cpu_kernels import STEP_KERNELS, compiled_on_disk
 from gsseg.render.cpu_projection import PROJECTION_KERNELS
 from gsseg.run_folder import RunFolder, write_torch
+from gsseg.sh_cpu import SH_KERNELS
 from gsseg.train.losses import knn_identity_loss, object_loss, photometric_loss, psnr, sample_pixels
 from gsseg.train.optim import GaussianOptimizer
 from gsseg.train.ssim_cpu import SSIM_KERNELS, mean_ssim_cpu
@@ -428,7 +429,8 @@ def _warm_up(backend: Backend, progress: bool) -> None:
     on the first run, so that the bar's estimate times training steps alone."""
     if backend.name != "cpu":
         return
-    if progress and not compiled_on_disk(STEP_KERNELS + PROJECTION_KERNELS + SSIM_KERNELS + ENVIRONMENT_KERNELS):
+    kernels = STEP_KERNELS + PROJECTION_KERNELS + SH_KERNELS + SSIM_KERNELS + ENVIRONMENT_KERNELS
+    if progress and not compiled_on_disk(kernels):
         tqdm.write("compiling the CPU kernels (first run only, about half a minute)", file=sys.stderr)
     xyz = np.array([[0.0, 0.0, 2.0], [0.2, 0.0, 2.5], [0.0, 0.2, 3.0], [-0.2, 0.0, 2.2]])
     tiny = gaussians_from_points(xyz, np.full((4, 3), 128, np.uint8), initial_opacity=0.5)
