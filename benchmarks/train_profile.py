@@ -7,7 +7,7 @@ the forward pass and of the backward pass, the losses, the optimiser, densificat
 loop around the steps. Prints and writes JSON.
 
     python -m benchmarks.train_profile [--real ../shared/data/real] [--scene statue]
-        [--iters 1200] [--max-gaussians 30000] [--work /tmp/train_profile] [--out FILE]
+        [--iters 1000] [--max-gaussians 30000] [--work /tmp/train_profile] [--out FILE]
 
 cProfile counts wall time per Python function; the numba kernels and torch's operators run
 inside the functions that call them, so the phases hold them. Its own cost is a few

@@ -63,9 +63,9 @@ SCHEDULES = {
     ),
 }
 
-# ``gsseg demo``'s training: the cpu schedule shortened to 1200 steps (at 497x372, 5 steps a
+# ``gsseg demo``'s training: the cpu schedule shortened to 1000 steps (at 497x372, 5 steps a
 # second on 2 cores) and at most 30k Gaussians, about two per pixel of a 128x128 view.
-DEMO_ITERS = 1_200
+DEMO_ITERS = 1_000
 DEMO_MAX_GAUSSIANS = 30_000
 
 
