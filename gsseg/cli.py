@@ -9,7 +9,7 @@ import numpy as np
 from click.core import ParameterSource
 
 from dataset_tools.infra.cli_support import none_means_off, other_scene_option, run_cli
-from gsseg.train_config import DEMO_ITERS, DEMO_MAX_GAUSSIANS
+from gsseg.train_config import DEMO_ITERS, DEMO_MAX_GAUSSIANS, DEMO_SCENE_ITERS
 
 
 @click.group(name="gsseg", context_settings={"help_option_names": ["-h", "--help"]})
@@ -343,7 +343,12 @@ def export(
     "go through `python -m dataset_tools sfm` first).",
 )
 @click.option("--images", default=None, help="Image folder of --scene (default: the largest copy at most 640 px).")
-@click.option("--iters", type=int, default=DEMO_ITERS, show_default=True, help="Training iterations.")
+@click.option(
+    "--iters",
+    type=int,
+    default=None,
+    help=f"Training iterations [default: {DEMO_ITERS} on the embedded scene, {DEMO_SCENE_ITERS} on --scene].",
+)
 @click.option(
     "--max-gaussians",
     type=int,
@@ -354,7 +359,7 @@ def export(
 @click.option("--backend", type=click.Choice(["auto", "cpu", "torch", "gsplat"]), default="auto", show_default=True)
 @click.option("--force", is_flag=True, help="Replace the outputs in --out.")
 def demo(
-    out: Path, scene: Path | None, images: str | None, iters: int, max_gaussians: int, backend: str, force: bool
+    out: Path, scene: Path | None, images: str | None, iters: int | None, max_gaussians: int, backend: str, force: bool
 ) -> None:
     """The whole pipeline: scene, masks, training, segmentation, a 3D-point edit, the report."""
     from pipeline.demo import run_demo

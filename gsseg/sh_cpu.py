@@ -134,4 +134,7 @@ class _EvalSH(torch.autograd.Function):
 def eval_sh_cpu(degree: int, coeffs: torch.Tensor, dirs: torch.Tensor) -> torch.Tensor:
     """:func:`gsseg.sh.eval_sh` for float32 CPU coefficients (N, K, 3) and unit directions
     (N, 3): (N, 3) colours, differentiable in both."""
-    return _EvalSH.apply(coeffs, dirs, (degree + 1) ** 2)
+    n_k = (degree + 1) ** 2
+    if coeffs.shape[1] < n_k:
+        raise ValueError(f"SH degree {degree} needs {n_k} coefficients per direction, not {coeffs.shape[1]}")
+    return _EvalSH.apply(coeffs, dirs, n_k)

@@ -45,7 +45,7 @@ from gsseg.run import Run, load_run
 from gsseg.segment.prompts import pick_object, point_from_click
 from gsseg.segment.segment_run import LabelOptions, segment_run
 from gsseg.train import TrainConfig, train
-from gsseg.train_config import DEMO_ITERS, DEMO_MAX_GAUSSIANS
+from gsseg.train_config import DEMO_ITERS, DEMO_MAX_GAUSSIANS, DEMO_SCENE_ITERS
 from hqmask.build import BuildConfig, build_masks
 
 # Masks are proposed at 256x256, where the graph proposer separates these objects well;
@@ -145,7 +145,7 @@ def run_demo(
     *,
     scene: Path | str | None = None,
     images: str | None = None,
-    iters: int = DEMO_ITERS,
+    iters: int | None = None,
     max_gaussians: int = DEMO_MAX_GAUSSIANS,
     backend: str = "auto",
     overwrite: bool = False,
@@ -155,12 +155,17 @@ def run_demo(
     the scene structure from motion makes of them; for a scene folder, links to it, so that
     its masks are written here and never into ``scene``), ``out/run``, ``out/depth`` (the
     run's depth maps), ``out/report``. Every
-    option is checked before any work; ``images`` defaults to the largest copy at most 640 px."""
+    option is checked before any work; ``images`` defaults to the largest copy at most 640 px,
+    ``iters`` to ``DEMO_ITERS`` on the embedded scene and ``DEMO_SCENE_ITERS`` on ``scene``."""
     start = time.perf_counter()
     out = Path(out)
     backend = get_backend(backend)
     cfg = TrainConfig(
-        iters=iters, masks=MASKS, images=images or "images", backend=backend.name, max_gaussians=max_gaussians
+        iters=iters if iters is not None else DEMO_ITERS if scene is None else DEMO_SCENE_ITERS,
+        masks=MASKS,
+        images=images or "images",
+        backend=backend.name,
+        max_gaussians=max_gaussians,
     )
     if scene is not None and not Path(scene).exists():
         raise OptionError("not found; pass a scene folder, a folder of photos or a video as {scene}.", file=scene)
