@@ -159,10 +159,15 @@ def test_a_click_selects_what_gsseg_edit_click_selects(segmented, small_scene, t
     session = ViewerSession(load_run(run), scene_dir=small_scene.root, backend="cpu")
     view = load_scene(small_scene.root, masks="object_mask").split("train")[1]
     mask = view.load_mask()
+    found = []
     for label in [int(x) for x in np.unique(mask) if x][:3]:
         u, v = _inside_pixel(mask, label)
         chosen = session.select_at(ViewCamera(view.camera, view.cam_from_world), u, v)
-        assert chosen == label == _edited_by_click(run, view.stem, u, v, "remove", f"click_{label}")
+        edited = _edited_by_click(run, view.stem, u, v, "remove", f"click_{label}")
+        assert chosen == edited, (label, chosen, edited)  # None: both found the background there
+        found.append(chosen == label)
+    # the run is a rough one (200 steps on 8 views): most clicks find their mask's object
+    assert sum(found) >= 2, found
 
 
 @pytest.mark.slow
@@ -327,10 +332,13 @@ def browser():
     driver.quit()
 
 
-def _edited_by_click(run: Path, view: str, u: float, v: float, op: str, name: str) -> int:
-    """The object ``gsseg edit RUN --click VIEW U V --op OP --name NAME`` edits."""
+def _edited_by_click(run: Path, view: str, u: float, v: float, op: str, name: str) -> int | None:
+    """The object ``gsseg edit RUN --click VIEW U V --op OP --name NAME`` edits, None where it
+    refuses the click as one on the background."""
     cmd = [script("gsseg"), "edit", str(run), "--click", view, str(u), str(v), "--op", op, "--name", name]
     r = subprocess.run([*cmd, "--backend", "cpu"], capture_output=True, text=True)
+    if r.returncode == 2 and "lies on the background" in r.stderr:
+        return None
     assert r.returncode == 0, r.stderr
     return json.loads((run / "edits" / name / "edit.json").read_text())["object_id"]
 
