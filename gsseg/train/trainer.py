@@ -431,7 +431,7 @@ def _warm_up(backend: Backend, progress: bool) -> None:
         return
     kernels = STEP_KERNELS + PROJECTION_KERNELS + SH_KERNELS + SSIM_KERNELS + ENVIRONMENT_KERNELS
     if progress and not compiled_on_disk(kernels):
-        tqdm.write("compiling the CPU kernels (first run only, about half a minute)", file=sys.stderr)
+        tqdm.write("compiling the CPU kernels (first run only, under a minute)", file=sys.stderr)
     xyz = np.array([[0.0, 0.0, 2.0], [0.2, 0.0, 2.5], [0.0, 0.2, 3.0], [-0.2, 0.0, 2.2]])
     tiny = gaussians_from_points(xyz, np.full((4, 3), 128, np.uint8), initial_opacity=0.5)
     tiny = Gaussians(**{k: v.clone().requires_grad_(True) for k, v in tiny.tensors().items()})
