@@ -2,8 +2,9 @@
 set of coefficients per direction, and its gradient with respect to the coefficients and
 the directions (through which the colour's gradient reaches the Gaussians' positions).
 
-One Gaussian at a time, in float32 with float64 sums, over Gaussians split between threads;
-the tensor version is the reference the tests compare with.
+One Gaussian at a time, computed in float64 and returned in float32, over Gaussians split
+between threads (each writes its own rows); the tensor version is the reference the tests
+compare with.
 """
 
 from __future__ import annotations
