@@ -18,7 +18,7 @@ import numpy as np
 import torch
 
 from dataset_tools.cameras import PinholeCamera
-from gsseg.sh import C0, C1, C2, C3
+from gsseg.sh_cpu import sh_basis_at, sh_channel
 
 ROW_BLOCK = 8  # rows whose gradients one block sums before the blocks are summed in order
 
@@ -33,24 +33,6 @@ def _ray(rotation, intrinsics, u, v):
     z = a * rotation[0, 2] + b * rotation[1, 2] + rotation[2, 2]
     n = math.sqrt(x * x + y * y + z * z)
     return x / n, y / n, z / n
-
-
-@numba.njit(inline="always")
-def _sh_basis(x, y, z, out):
-    """The 16 real SH basis values of degree <= 3 at the unit direction (x, y, z), in the order
-    and signs of :func:`gsseg.sh.sh_basis`."""
-    xx, yy, zz, xy, yz, xz = x * x, y * y, z * z, x * y, y * z, x * z
-    out[0] = C0
-    out[1], out[2], out[3] = -C1 * y, C1 * z, -C1 * x
-    out[4], out[5], out[6] = C2[0] * xy, C2[1] * yz, C2[2] * (2 * zz - xx - yy)
-    out[7], out[8] = C2[3] * xz, C2[4] * (xx - yy)
-    out[9] = C3[0] * y * (3 * xx - yy)
-    out[10] = C3[1] * xy * z
-    out[11] = C3[2] * y * (4 * zz - xx - yy)
-    out[12] = C3[3] * z * (2 * zz - 3 * xx - 3 * yy)
-    out[13] = C3[4] * x * (4 * zz - xx - yy)
-    out[14] = C3[5] * z * (xx - yy)
-    out[15] = C3[6] * x * (xx - 3 * yy)
 
 
 @numba.njit(inline="always")
@@ -74,12 +56,9 @@ def environment_forward(rotation, intrinsics, width, height, coeffs, up, profile
         basis = np.empty(16)
         for j in range(width):
             x, y, z = _ray(rotation, intrinsics, j + 0.5, i + 0.5)
-            _sh_basis(x, y, z, basis)
+            sh_basis_at(x, y, z, basis)
             for c in range(3):
-                s = 0.5
-                for k in range(n_k):
-                    s += basis[k] * coeffs[k, c]
-                image[i, j, c] = max(s, 0.0)
+                image[i, j, c] = max(sh_channel(basis, coeffs, n_k, c), 0.0)
             if bins:
                 lo, hi, w = _profile_bin(x, y, z, up, bins)
                 for c in range(3):
@@ -101,12 +80,11 @@ def environment_backward(rotation, intrinsics, width, height, coeffs, up, profil
         for i in range(block * ROW_BLOCK, min((block + 1) * ROW_BLOCK, height)):
             for j in range(width):
                 x, y, z = _ray(rotation, intrinsics, j + 0.5, i + 0.5)
-                _sh_basis(x, y, z, basis)
+                sh_basis_at(x, y, z, basis)
                 for c in range(3):
-                    s = 0.5
-                    for k in range(n_k):
-                        s += basis[k] * coeffs[k, c]
-                    if s >= 0.0:  # where the clamp at 0 is active, no gradient reaches the SH
+                    if (
+                        sh_channel(basis, coeffs, n_k, c) >= 0.0
+                    ):  # where the clamp at 0 is active, no gradient reaches the SH
                         g = grad[i, j, c]
                         for k in range(n_k):
                             acc[k, c] += basis[k] * g

@@ -17,7 +17,7 @@ from gsseg.sh import C0, C1, C2, C3
 
 
 @numba.njit(inline="always")
-def _basis(x, y, z, out):
+def sh_basis_at(x, y, z, out):
     """The 16 SH basis values at (x, y, z), in the order and signs of :func:`gsseg.sh.sh_basis`."""
     xx, yy, zz, xy, yz, xz = x * x, y * y, z * z, x * y, y * z, x * z
     out[0] = C0
@@ -31,6 +31,16 @@ def _basis(x, y, z, out):
     out[13] = C3[4] * x * (4 * zz - xx - yy)
     out[14] = C3[5] * z * (xx - yy)
     out[15] = C3[6] * x * (xx - 3 * yy)
+
+
+@numba.njit(inline="always")
+def sh_channel(basis, coeffs, n_k, c):
+    """Channel c of the SH colour before 3D-GS's clamp at 0: 0.5 + sum_k basis[k] coeffs[k, c]
+    over the first ``n_k`` basis values, for coefficients (K, 3)."""
+    s = 0.5
+    for k in range(n_k):
+        s += basis[k] * coeffs[k, c]
+    return s
 
 
 @numba.njit(inline="always")
@@ -83,12 +93,9 @@ def sh_forward(coeffs, dirs, n_k):
     colours = np.empty((n, 3), np.float32)
     for i in numba.prange(n):
         basis = np.empty(16)
-        _basis(dirs[i, 0], dirs[i, 1], dirs[i, 2], basis)
+        sh_basis_at(dirs[i, 0], dirs[i, 1], dirs[i, 2], basis)
         for c in range(3):
-            s = 0.5
-            for k in range(n_k):
-                s += basis[k] * coeffs[i, k, c]
-            colours[i, c] = max(s, 0.0)
+            colours[i, c] = max(sh_channel(basis, coeffs[i], n_k, c), 0.0)
     return colours
 
 
@@ -102,12 +109,9 @@ def sh_backward(coeffs, dirs, n_k, grad):
     for i in numba.prange(n):
         basis, w = np.empty(16), np.zeros(16)
         x, y, z = dirs[i, 0], dirs[i, 1], dirs[i, 2]
-        _basis(x, y, z, basis)
+        sh_basis_at(x, y, z, basis)
         for c in range(3):
-            s = 0.5
-            for k in range(n_k):
-                s += basis[k] * coeffs[i, k, c]
-            if s >= 0.0:  # where the clamp at 0 is active, no gradient passes
+            if sh_channel(basis, coeffs[i], n_k, c) >= 0.0:  # where the clamp at 0 is active, no gradient passes
                 g = grad[i, c]
                 for k in range(n_k):
                     g_coeffs[i, k, c] = basis[k] * g

@@ -147,16 +147,7 @@ class _Projecting(Backend):
 
     def rasterize(self, means, quats, scales, opacities, values, cam_from_world, camera):
         proj = self._projected(means, quats, scales, opacities, cam_from_world, camera)
-        image, alpha = self.blend(
-            proj.means2d,
-            proj.conics,
-            opacities,
-            _with_depth(values, proj),
-            proj.depths,
-            proj.radii,
-            camera.width,
-            camera.height,
-        )
+        image, alpha = self.blend(*_blend_args(proj, opacities, values, camera))
         return _raster(image, alpha, proj)
 
     def _projected(self, means, quats, scales, opacities, cam_from_world, camera) -> Projection:
@@ -167,13 +158,15 @@ class _Projecting(Backend):
         return proj
 
 
-def _with_depth(values: torch.Tensor, proj: Projection) -> torch.Tensor:
-    """(N, C + 1): the values to blend, then the depth."""
-    return torch.cat([values, proj.depths[:, None]], dim=1)
+def _blend_args(proj: Projection, opacities: torch.Tensor, values: torch.Tensor, camera: PinholeCamera) -> tuple:
+    """The arguments of :meth:`_Projecting.blend` for ``values`` (N, C) and the depth after
+    them, (N, C + 1)."""
+    with_depth = torch.cat([values, proj.depths[:, None]], dim=1)
+    return proj.means2d, proj.conics, opacities, with_depth, proj.depths, proj.radii, camera.width, camera.height
 
 
 def _raster(image: torch.Tensor, alpha: torch.Tensor, proj: Projection) -> Raster:
-    """The raster of a blend of :func:`_with_depth` values."""
+    """The raster of a blend of :func:`_blend_args`' values."""
     return Raster(image[..., :-1], alpha, image[..., -1], proj.means2d, proj.radii)
 
 
@@ -192,18 +185,7 @@ class CpuBackend(_Projecting):
         backward pass lets only ``values`` and depth reach the geometry; with ``pixels``,
         ``beside`` is blended at those pixels alone."""
         proj = self._projected(means, quats, scales, opacities, cam_from_world, camera)
-        image, alpha, beside_image = blend_cpu(
-            proj.means2d,
-            proj.conics,
-            opacities,
-            _with_depth(values, proj),
-            proj.depths,
-            proj.radii,
-            camera.width,
-            camera.height,
-            beside,
-            pixels,
-        )
+        image, alpha, beside_image = blend_cpu(*_blend_args(proj, opacities, values, camera), beside, pixels)
         return _raster(image, alpha, proj), beside_image
 
     @torch.no_grad()
