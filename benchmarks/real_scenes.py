@@ -46,6 +46,7 @@ from dataset_tools.scene import View, load_scene
 from dataset_tools.sfm import run_sfm
 from eval.metrics import binary_scores
 from eval.report import markdown_table
+from gsseg.render import Backend, get_backend
 from gsseg.render.pixel_labels import segment_pixels
 from gsseg.run import Run, load_run
 from gsseg.segment.clicks import select_by_points
@@ -84,11 +85,13 @@ def posed_scene(photos: Path, out: Path) -> Path:
     return out
 
 
-def rendered_selection(run: Run, selected: np.ndarray, view: View) -> np.ndarray:
+def rendered_selection(run: Run, selected: np.ndarray, view: View, backend: str | Backend = "cpu") -> np.ndarray:
     """(H, W) bool: where the ``selected`` Gaussians win the blended weight (``render --what
     segments`` of a two-label segmentation)."""
-    pose = torch.as_tensor(view.cam_from_world, dtype=torch.float32)
-    return segment_pixels(run.gaussians, selected.astype(np.uint8), view.camera, pose, backend="cpu") == 1
+    backend = get_backend(backend)
+    pose = torch.as_tensor(view.cam_from_world, dtype=torch.float32, device=backend.device)
+    labels = selected.astype(np.uint8)
+    return segment_pixels(run.gaussians_on(backend.device), labels, view.camera, pose, backend=backend) == 1
 
 
 def deepest_pixel(region: np.ndarray) -> tuple[float, float]:
@@ -101,8 +104,9 @@ def deepest_pixel(region: np.ndarray) -> tuple[float, float]:
 class Clicker:
     """Selections of a segmented run by clicks in one view, scored in the others."""
 
-    def __init__(self, run: Run, views: list[View], truth: dict[str, np.ndarray]):
+    def __init__(self, run: Run, views: list[View], truth: dict[str, np.ndarray], backend: str | Backend = "cpu"):
         self.run, self.first, self.others, self.truth = run, views[0], views[1:], truth
+        self.backend = get_backend(backend)
         self.labels = run.labels().labels
         self.means, self.features = run.gaussians.means.numpy(), run.gaussians.obj_feat.detach().numpy()
         self.positives: list[np.ndarray] = []
@@ -114,7 +118,7 @@ class Clicker:
         positive one on the background, is spent without changing the selection."""
         try:
             point = point_from_click(
-                self.run.gaussians, self.first.camera, self.first.cam_from_world, u, v, backend="cpu"
+                self.run.gaussians, self.first.camera, self.first.cam_from_world, u, v, backend=self.backend
             )
             positives = self.positives + [point] if positive else self.positives
             negatives = self.negatives if positive else self.negatives + [point]
@@ -127,13 +131,16 @@ class Clicker:
 
     def scores(self) -> tuple[float, float]:
         """mIoU and mAcc of the selection over the other views."""
-        pairs = [binary_scores(rendered_selection(self.run, self.selected, v), self.truth[v.name]) for v in self.others]
+        pairs = [
+            binary_scores(rendered_selection(self.run, self.selected, v, self.backend), self.truth[v.name])
+            for v in self.others
+        ]
         return float(np.mean([p[0] for p in pairs])), float(np.mean([p[1] for p in pairs]))
 
     def next_click(self, tried: list[tuple[float, float]]) -> tuple[float, float, bool] | None:
         """The deepest pixel of the largest error region of the first view that holds no
         earlier click: (u, v, positive), or None when there is none."""
-        shown = rendered_selection(self.run, self.selected, self.first)
+        shown = rendered_selection(self.run, self.selected, self.first, self.backend)
         truth = self.truth[self.first.name]
         regions = []
         for positive, error in ((True, truth & ~shown), (False, shown & ~truth)):
@@ -145,10 +152,16 @@ class Clicker:
         return None
 
 
-def interactive(run: Run, views: list[View], truth: dict[str, np.ndarray], max_clicks: int = MAX_CLICKS) -> dict:
+def interactive(
+    run: Run,
+    views: list[View],
+    truth: dict[str, np.ndarray],
+    max_clicks: int = MAX_CLICKS,
+    backend: str | Backend = "cpu",
+) -> dict:
     """The single-click scores and the clicks to reach :data:`TARGET` (NoC@90), up to
-    ``max_clicks``."""
-    clicker = Clicker(run, views, truth)
+    ``max_clicks``, rendered on ``backend``."""
+    clicker = Clicker(run, views, truth, backend)
     u, v = deepest_pixel(truth[views[0].name])
     clicker.click(u, v, True)
     miou, macc = clicker.scores()

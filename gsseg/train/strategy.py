@@ -34,9 +34,10 @@ class DensifyStats:
         """Add one view: ``means2d_grad`` (N, 2) in pixels, converted to NDC units as 3D-GS measures it."""
         visible = radii > 0
         ndc = means2d_grad.reshape(-1, 2) * means2d_grad.new_tensor([0.5 * width, 0.5 * height])
-        self.grad_sum[visible] += ndc[visible].norm(dim=-1)
-        self.count[visible] += 1
-        self.max_radii[visible] = torch.maximum(self.max_radii[visible], radii[visible].float())
+        # Masked by torch.where rather than indexed: no index list, so no wait for the GPU.
+        self.grad_sum += torch.where(visible, ndc.norm(dim=-1), 0.0)
+        self.count += visible
+        self.max_radii = torch.maximum(self.max_radii, torch.where(visible, radii.float(), 0.0))
 
 
 @dataclass(frozen=True)

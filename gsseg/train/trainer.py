@@ -37,7 +37,7 @@ from gsseg.render.cpu_kernels import STEP_KERNELS, compiled_on_disk
 from gsseg.render.cpu_projection import PROJECTION_KERNELS
 from gsseg.run_folder import RunFolder, write_torch
 from gsseg.sh_cpu import SH_KERNELS
-from gsseg.train.losses import knn_identity_loss, object_loss, photometric_loss, psnr, sample_pixels
+from gsseg.train.losses import knn_identity_loss, object_loss, photometric_loss, psnr_from_mse, sample_pixels
 from gsseg.train.optim import GaussianOptimizer
 from gsseg.train.ssim_cpu import SSIM_KERNELS, mean_ssim_cpu
 from gsseg.train.strategy import DensifyOptions, DensifyStrategy
@@ -309,9 +309,12 @@ def _loss_and_backward(
         loss = loss + cfg.knn_reg * knn_identity_loss(
             g.means, g.obj_feat, state.classifier, cfg.knn_samples, cfg.knn_k, generator
         )
-    if torch.isfinite(loss):
+    mse = torch.mean((out.rgb.detach().clamp(0, 1) - view.image) ** 2)
+    # One transfer of the step's numbers: on a GPU each .item() waits for the device.
+    total, rgb, obj_value, mse_value = torch.stack([loss.detach(), rgb_loss.detach(), obj.detach(), mse]).tolist()
+    if math.isfinite(total):
         loss.backward()
-    return {"loss": loss.item(), "rgb": rgb_loss.item(), "obj": obj.item(), "psnr": psnr(out.rgb, view.image)}, out
+    return {"loss": total, "rgb": rgb, "obj": obj_value, "psnr": psnr_from_mse(mse_value)}, out
 
 
 def train(
@@ -423,7 +426,7 @@ def _train_locked(
         views.close()
 
 
-def _warm_up(backend: Backend, progress: bool) -> None:
+def warm_up(backend: Backend, progress: bool = False) -> None:
     """Compile (or load from numba's cache) the CPU kernels on a tiny render over an
     environment, its SSIM and their backward pass before the progress bar starts, saying so
     on the first run, so that the bar's estimate times training steps alone."""
@@ -459,7 +462,7 @@ def _loop(
     progress: bool,
 ) -> TrainResult:
     timing = cfg.timing
-    _warm_up(backend, progress)
+    warm_up(backend, progress)
     last = min(timing.iters, stop_after) if stop_after is not None else timing.iters
     start_time = time.perf_counter()
     with (
