@@ -20,7 +20,8 @@ views: a scene folder small enough to travel to a GPU machine, with the people's
    (gsplat clamps one Gaussian's alpha at 0.999, 3D-GS at 0.99), and with the opacities below
    0.99, where no clamp acts; the contribution matrices over the training views (relative
    Frobenius difference); the labels each gives (share of Gaussians that agree) and the
-   selection of the same click (IoU of the selected Gaussians).
+   selection of the same click, each backend's region weights and click throughout (IoU of
+   the selected Gaussians).
 
 Every stage's result is kept in ``--work`` as it finishes and the training resumes from its
 checkpoint, so the same command continues where a stopped one ended; ``--deadline`` seconds
@@ -61,11 +62,10 @@ from eval.report import markdown_table
 from gsseg.environment import background_image
 from gsseg.gaussians import Gaussians, gaussians_from_points
 from gsseg.render import get_backend, render
-from gsseg.render.contributions import contribution_matrix
 from gsseg.run import Run, load_run
-from gsseg.segment.clicks import select_by_points
-from gsseg.segment.prompts import point_from_click
-from gsseg.segment.segment_run import label_gaussians, segment_run
+from gsseg.segment.clicks import ClickEvidence, ClickSelector
+from gsseg.segment.prompts import click_weights
+from gsseg.segment.segment_run import label_gaussians, mask_contributions, mask_regions, segment_run
 from gsseg.train import TrainConfig, train
 from hqmask.build import BuildConfig, build_masks
 from pipeline.demo import DEMO_LABELS, DEPTH_MASKS, MASKS, demo_images, masks_at_depth_jumps
@@ -260,20 +260,19 @@ def parity(run: Run, scene: Path, backend: str, click: tuple[float, float], firs
         out[f"colour_psnr_{name}"] = float(np.mean(colour))
         out[f"colour_psnr_{name}_worst"] = float(np.min(colour))
         out[f"feature_max_error_{name}"] = float(np.max(features))
-    views = [v for v in run.scene(masks=DEPTH_MASKS).split("train") if v.mask_path is not None]
-    matrices = {name: contribution_matrix(g, views, backend=name, progress=False) for name in (backend, "cpu")}
-    a, b = matrices[backend].weights.double(), matrices["cpu"].weights.double()
+    contributions = {
+        name: mask_contributions(run, scene, masks=DEPTH_MASKS, backend=name, regions=True, progress=False)
+        for name in (backend, "cpu")
+    }
+    a, b = (contributions[name].weights.double() for name in (backend, "cpu"))
     out["contributions_relative_error"] = float((a - b).norm() / b.norm())
-    labels = {}
-    for name, matrix in matrices.items():
-        matrix.masks = DEPTH_MASKS
+    labels, selections = {}, {}
+    for name, matrix in contributions.items():
         labels[name] = label_gaussians(run, matrix, DEMO_LABELS).labels
+        regions = mask_regions(run, scene, masks=DEPTH_MASKS, backend=name, first=matrix, progress=False)
+        weights = click_weights(g, first_view.camera, first_view.cam_from_world, *click, backend=name)
+        selections[name] = ClickSelector(g, labels[name], regions).select([ClickEvidence(weights, True)])
     out["labels_agree"] = float((labels[backend] == labels["cpu"]).mean())
-    selections = {}
-    for name in (backend, "cpu"):
-        point = point_from_click(run.gaussians, first_view.camera, first_view.cam_from_world, *click, backend=name)
-        means, feats = g.means.numpy(), g.obj_feat.numpy()
-        selections[name] = select_by_points(means, feats, labels[name], point[None])
     sa, sb = selections[backend], selections["cpu"]
     out["selection_iou"] = float((sa & sb).sum() / max((sa | sb).sum(), 1))
     out["selected"] = {name: int(s.sum()) for name, s in selections.items()}

@@ -49,9 +49,9 @@ from eval.report import markdown_table
 from gsseg.render import Backend, get_backend
 from gsseg.render.pixel_labels import segment_pixels
 from gsseg.run import Run, load_run
-from gsseg.segment.clicks import select_by_points
-from gsseg.segment.prompts import point_from_click
-from gsseg.segment.segment_run import segment_run
+from gsseg.segment.clicks import ClickEvidence, ClickSelector
+from gsseg.segment.prompts import click_weights
+from gsseg.segment.segment_run import run_regions, segment_run
 from gsseg.train import TrainConfig, train
 from hqmask.build import BuildConfig, build_masks
 from pipeline.demo import DEMO_LABELS, DEPTH_MASKS, MASKS, demo_images, masks_at_depth_jumps
@@ -102,30 +102,26 @@ def deepest_pixel(region: np.ndarray) -> tuple[float, float]:
 
 
 class Clicker:
-    """Selections of a segmented run by clicks in one view, scored in the others."""
+    """Selections of a segmented run by clicks in one view (the rule of ``gsseg edit --click``),
+    scored in the others."""
 
     def __init__(self, run: Run, views: list[View], truth: dict[str, np.ndarray], backend: str | Backend = "cpu"):
         self.run, self.first, self.others, self.truth = run, views[0], views[1:], truth
         self.backend = get_backend(backend)
-        self.labels = run.labels().labels
-        self.means, self.features = run.gaussians.means.numpy(), run.gaussians.obj_feat.detach().numpy()
-        self.positives: list[np.ndarray] = []
-        self.negatives: list[np.ndarray] = []
-        self.selected = np.zeros(len(self.labels), bool)
+        self.selector = ClickSelector(run.gaussians, run.labels().labels, run_regions(run, backend=self.backend))
+        self.clicks: list[ClickEvidence] = []
+        self.selected = np.zeros(len(run.gaussians), bool)
 
     def click(self, u: float, v: float, positive: bool) -> None:
         """Add a click at pixel (u, v) of the first view; a click on nothing opaque, or a
-        positive one on the background, is spent without changing the selection."""
+        negative one before any positive, is spent without changing the selection."""
         try:
-            point = point_from_click(
+            weights = click_weights(
                 self.run.gaussians, self.first.camera, self.first.cam_from_world, u, v, backend=self.backend
             )
-            positives = self.positives + [point] if positive else self.positives
-            negatives = self.negatives if positive else self.negatives + [point]
-            self.selected = select_by_points(
-                self.means, self.features, self.labels, np.stack(positives), np.stack(negatives) if negatives else None
-            )
-            self.positives, self.negatives = positives, negatives
+            clicks = self.clicks + [ClickEvidence(weights, positive)]
+            self.selected = self.selector.cut(clicks, self.selected if self.clicks else None)
+            self.clicks = clicks
         except InputError:
             pass
 

@@ -25,7 +25,7 @@ from eval.evaluate import PROTOCOLS, Evaluation, evaluate, load_inputs
 from eval.lpips import LPIPS
 from eval.renders import ViewRenders
 from eval.training_curve import psnr_levels
-from gsseg.edits import apply_edit, edit_background
+from gsseg.edits import Selection, apply_edit, edit_background
 from gsseg.render import Backend, get_backend
 from gsseg.run import Run
 from gsseg.run_folder import RunFolder
@@ -59,14 +59,13 @@ def default_object(segmentation: Segmentation) -> int:
 
 def edit_panels(
     run: Run,
-    segmentation: Segmentation,
+    selected: np.ndarray,
     views: list[View],
-    label: int,
     color: tuple[int, int, int],
     backend: str | Backend,
 ) -> dict[str, list[np.ndarray]]:
-    """Renders of ``views`` after removing, extracting (on white) and recolouring ``label``."""
-    selected = segmentation.selection(label)
+    """Renders of ``views`` after removing, extracting (on white) and recolouring the (N,) bool
+    ``selected`` Gaussians."""
     backend = get_backend(backend)
     out: dict[str, list[np.ndarray]] = {}
     for op in ("remove", "extract", "recolor"):
@@ -230,21 +229,22 @@ def write_report(
     history: list[dict],
     out_dir: Path,
     *,
-    selected: int,
+    edited: str,
+    matched: int | None,
     title: str,
     truth: dict[str, np.ndarray] | None = None,
     levels: tuple[np.ndarray, np.ndarray] | None = None,
     overwrite: bool = False,
 ) -> Path:
     """Write ``out_dir`` (atomically) with metrics.json, report.md, report.html and images/;
-    ``truth``: image rows of the edits beside their ground truth (:func:`truth_rows`);
+    ``edited``: what the edits took, in words, and ``matched`` the ground-truth object it was
+    matched to (None: none); ``truth``: image rows of the edits beside their ground truth (:func:`truth_rows`);
     ``levels``: the training curve of the model alone (:func:`training_plot`)."""
     sections = _sections(ev)
     rows = {r.stem: encode_png(image_row(r, ev.id_map, edits, i)) for i, r in enumerate(renders)}
     truth_pngs = {stem: encode_png(row) for stem, row in (truth or {}).items()}
     curve = training_plot(history, levels)
-    gt = ev.id_map.get(selected)
-    edit_note = f"edits of object {selected}" + (f" (ground-truth match: object {gt})" if gt is not None else "")
+    edit_note = f"edits of {edited}" + (f" (ground-truth match: object {matched})" if matched is not None else "")
     panels = " | ".join(p for p in PANELS if p != "ground truth" or ev.objects)
     with atomic_directory(out_dir, overwrite=overwrite) as tmp:
         ev.save(tmp / "metrics.json")
@@ -303,6 +303,7 @@ def report_run(
     gt_masks: str | None = GT_MASKS,
     split: str = "test",
     object_id: int | None = None,
+    selection: Selection | None = None,
     color: tuple[int, int, int] = (255, 40, 200),
     backend: str = "auto",
     lpips: Path | str | None = None,
@@ -311,7 +312,9 @@ def report_run(
     progress: bool = True,
 ) -> Evaluation:
     """Evaluate a segmented run and write its report to ``out_dir`` and ``RUN/evaluation.json``
-    (LPIPS with the network file ``lpips``, else reported as not available)."""
+    (LPIPS with the network file ``lpips``, else reported as not available). The edits shown
+    are of ``object_id``, or of a ``selection`` made by clicks (:func:`gsseg.edits.select`), or
+    of the largest object."""
     run_dir, scene_dir, out_dir = Path(run_dir), Path(scene_dir), Path(out_dir)
     refuse_overlap(
         out_dir,
@@ -334,11 +337,14 @@ def report_run(
         lpips=lpips_net,
         progress=progress,
     )
-    selected = default_object(segmentation) if object_id is None else int(object_id)
+    if selection is None:
+        k = default_object(segmentation) if object_id is None else int(object_id)
+        selection = Selection(segmentation.selection(k), k, str(k))
+    label = selection.object_id if selection.object_id is not None else selection.main_label(segmentation.labels)
     if gt_masks is not None:
         ev.edits = edit_rows(run, segmentation, views, scene_dir, ev.id_map, backend=backend)
-    edits = edit_panels(run, segmentation, views, selected, color, backend)
-    truth = truth_rows(scene_dir, views, ev.id_map.get(selected), edits) if ev.edits else None
+    edits = edit_panels(run, selection.mask, views, color, backend)
+    truth = truth_rows(scene_dir, views, ev.id_map.get(label), edits) if ev.edits else None
     history = run.folder.read_history()
     trained = len(run.record.train_views)
     levels = psnr_levels(history, trained, run.config.seed, max(10, history[-1]["step"] // 30)) if history else None
@@ -348,7 +354,8 @@ def report_run(
         edits,
         history,
         out_dir,
-        selected=selected,
+        edited=selection.name if selection.object_id is None else f"object {selection.object_id}",
+        matched=ev.id_map.get(label),
         title=f"gsseg report: {run_dir.name}",
         truth=truth,
         levels=levels,

@@ -5,7 +5,6 @@ from __future__ import annotations
 from pathlib import Path
 
 import click
-import numpy as np
 from click.core import ParameterSource
 
 from dataset_tools.infra.cli_support import none_means_off, other_scene_option, run_cli
@@ -370,7 +369,7 @@ def demo(
     score = "" if result.miou is None else f"mIoU {result.miou:.3f} (visible); "
     match = "" if result.match is None else f" (ground-truth match: object {result.match})"
     click.echo(
-        f"object {result.object_id}{match} at {np.round(result.point, 3).tolist()} removed, extracted and "
+        f"{result.edited}{match} ({result.gaussians:,} Gaussians) removed, extracted and "
         f"recoloured in {result.out / 'run' / 'edits'}; {score}{result.seconds / 60:.1f} min"
     )
     click.echo(f"report: {result.report}")

@@ -22,9 +22,10 @@ from gsseg.ply import write_ply
 from gsseg.render import Backend, get_backend
 from gsseg.run import Background, Run, load_run
 from gsseg.run_folder import write_edit_record
-from gsseg.segment.clicks import Click, select_by_points
-from gsseg.segment.prompts import pick_object, point_from_click
+from gsseg.segment.clicks import Click, ClickEvidence, ClickSelector
+from gsseg.segment.prompts import click_weights, pick_object, point_evidence
 from gsseg.segment.reassign import Segmentation
+from gsseg.segment.segment_run import run_regions
 from gsseg.sh import C0, rgb_to_sh_dc
 
 OPS = ("remove", "extract", "recolor")
@@ -83,10 +84,15 @@ class Selection:
     object_id: int | None
     name: str
 
+    def main_label(self, labels: np.ndarray) -> int:
+        """The label (not the background, 0) most of the selected Gaussians carry; 0 when none does."""
+        held = np.bincount(labels[self.mask], minlength=256)[1:]
+        return int(held.argmax() + 1) if held.any() else 0
+
 
 def check_prompts(point, clicks: list[Click] | tuple[Click, ...], object_id: int | None) -> None:
     """Refuse prompts that do not make one selection: exactly one of an object ID or points
-    and clicks, excluding clicks only with points or clicks, finite points."""
+    and clicks, excluding clicks only after a point or a positive click, finite points."""
     positive = any(c.positive for c in clicks)
     if (object_id is not None) + (point is not None or positive) != 1:
         raise OptionError("give {object_id}, or {point} and/or {clicks} (with excluding clicks to split).")
@@ -109,22 +115,14 @@ def select(
     k: int = 20,
     backend: str | Backend = "auto",
 ) -> Selection:
-    """The Gaussians of an ``object_id``, of the object under a 3D ``point`` or one positive
-    click, or (:func:`gsseg.segment.clicks.select_by_points`) of several joined and split by
-    the negative ``clicks`` that land on them; clicks name views of ``scene``."""
+    """The Gaussians of an ``object_id``, of the object under a 3D ``point`` (its label), or of
+    ``clicks`` (:class:`gsseg.segment.clicks.ClickSelector`, after the ``point`` where one is
+    given too); clicks name views of ``scene``."""
     check_prompts(point, clicks, object_id)
     backend = get_backend(backend)
-    lifted = {
-        c: point_from_click(
-            run.gaussians, scene.view(c.view).camera, scene.view(c.view).cam_from_world, c.u, c.v, backend=backend
-        )
-        for c in clicks
-    }
-    positives = ([np.asarray(point, float)] if point is not None else []) + [lifted[c] for c in clicks if c.positive]
-    negatives = [lifted[c] for c in clicks if not c.positive]
     means = run.gaussians.means.numpy()
-    if object_id is None and len(positives) == 1 and not negatives:
-        object_id = pick_object(means, segmentation.labels, positives[0], k)
+    if object_id is None and not clicks:
+        object_id = pick_object(means, segmentation.labels, np.asarray(point, float), k)
     if object_id is not None:
         mask = segmentation.selection(int(object_id))
         if not mask.any():
@@ -133,16 +131,16 @@ def select(
                 "segment the run again."
             )
         return Selection(mask, int(object_id), str(object_id))
-    mask = select_by_points(
-        means,
-        run.gaussians.obj_feat.detach().numpy(),
-        segmentation.labels,
-        np.stack(positives),
-        np.stack(negatives) if negatives else None,
-        k,
-    )
+    evidence = [point_evidence(run.gaussians, np.asarray(point, float), k)] if point is not None else []
+    for c in clicks:
+        view = scene.view(c.view)
+        weights = click_weights(run.gaussians, view.camera, view.cam_from_world, c.u, c.v, backend=backend)
+        evidence.append(ClickEvidence(weights, c.positive))
+    selector = ClickSelector(run.gaussians, segmentation.labels, run_regions(run, scene.root, backend=backend))
+    mask = selector.select(evidence)
     objects = sorted(set(np.unique(segmentation.labels[mask]).tolist()))
-    return Selection(mask, None, "+".join(map(str, objects)) + ("_split" if negatives else ""))
+    split = any(not c.positive for c in clicks)
+    return Selection(mask, None, "click_" + "+".join(map(str, objects)) + ("_split" if split else ""))
 
 
 def edit_run(

@@ -10,6 +10,8 @@ file of a run is named here and nowhere else.
       metrics.json      the training curve
       labels.npz        per-Gaussian labels (`gsseg segment`)
       contributions.npz the contribution matrix they were chosen from (`gsseg segment`, `gsseg view`)
+      regions.npz       each Gaussian's weight in every mask region of every view, the evidence
+                        clicks select with (`gsseg segment`, or the first click)
       evaluation.json   the scores of `gseval report`, for `gseval compare`
       edits/NAME/       one edit: gaussians.ply, renders/, video.mp4, edit.json
       .lock             held by the command writing the run (an OS file lock)
@@ -31,6 +33,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import scipy.sparse as sp
 import torch
 
 from dataset_tools.infra.atomic import write_bytes_atomic
@@ -40,7 +43,7 @@ from dataset_tools.infra.names import plain_name
 from gsseg.environment import Environment
 from gsseg.gaussians import Gaussians, make_classifier
 from gsseg.ply import read_ply, write_ply
-from gsseg.render.contributions import Contributions
+from gsseg.render.contributions import Contributions, RegionWeights
 from gsseg.segment.reassign import Segmentation
 from gsseg.train_config import RunRecord
 
@@ -49,6 +52,7 @@ FORMAT_VERSIONS = {
     "metrics.json": 1,
     "labels.npz": 1,
     "contributions.npz": 1,
+    "regions.npz": 1,
     "evaluation.json": 1,
     "edit.json": 1,
 }
@@ -95,6 +99,10 @@ class RunFolder:
     @property
     def contributions(self) -> Path:
         return self.root / "contributions.npz"
+
+    @property
+    def regions(self) -> Path:
+        return self.root / "regions.npz"
 
     @property
     def evaluation(self) -> Path:
@@ -255,6 +263,43 @@ class RunFolder:
     def write_contributions(self, contributions: Contributions) -> None:
         c = contributions
         _write_npz(self.contributions, labels=c.labels, weights=c.weights.numpy(), model=c.model, masks=c.masks)
+
+    def read_regions(self) -> RegionWeights | None:
+        """The region weights ``gsseg segment`` wrote, None when there are none."""
+        if not self.regions.is_file():
+            return None
+        try:
+            with np.load(self.regions, allow_pickle=False) as f:
+                _check_version(self.regions, f)
+                shape = tuple(int(n) for n in f["shape"])
+                return RegionWeights(
+                    sp.csr_matrix((f["data"], f["indices"], f["indptr"]), shape=shape),
+                    f["view"],
+                    f["label"],
+                    f["layer"],
+                    tuple(str(name) for name in f["layers"]),
+                    str(f["model"]),
+                )
+        except DAMAGED as e:
+            raise InputError(
+                f"{self.regions}: damaged region weights ({e}); delete the file and run `gsseg segment` again."
+            ) from None
+
+    def write_regions(self, regions: RegionWeights) -> None:
+        m = regions.matrix.tocsr()
+        _write_npz(
+            self.regions,
+            compressed=True,
+            data=m.data.astype(np.float32),
+            indices=m.indices.astype(np.int32),
+            indptr=m.indptr.astype(np.int64),
+            shape=np.array(m.shape),
+            view=regions.view,
+            label=regions.label,
+            layer=regions.layer,
+            layers=np.array(regions.layers),
+            model=regions.model,
+        )
 
     # evaluation.json: `gseval report`
     def read_evaluation(self) -> dict:

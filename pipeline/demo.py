@@ -14,8 +14,8 @@
 5. prior-guided reassignment with the 3D regularisations (``gsseg segment --smooth 16
    --fill-interiors``): the rims and interiors that the masks leave to the background go
    with their object, so that a removal leaves no outline of it;
-6. the object under a 3D point (the first object's centre in the synthetic scene, the
-   surface under the centre pixel of the first test view otherwise) removed, extracted
+6. the object under a 3D point (the first object's centre) in the synthetic scene, or in
+   the user's what a click at the centre of the first test view selects, removed, extracted
    and recoloured (``gsseg edit``);
 7. the report (``gseval report``) against the exact masks where the scene has them.
 """
@@ -37,13 +37,14 @@ from dataset_tools.infra.overlap import refuse_overlap, scene_entries
 from dataset_tools.scene import GT_MASKS, linked_scene
 from dataset_tools.sfm import run_sfm
 from dataset_tools.synth import SynthConfig, generate_scene
-from eval.report import default_object, report_run
-from gsseg.edits import edit_run
+from eval.report import report_run
+from gsseg.edits import Selection, edit_run, select
 from gsseg.render import Backend, get_backend
 from gsseg.render_views import render_run
 from gsseg.run import Run, load_run
-from gsseg.segment.prompts import pick_object, point_from_click
-from gsseg.segment.segment_run import LabelOptions, segment_run
+from gsseg.segment.clicks import Click
+from gsseg.segment.reassign import Segmentation
+from gsseg.segment.segment_run import LabelOptions, run_regions, segment_run
 from gsseg.train import TrainConfig, train
 from gsseg.train_config import DEMO_ITERS, DEMO_MAX_GAUSSIANS, DEMO_SCENE_ITERS
 from hqmask.build import BuildConfig, build_masks
@@ -64,41 +65,40 @@ DEMO_LABELS = LabelOptions(smooth=16, fill=True)
 class DemoResult:
     out: Path
     report: Path
-    object_id: int
-    point: np.ndarray
+    edited: str  # what was edited: "object K", or the name of a click's selection
+    gaussians: int  # how many Gaussians that is
     miou: float | None
     seconds: float
     warning: str | None = None  # structure from motion's, on cameras posed on the far side
     match: int | None = None  # the ground-truth object the edited one was matched to, where there is truth
 
 
-def _demo_object(
-    scene_dir: Path, run: Run, labels: np.ndarray, default: int, synth_point: np.ndarray | None, backend: Backend
-) -> tuple[int, np.ndarray]:
-    """The object the demo edits and the 3D point that selects it: the synthetic scene's first
-    object; in a user's scene the object under the centre of the first test view, or, where
-    the centre shows background, the ``default`` object at the median of its Gaussians."""
-    means = run.gaussians.means.numpy()
+def _demo_selection(
+    scene_dir: Path, run: Run, segmentation: Segmentation, synth_point: np.ndarray | None, backend: Backend
+) -> tuple[Selection, dict]:
+    """What the demo edits, and the prompt that selects it (``edit_run``'s keywords): the
+    synthetic scene's first object, by a 3D point at its centre; in a user's scene what a click
+    at the centre of the first test view selects (the rule of ``gsseg edit --click``), or,
+    where nothing is seen there, the largest object that does not cover most of every view
+    (such a label is the scene, not an object in it)."""
+    scene = run.scene(scene_dir)
     if synth_point is not None:
-        return pick_object(means, labels, synth_point), np.asarray(synth_point, np.float64)
-    view = run.scene(scene_dir).split("test")[0]
+        prompt = {"point": np.asarray(synth_point, np.float64)}
+        return select(run, segmentation, scene, backend=backend, **prompt), prompt
+    view = scene.split("test")[0]
+    prompt = {"clicks": [Click(view.name, view.camera.width / 2, view.camera.height / 2)]}
     try:
-        point = point_from_click(
-            run.gaussians,
-            view.camera,
-            view.cam_from_world,
-            view.camera.width / 2,
-            view.camera.height / 2,
-            backend=backend,
-        )
-        return pick_object(means, labels, point), point
+        return select(run, segmentation, scene, backend=backend, **prompt), prompt
     except InputError:
-        if not (labels == default).any():
+        scene_wide = run_regions(run, scene_dir, backend=backend).covering()
+        objects = [o for o in segmentation.objects if int(o) not in scene_wide and segmentation.selection(o).any()]
+        if not objects:
             raise OptionError(
-                f"{run.folder.labels}: no Gaussian carries an object label; train longer ({{iters}}) or check the "
-                f"masks in the scene's {MASKS}/."
+                f"{run.folder.labels}: no object label holds less than most of every view; train longer "
+                f"({{iters}}) or check the masks in the scene's {MASKS}/."
             ) from None
-        return default, np.median(means[labels == default], axis=0).astype(np.float64)
+        largest = int(max(objects, key=lambda o: segmentation.selection(o).sum()))
+        return select(run, segmentation, scene, object_id=largest, backend=backend), {"object_id": largest}
 
 
 def demo_images(scene: Path) -> str:
@@ -227,24 +227,22 @@ def _run_demo(
         run_dir, scene_dir, options=DEMO_LABELS, masks=DEPTH_MASKS, backend=backend, progress=progress
     )
     run = load_run(run_dir)
-    object_id, point = _demo_object(
-        scene_dir, run, segmentation.labels, default_object(segmentation), synth_point, backend
-    )
+    selection, prompt = _demo_selection(scene_dir, run, segmentation, synth_point, backend)
     for op, color in (("remove", None), ("extract", None), ("recolor", (255, 40, 200))):
-        edit_run(run_dir, op, object_id=object_id, color=color, scene_dir=scene_dir, backend=backend, progress=progress)
+        edit_run(run_dir, op, color=color, scene_dir=scene_dir, backend=backend, progress=progress, **prompt)
     report = out / "report"
     with torch.no_grad():
         ev = report_run(
-            run_dir, scene_dir, report, gt_masks=gt_masks, object_id=object_id, backend=backend, progress=progress
+            run_dir, scene_dir, report, gt_masks=gt_masks, selection=selection, backend=backend, progress=progress
         )
     miou = ev.summary()["visible"]["miou"]
     return DemoResult(
         out,
         report / "report.html",
-        object_id,
-        point,
+        selection.name if selection.object_id is None else f"object {selection.object_id}",
+        int(selection.mask.sum()),
         miou,
         time.perf_counter() - start,
         warning,
-        ev.id_map.get(object_id),
+        ev.id_map.get(selection.object_id or selection.main_label(segmentation.labels)),
     )

@@ -1,5 +1,5 @@
-"""Selections by several clicks: positive clicks join objects, a negative click splits an
-object the masks joined to another (``gsseg edit --click ... --exclude-click ...``)."""
+"""Selections made by clicks (``gsseg edit --click ... --exclude-click ...``, the viewer): the
+views' mask regions under a click, the labels where they agree, a cut over the Gaussians."""
 
 from __future__ import annotations
 
@@ -11,60 +11,133 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import scipy.sparse as sp
 import torch
 from helpers import script
 from scipy import ndimage
 
+from dataset_tools.image_files import encode_png
+from dataset_tools.infra.atomic import write_bytes_atomic
 from dataset_tools.infra.errors import InputError
+from dataset_tools.scene import load_scene
+from gsseg.gaussians import gaussians_from_points
 from gsseg.ply import read_ply
+from gsseg.render.contributions import RegionWeights
 from gsseg.render.pixel_labels import segment_pixels
 from gsseg.run import load_run
-from gsseg.segment.clicks import select_by_points, split_by_graph
-from gsseg.segment.prompts import point_from_click
+from gsseg.segment.clicks import ClickEvidence, ClickSelector
+from gsseg.segment.segment_run import segment_run
+
+# --- the rule on a drawn model: two blobs, what the views and the labels say of them ----------
 
 
-def test_a_negative_click_splits_two_blobs_along_the_graph_not_across_it():
-    """Two clusters of Gaussians, one label, the same features: the excluded cluster leaves
-    whole, even where its nearest Gaussian lies closer to the positive click than to the
-    negative one in a straight line (an elongated object reaching towards the other)."""
+def _two_blobs():
+    """200 red Gaussians about x = 0 (A) and 200 blue ones about x = 3 (B)."""
     rng = np.random.default_rng(0)
-    rod = np.stack([np.linspace(0, 4, 400), rng.normal(0, 0.05, 400), rng.normal(0, 0.05, 400)], 1)
-    blob = rng.normal(0, 0.2, (300, 3)) + [5.0, 0.0, 0.0]
-    means = np.concatenate([rod, blob])
-    feats = np.zeros((len(means), 16))
-    labels = np.full(len(means), 7, np.uint8)
-    selected = select_by_points(means, feats, labels, positives=[[0.0, 0, 0]], negatives=[[5.0, 0, 0]])
-    assert selected[:400].all() and not selected[400:].any()
-    keep = split_by_graph(means, feats, np.array([[0.0, 0, 0]]), np.array([[5.0, 0, 0]]))
-    assert keep.sum() == 400
-    with pytest.raises(InputError, match="on the background"):
-        select_by_points(means, feats, np.zeros(len(means), np.uint8), positives=[[0.0, 0, 0]])
-    with pytest.raises(InputError, match="at least one positive click"):
-        select_by_points(means, feats, labels, positives=np.zeros((0, 3)))
+    xyz = np.concatenate([rng.normal(0, 0.3, (200, 3)), rng.normal(0, 0.3, (200, 3)) + [3.0, 0, 0]])
+    rgb = np.concatenate([np.tile([200, 30, 30], (200, 1)), np.tile([30, 30, 200], (200, 1))]).astype(np.uint8)
+    return gaussians_from_points(xyz, rgb, initial_opacity=0.9), np.arange(200), np.arange(200, 400)
 
 
-def _clickable(run, labels: np.ndarray, objects: list[int]) -> dict[int, tuple[str, float, float, np.ndarray]]:
-    """For each object, a training view and the pixel deepest inside it there, and the 3D point
-    that pixel lifts to."""
+def _regions(n: int, groups: list[np.ndarray], views: int = 6) -> RegionWeights:
+    """Each of ``views`` views shows every Gaussian with weight 1, in one region per group (the
+    Gaussians of a group under one mask label, 1, 2, ...) and the rest under label 0."""
+    rows, view, label = [], [], []
+    for v in range(views):
+        rest = np.ones(n, bool)
+        for k, group in enumerate(groups):
+            row = np.zeros(n, np.float32)
+            row[group] = 1
+            rest[group] = False
+            rows.append(row), view.append(v), label.append(k + 1)
+        rows.append(rest.astype(np.float32)), view.append(v), label.append(0)
+    return RegionWeights(
+        sp.csr_matrix(np.stack(rows)), np.array(view), np.array(label, np.uint8), np.zeros(len(view), np.uint8), ("m",)
+    )
+
+
+def _click(n: int, on: np.ndarray, positive: bool = True) -> ClickEvidence:
+    weights = np.zeros(n)
+    weights[on[:5]] = 1.0
+    return ClickEvidence(weights, positive)
+
+
+def test_a_click_selects_what_the_views_hold_apart_although_the_labels_join_it():
+    g, a, b = _two_blobs()
+    n = len(g)
+    joined = np.full(n, 7, np.uint8)  # the 3D labels joined A and B
+    selector = ClickSelector(g, joined, _regions(n, [a, b]))  # every view holds them apart
+    selected = selector.select([_click(n, a)])
+    assert selected[a].all() and not selected[b].any()
+    with pytest.raises(InputError, match="click on it first"):
+        selector.select([_click(n, b, positive=False)])
+
+
+def test_a_negative_click_takes_out_a_part_the_views_and_labels_joined():
+    g, a, b = _two_blobs()
+    n = len(g)
+    selector = ClickSelector(g, np.full(n, 7, np.uint8), _regions(n, [np.concatenate([a, b])]))
+    both = selector.select([_click(n, a)])
+    assert both.all()
+    alone = selector.select([_click(n, a), _click(n, b, positive=False)])
+    assert alone[a].all() and not alone[b].any()
+
+
+def test_a_positive_click_adds_a_part_no_label_holds_and_keeps_what_was_selected():
+    g, a, b = _two_blobs()
+    n = len(g)
+    labels = np.zeros(n, np.uint8)
+    labels[a] = 3  # B carries no label: the 3D labels lost it
+    selector = ClickSelector(g, labels, _regions(n, [a, b]))
+    first = selector.select([_click(n, a)])
+    assert first[a].all() and not first[b].any()
+    both = selector.cut([_click(n, a), _click(n, b)], first)
+    assert both[a].all() and both[b].all()
+    assert np.array_equal(both, selector.select([_click(n, a), _click(n, b)]))
+
+
+# --- the rule on a trained run, through gsseg edit, export and the viewer ----------------------
+
+
+def _clickable(run, labels: np.ndarray, objects: list[int]) -> dict[int, tuple[str, float, float]]:
+    """For each object, a training view and the pixel deepest inside it there."""
     found = {}
-    g = run.gaussians
     for view in run.scene().split("train"):
         ids = segment_pixels(
-            g, labels, view.camera, torch.as_tensor(view.cam_from_world, dtype=torch.float32), backend="cpu"
+            run.gaussians, labels, view.camera, torch.as_tensor(view.cam_from_world, dtype=torch.float32), backend="cpu"
         )
         for obj in objects:
             depth = ndimage.distance_transform_edt(ids == obj)
             if obj not in found and depth.max() > 3:
                 row, col = np.unravel_index(depth.argmax(), depth.shape)
-                point = point_from_click(g, view.camera, view.cam_from_world, col + 0.5, row + 0.5, backend="cpu")
-                found[obj] = (view.stem, col + 0.5, row + 0.5, point)
+                found[obj] = (view.stem, col + 0.5, row + 0.5)
     assert set(found) == set(objects)
     return found
 
 
-def _joined(segmented: Path, tmp_path: Path):
-    """A copy of the test run whose two largest objects a and b share a's label in labels.npz:
-    (run folder, run, its original labels, the joined labels (N,), a, b)."""
+def _edit(run_dir: Path, *args: str) -> np.ndarray:
+    """The Gaussians ``gsseg edit RUN --op extract ARGS`` keeps, (N,) bool over the run's."""
+    r = subprocess.run(
+        [script("gsseg"), "edit", str(run_dir), "--op", "extract", "--backend", "cpu", *args],
+        capture_output=True,
+        text=True,
+    )
+    assert r.returncode == 0, r.stderr
+    return _kept(load_run(run_dir), Path(r.stdout.split()[-1]) / "gaussians.ply")
+
+
+def _kept(run, ply: Path) -> np.ndarray:
+    kept = {tuple(p) for p in read_ply(ply).means.numpy().tolist()}
+    return np.array([tuple(p) in kept for p in run.gaussians.means.numpy().tolist()])
+
+
+def _iou(x: np.ndarray, y: np.ndarray) -> float:
+    return float((x & y).sum() / max((x | y).sum(), 1))
+
+
+def _joined_labels(segmented: Path, tmp_path: Path):
+    """A copy of the test run whose two largest objects a and b share a's label in labels.npz
+    (the masks still tell them apart): (run folder, run, its own labels, a, b)."""
     run_dir = Path(shutil.copytree(segmented, tmp_path / "run"))
     run = load_run(run_dir)
     seg = run.labels()
@@ -73,41 +146,39 @@ def _joined(segmented: Path, tmp_path: Path):
     merged = np.where(seg.labels == b, a, seg.labels).astype(np.uint8)
     objects = np.array([o for o in seg.objects if o != b], np.uint8)
     run.folder.write_labels(replace(seg, labels=merged, objects=objects, selections=merged[None] == objects[:, None]))
-    return run_dir, run, seg, merged, a, b
+    return run_dir, run, seg, a, b
 
 
 @pytest.mark.slow
-def test_exclude_click_splits_an_object_joined_to_another(segmented, tmp_path):
-    """The two largest objects of the test run given one label (as the weight-free masks join
-    a dark head to the dark bush behind it): one click selects both; an excluding click on the
-    second leaves the first alone (IoU > 0.95 with its own Gaussians); two clicks on the
-    parts join them again."""
-    run_dir, run, seg, merged, a, b = _joined(segmented, tmp_path)
+def test_clicks_carve_objects_the_labels_joined(segmented, small_scene, tmp_path):
+    """The test run's two largest objects a and b given one label (as the weight-free masks
+    join an object to what it stands on): a click on a selects a (the views hold it apart);
+    where the masks join them as well, one click selects both and an excluding click on b
+    takes b out (most of it on this rough 200-step model), keeping a. ``gsseg export``
+    selects what ``gsseg edit`` selects."""
+    run_dir, run, seg, a, b = _joined_labels(segmented, tmp_path)
     clicks = _clickable(run, seg.labels, [a, b])
+    at_a = ["--click", *map(str, clicks[a])]
+    own_a, own_b = seg.labels == a, seg.labels == b
 
-    def edit(*args: str) -> Path:
-        r = subprocess.run(
-            [script("gsseg"), "edit", str(run_dir), "--op", "extract", "--backend", "cpu", *args],
-            capture_output=True,
-            text=True,
-        )
-        assert r.returncode == 0, r.stderr
-        return Path(r.stdout.split()[-1])
+    alone = _edit(run_dir, *at_a, "--name", "a")
+    assert _iou(alone, own_a) > 0.9
 
-    def chosen(out: Path) -> np.ndarray:
-        kept = {tuple(p) for p in read_ply(out / "gaussians.ply").means.numpy().tolist()}
-        return np.array([tuple(p) in kept for p in run.gaussians.means.numpy().tolist()])
-
-    va, ua, wa, _ = clicks[a]
-    vb, ub, wb, _ = clicks[b]
-    both = chosen(edit("--click", va, str(ua), str(wa), "--name", "both"))
-    assert both[seg.labels == a].all() and both[seg.labels == b].all()
-    alone = chosen(edit("--click", va, str(ua), str(wa), "--exclude-click", vb, str(ub), str(wb)))
-    truth = seg.labels == a
-    assert (alone & truth).sum() / (alone | truth).sum() > 0.95
-    record = json.loads((run_dir / "edits" / f"extract_{a}_split" / "edit.json").read_text())
+    # masks that join a and b in every view: the views no longer hold them apart
+    scene = Path(shutil.copytree(small_scene.root, tmp_path / "scene"))
+    for view in load_scene(scene, masks="object_mask").views:
+        mask = view.load_mask()
+        write_bytes_atomic(view.mask_path, encode_png(np.where(mask == b, a, mask).astype(np.uint8)))
+    segment_run(run_dir, scene, backend="cpu", progress=False)
+    run = load_run(run_dir)
+    scene_args = ["--scene", str(scene)]
+    joined = _edit(run_dir, *at_a, *scene_args, "--name", "joined")
+    assert _iou(joined, own_a | own_b) > 0.9
+    split = _edit(run_dir, *at_a, "--exclude-click", *map(str, clicks[b]), *scene_args, "--name", "split")
+    assert (split & own_a).sum() >= 0.98 * (joined & own_a).sum() and (split & own_b).sum() < (joined & own_b).sum() / 3
+    record = json.loads((run_dir / "edits" / "split" / "edit.json").read_text())
     assert [c["positive"] for c in record["clicks"]] == [True, False] and record["object_id"] is None
-    exported = tmp_path / "alone.ply"  # the selection is an object like any other for export
+    exported = tmp_path / "split.ply"
     r = subprocess.run(
         [
             script("gsseg"),
@@ -115,52 +186,44 @@ def test_exclude_click_splits_an_object_joined_to_another(segmented, tmp_path):
             str(run_dir),
             "--out",
             str(exported),
-            "--click",
-            va,
-            str(ua),
-            str(wa),
+            *at_a,
             "--exclude-click",
-            vb,
-            str(ub),
-            str(wb),
-        ],
+            *map(str, clicks[b]),
+        ]
+        + scene_args,
         capture_output=True,
         text=True,
     )
     assert r.returncode == 0, r.stderr
-    assert len(read_ply(exported)) == alone.sum()  # no environment shell for a selection
-    run.folder.write_labels(seg)  # the original labels: two clicks join the two objects
-    joined = chosen(edit("--click", va, str(ua), str(wa), "--click", vb, str(ub), str(wb), "--name", "joined"))
-    np.testing.assert_array_equal(joined, (seg.labels == a) | (seg.labels == b))
+    np.testing.assert_array_equal(_kept(run, exported), split)
 
 
 @pytest.mark.slow
-def test_the_viewers_shift_click_splits_what_gsseg_edit_exclude_click_splits(segmented, tmp_path):
-    """The viewer's click, then shift-click on the second of two joined objects, selects what
-    ``gsseg edit --click --exclude-click`` selects; removing it keeps the rest; undo restores."""
+def test_the_viewers_clicks_select_what_gsseg_edit_selects(segmented, tmp_path):
+    """The viewer's click, ctrl-click and shift-click select what ``gsseg edit --click`` and
+    ``--exclude-click`` select; a removal keeps the rest; undo restores."""
     from gsseg.viewer.session import ViewCamera, ViewerSession
 
-    run_dir, run, seg, merged, a, b = _joined(segmented, tmp_path)
+    run_dir, run, seg, a, b = _joined_labels(segmented, tmp_path)
     clicks = _clickable(run, seg.labels, [a, b])
     session = ViewerSession(load_run(run_dir), backend="cpu")
     scene = run.scene()
 
-    def at(obj: int, mode: str):
+    def at(obj: int, mode: str) -> np.ndarray:
         view = scene.view(clicks[obj][0])
         return session.select_at(ViewCamera(view.camera, view.cam_from_world), clicks[obj][1], clicks[obj][2], mode)
 
     with pytest.raises(InputError, match="click an object first"):
         at(b, "exclude")
-    assert at(a, "select") == a and session.selection().sum() == (merged == a).sum()
-    assert at(b, "exclude") is None
-    expected = select_by_points(
-        run.gaussians.means.numpy(),
-        run.gaussians.obj_feat.detach().numpy(),
-        merged,
-        clicks[a][3][None],
-        clicks[b][3][None],
+    np.testing.assert_array_equal(at(a, "select"), _edit(run_dir, "--click", *map(str, clicks[a]), "--name", "1"))
+    added = at(b, "add")
+    np.testing.assert_array_equal(
+        added, _edit(run_dir, "--click", *map(str, clicks[a]), "--click", *map(str, clicks[b]), "--name", "2")
     )
-    np.testing.assert_array_equal(session.selection(), expected)
+    at(a, "select")
+    taken = at(b, "exclude")
+    expected = _edit(run_dir, "--click", *map(str, clicks[a]), "--exclude-click", *map(str, clicks[b]), "--name", "3")
+    np.testing.assert_array_equal(taken, expected)
     session.edit("remove")
     assert len(session.current()[0]) == len(run.gaussians) - expected.sum() and session.selection() is None
     assert session.undo().object_id is None and len(session.current()[0]) == len(run.gaussians)

@@ -159,13 +159,14 @@ def test_a_click_selects_what_gsseg_edit_click_selects(segmented, small_scene, t
     session = ViewerSession(load_run(run), scene_dir=small_scene.root, backend="cpu")
     view = load_scene(small_scene.root, masks="object_mask").split("train")[1]
     mask = view.load_mask()
+    labels = session.segmentation.labels
     found = []
     for label in [int(x) for x in np.unique(mask) if x][:3]:
         u, v = _inside_pixel(mask, label)
         chosen = session.select_at(ViewCamera(view.camera, view.cam_from_world), u, v)
-        edited = _edited_by_click(run, view.stem, u, v, "remove", f"click_{label}")
-        assert chosen == edited, (label, chosen, edited)  # None: both found the background there
-        found.append(chosen == label)
+        np.testing.assert_array_equal(chosen, _edited_by_click(run, view.stem, u, v, "extract", f"click_{label}"))
+        own = labels == label
+        found.append((chosen & own).sum() / (chosen | own).sum() > 0.5)
     # the run is a rough one (200 steps on 8 views): most clicks find their mask's object
     assert sum(found) >= 2, found
 
@@ -332,15 +333,14 @@ def browser():
     driver.quit()
 
 
-def _edited_by_click(run: Path, view: str, u: float, v: float, op: str, name: str) -> int | None:
-    """The object ``gsseg edit RUN --click VIEW U V --op OP --name NAME`` edits, None where it
-    refuses the click as one on the background."""
+def _edited_by_click(run: Path, view: str, u: float, v: float, op: str, name: str) -> np.ndarray:
+    """The Gaussians (N,) bool ``gsseg edit RUN --click VIEW U V --op OP --name NAME`` edits."""
     cmd = [script("gsseg"), "edit", str(run), "--click", view, str(u), str(v), "--op", op, "--name", name]
     r = subprocess.run([*cmd, "--backend", "cpu"], capture_output=True, text=True)
-    if r.returncode == 2 and "lies on the background" in r.stderr:
-        return None
     assert r.returncode == 0, r.stderr
-    return json.loads((run / "edits" / name / "edit.json").read_text())["object_id"]
+    kept = {tuple(p) for p in read_ply(run / "edits" / name / "gaussians.ply").means.numpy().tolist()}
+    inside = np.array([tuple(p) in kept for p in load_run(run).gaussians.means.numpy().tolist()])
+    return inside if op == "extract" else ~inside
 
 
 def _canvas_image(driver, canvas) -> np.ndarray:
@@ -430,13 +430,15 @@ def test_the_viewer_in_headless_chromium_selects_and_removes_by_click(segmented,
         x, y = canvas.from_view(*_inside_pixel(mask, label))
         offset = (x - canvas.w // 2, y - canvas.h // 2)  # selenium's offsets are from the element's centre
         ActionChains(browser).move_to_element_with_offset(element, *offset).click().perform()
-        assert _wait(lambda: viewer.session.selected, what="a selection") == label
+        selected = _wait(lambda: viewer.session.selection(), what="a selection")
+        own = session.segmentation.labels == label
+        assert (selected & own).sum() / (selected | own).sum() > 0.5
         region = canvas.region(ndimage.binary_erosion(mask == label, iterations=2))
         _wait(lambda: changes(region, shown), what="the highlight")
         highlighted = _canvas_image(browser, element)
-        # the same pixel through `gsseg edit --click` selects the same object
+        # the same pixel through `gsseg edit --click` selects the same Gaussians
         u, v = canvas.to_view(x, y)
-        assert _edited_by_click(run, view.stem, u, v, "extract", "click") == label
+        np.testing.assert_array_equal(_edited_by_click(run, view.stem, u, v, "extract", "click"), selected)
         # "Remove" in the panel: the object's pixels change in the next frames
         browser.find_element(By.XPATH, "//button[normalize-space(.)='Remove']").click()
         _wait(lambda: viewer.session.steps, what="the removal")

@@ -3,7 +3,9 @@
     A[k, i] = sum over views v and pixels p with M_v(p) = labels[k] of alpha_i(p) T_i(p)
 
 computed with the blending rules of training, one pass per view on the chosen backend
-(:meth:`gsseg.render.backends.Backend.contributions`).
+(:meth:`gsseg.render.backends.Backend.contributions`). The same pass can keep the terms of each
+view apart: :class:`RegionWeights`, each Gaussian's weight in every mask region of every view,
+from which a click's object is found (:mod:`gsseg.segment.clicks`).
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
+import scipy.sparse as sp
 import torch
 from tqdm import tqdm
 
@@ -42,22 +45,83 @@ class MaskedView:
         return self.mask
 
 
+# A Gaussian's weight in a region under this (a thousandth of a pixel) is left out of RegionWeights.
+REGION_WEIGHT_FLOOR = 1e-3
+
+
+@dataclass
+class RegionWeights:
+    """Each Gaussian's blended weight alpha_i T_i summed over the pixels of each mask region
+    (a label in one view) of one or more mask folders (layers).
+
+    Attributes:
+        matrix: (R, N) float32 CSR matrix, a row per region; weights under
+            :data:`REGION_WEIGHT_FLOOR` are left out.
+        view: (R,) int32 index of the region's view. label: (R,) uint8 its mask label.
+        layer: (R,) uint8 index into ``layers``, the mask folders.
+        model: the fingerprint of the model they were computed for, "" when unknown.
+    """
+
+    matrix: sp.csr_matrix
+    view: np.ndarray
+    label: np.ndarray
+    layer: np.ndarray
+    layers: tuple[str, ...]
+    model: str = ""
+
+    def covering(self, share: float = 0.5, views: float = 0.75) -> set[int]:
+        """The labels of the first layer whose regions hold at least ``share`` of the blended
+        weight of their view in at least ``views`` of its views: labels that cover most of
+        every view, the scene rather than an object in it."""
+        first = self.layer == 0
+        matrix, view, label = self.matrix[np.flatnonzero(first)], self.view[first], self.label[first]
+        weight = np.asarray(matrix.sum(1)).ravel()
+        per_view = np.bincount(view, weight)
+        n_views = len(np.unique(view))
+        wide = label[weight >= share * per_view[view]]
+        counts = np.bincount(wide, minlength=256)
+        return {int(k) for k in np.flatnonzero(counts >= views * max(n_views, 1))}
+
+    def subset(self, keep: np.ndarray) -> RegionWeights:
+        """The weights of the Gaussians where (N,) bool ``keep`` is true (a model after a removal)."""
+        return RegionWeights(self.matrix[:, np.flatnonzero(keep)], self.view, self.label, self.layer, self.layers, "")
+
+    @classmethod
+    def stack(cls, parts: Sequence[RegionWeights]) -> RegionWeights:
+        """The layers of ``parts`` (each of one layer, of the same model) as one."""
+        return cls(
+            sp.vstack([p.matrix for p in parts]).tocsr(),
+            np.concatenate([p.view for p in parts]),
+            np.concatenate([p.label for p in parts]),
+            np.concatenate([np.full(len(p.view), k, np.uint8) for k, p in enumerate(parts)]),
+            tuple(name for p in parts for name in p.layers),
+            parts[0].model if parts else "",
+        )
+
+
 @dataclass
 class Contributions:
     """labels: (K,) uint8, the mask labels seen in any view, sorted. weights: (K, N) float32.
     model: the fingerprint of the model they were computed for, "" when unknown. masks: the
-    mask folder that voted, "" when unknown."""
+    mask folder that voted, "" when unknown. regions: the same weights per view, where asked for."""
 
     labels: np.ndarray
     weights: torch.Tensor
     model: str = ""
     masks: str = ""
+    regions: RegionWeights | None = None
 
 
 def contribution_matrix(
-    gaussians: Gaussians, views: Sequence[Masked], *, backend: str | Backend = "cpu", progress: bool = True
+    gaussians: Gaussians,
+    views: Sequence[Masked],
+    *,
+    backend: str | Backend = "cpu",
+    regions: bool = False,
+    progress: bool = True,
 ) -> Contributions:
-    """Sum alpha * T per Gaussian and mask label over ``views``.
+    """Sum alpha * T per Gaussian and mask label over ``views``; with ``regions``, also keep
+    each view's sums apart (:class:`RegionWeights`, one layer, its views numbered as given).
 
     ``cpu`` accumulates in a numba forward pass; ``torch`` and ``gsplat`` obtain the same sums
     as a gradient, on the backend's device. Memory: (K, N) float32 plus one such buffer per
@@ -70,9 +134,26 @@ def contribution_matrix(
     rows[labels] = np.arange(len(labels))
     g = gaussians.detach().to(backend.device)
     total = torch.zeros(len(labels), len(g))
-    for view in tqdm(views, desc="contributions", unit="view", disable=not progress, leave=False):
+    blocks, view_of, label_of = [], [], []
+    for k, view in enumerate(tqdm(views, desc="contributions", unit="view", disable=not progress, leave=False)):
         pose = torch.as_tensor(view.cam_from_world, dtype=torch.float32, device=backend.device)
-        total += backend.contributions(
+        weights = backend.contributions(
             g.means, g.quats, g.scales, g.opacities, pose, view.camera, rows[view.load_mask()], len(labels)
         )
-    return Contributions(labels=labels.astype(np.uint8), weights=total)
+        total += weights
+        if regions:
+            seen = np.flatnonzero(weights.sum(1).numpy() > 0)
+            block = weights.numpy()[seen]
+            blocks.append(sp.csr_matrix(np.where(block >= REGION_WEIGHT_FLOOR, block, 0.0).astype(np.float32)))
+            view_of.append(np.full(len(seen), k, np.int32))
+            label_of.append(labels[seen].astype(np.uint8))
+    kept = None
+    if regions:
+        kept = RegionWeights(
+            sp.vstack(blocks).tocsr() if blocks else sp.csr_matrix((0, len(g)), dtype=np.float32),
+            np.concatenate(view_of) if view_of else np.zeros(0, np.int32),
+            np.concatenate(label_of) if label_of else np.zeros(0, np.uint8),
+            np.zeros(sum(len(v) for v in view_of), np.uint8),
+            ("",),
+        )
+    return Contributions(labels=labels.astype(np.uint8), weights=total, regions=kept)

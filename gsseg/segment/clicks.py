@@ -1,31 +1,56 @@
-"""Selections made by several clicks, each for or against: positive clicks join the objects
-they land on (the parts of one object that the masks split), a negative click inside the
-selection splits it (an object the masks joined to another).
+"""Selections made by clicks, each for or against, whatever the labels hold.
 
-A click is lifted to a 3D point (:func:`gsseg.segment.prompts.point_from_click`). The
-selection starts as every object a positive point picks. A negative point on a selected
-object splits the selection: over a graph of the selected Gaussians that joins each to its
-nearest neighbours, with edges as long as their distance in position plus their distance in
-object feature (each over its median along the graph), every selected Gaussian follows the
-click it is nearest to; those nearest a negative click leave. Two parts that touch in 3D stay
-connected through their contact, two parts metres apart (a statue's head and the bush behind
-it in every photo) are far apart along the graph even when the masks gave them one label.
+A click is the set of Gaussians seen at the clicked pixel, each with its blended weight there
+(:func:`gsseg.segment.prompts.click_weights`); the Gaussians that carry most of that weight are
+its seeds. The selection is a cut over a graph of the Gaussians (each joined to its nearest
+neighbours; an edge is strong between Gaussians of like colour and object feature) made by a
+max-flow solver (PyMaxflow), with a cost per Gaussian from four kinds of evidence:
+
+- **the views** (the first positive click): in every training view where the click's Gaussians
+  are seen, the mask region they fall in (of each mask layer: the masks that voted and the
+  masks the run was trained on, :class:`gsseg.render.contributions.RegionWeights`) is the
+  object's; a Gaussian whose blended weight falls mostly in the object's regions, over the
+  views that show the object, is likely the object. Regions the selection then covers for the
+  most part join it, and the vote is taken again (:attr:`ClickOptions.iterations`). This is the
+  multi-view lifting of interactive 3D segmentation, with the weight-free masks in place of
+  SAM's: each view errs on its own, and the vote follows the views that agree. An object the
+  3D labels joined to its support, or that no label holds, is found as long as the views hold
+  it apart;
+- **the labels**: the label under the first click's seeds, in proportion to how far it agrees
+  with the views' vote (a label that swallowed the table under the object disagrees with it);
+- **the selection before the click** (from the second click on): a click changes the
+  selection only where its evidence outweighs :attr:`ClickOptions.stickiness`, so that a click
+  never undoes what the earlier clicks fixed;
+- **a negative click**: over the Gaussians nearer, along the graph (edge lengths from
+  position, colour and feature), to its seeds than to any positive seed, in proportion to how
+  much nearer, the click's word replaces the rest (:meth:`GaussianGraph.split`): a part the
+  views and labels joined to the object goes, while the object's own Gaussians beside the
+  click, nearly as near to a positive seed, keep their evidence.
+
+The seeds are hard constraints; the source's side of the cut is the selection (parts apart
+in space, several objects under one mask, stay together where the views join them). A later
+positive click adds its seeds, what the cut joins to them, and the regions under it that lie
+beside the selection (a part the first click's vote missed); a region the masks joined to the
+selection (a statue's head and the bush behind it) it leaves out of the vote.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
+import maxflow
 import numpy as np
-from scipy.sparse import coo_matrix
+import scipy.sparse as sp
 from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 
-from dataset_tools.infra.errors import InputError
-from gsseg.segment.prompts import object_at_point
+from dataset_tools.infra.errors import InputError, OptionError
+from gsseg.gaussians import Gaussians
+from gsseg.render.contributions import RegionWeights
+from gsseg.sh import C0
 
-GRAPH_NEIGHBOURS = 10  # each selected Gaussian is joined to this many nearest others
-SEED_GAUSSIANS = 5  # a click starts the graph search from this many Gaussians nearest its point
+HARD = 1e9  # the capacity that pins a seed to its side of the cut
 
 
 @dataclass(frozen=True)
@@ -38,88 +63,260 @@ class Click:
     positive: bool = True
 
 
-def _check_points(points: np.ndarray, name: str) -> np.ndarray:
-    points = np.asarray(points, np.float64).reshape(-1, 3)
-    if not np.isfinite(points).all():
-        raise InputError(f"{name}: give finite 3D points.")
-    return points
+@dataclass(frozen=True)
+class ClickOptions:
+    """The constants of the click cut (docs/segmentation.md, "Clicks").
+
+    Attributes:
+        neighbours: each Gaussian's edges to its nearest Gaussians.
+        region_share: a mask region is the object's once the selection carries this share of
+            its weight.
+        iterations: rounds of the views' vote.
+        seen_share: a click is seen in a view where its Gaussians show at least this share of
+            the weight they show in the view that shows them most.
+        seed_share: the seeds are the Gaussians carrying this share of the click's weight.
+        evidence: weight of the views' vote (times its log-odds).
+        label_weight: weight of the label under the first click where it agrees with the vote.
+        overlap: a later positive click's region joins the vote where it holds under this share
+            of the selection's weight in its view (a part beside the object; a region the
+            masks joined to the object would bring what they joined).
+        part_share: ... and where it holds this share of the click's weight in that view (the
+            click lies on it, not beside it).
+        split_weight: weight of a negative click over the Gaussians on its side.
+        split_full: how far on a negative click's side (:meth:`GaussianGraph.split`) its word
+            replaces all else (0.5: three times as near to it as to a positive click).
+        stickiness: weight of the selection before the click.
+        smoothness: weight of the graph's edges.
+    """
+
+    neighbours: int = 10
+    region_share: float = 0.5
+    iterations: int = 3
+    seen_share: float = 0.2
+    seed_share: float = 0.8
+    evidence: float = 2.0
+    label_weight: float = 2.0
+    overlap: float = 0.05
+    part_share: float = 0.5
+    split_weight: float = 4.0
+    split_full: float = 0.5
+    stickiness: float = 3.0
+    smoothness: float = 1.0
+
+    def __post_init__(self) -> None:
+        if self.neighbours < 1 or self.iterations < 1:
+            raise OptionError("{neighbours} and {iterations}: give 1 or more.", neighbours=self.neighbours)
+        for name in ("region_share", "seen_share", "seed_share", "overlap", "part_share"):
+            if not 0 < getattr(self, name) <= 1:
+                raise OptionError(f"{{{name}}}: give a share in (0, 1].", **{name: getattr(self, name)})
 
 
-def select_by_points(
-    means: np.ndarray,
-    features: np.ndarray,
-    labels: np.ndarray,
-    positives: np.ndarray,
-    negatives: np.ndarray | None = None,
-    k: int = 20,
-) -> np.ndarray:
-    """The Gaussians selected by positive and negative 3D points.
+@dataclass(frozen=True)
+class ClickEvidence:
+    """What one click saw: ``weights`` (N,) each Gaussian's blended weight at the clicked
+    pixels, and whether the click is for (``positive``) or against the selection."""
+
+    weights: np.ndarray
+    positive: bool
+
+    def seeds(self, share: float) -> np.ndarray:
+        """Indices of the Gaussians that carry ``share`` of the click's weight, heaviest first."""
+        order = np.argsort(-self.weights, kind="stable")
+        cumulative = np.cumsum(self.weights[order])
+        return order[: int(np.searchsorted(cumulative, share * cumulative[-1])) + 1]
+
+
+@dataclass(frozen=True)
+class GaussianGraph:
+    """Each Gaussian joined to its nearest ones: edges ``a`` -> ``b`` (E,), their ``affinity``
+    (E,) in (0, 1] (like colour and feature, near), and their ``length`` (E,) along which a
+    negative click reaches (distance, colour and feature differences, each over its median)."""
+
+    a: np.ndarray
+    b: np.ndarray
+    affinity: np.ndarray
+    length: sp.csr_matrix
+
+    @classmethod
+    def of(cls, gaussians: Gaussians, neighbours: int) -> GaussianGraph:
+        means = gaussians.means.detach().cpu().numpy().astype(np.float64)
+        n, k = len(means), min(neighbours, len(means) - 1)
+        if k < 1:
+            empty = np.zeros(0, np.int64)
+            return cls(empty, empty, np.zeros(0), sp.csr_matrix((n, n)))
+        colours = np.clip(gaussians.sh_dc.detach().cpu().numpy() * C0 + 0.5, 0, 1)
+        features = gaussians.obj_feat.detach().cpu().numpy().astype(np.float64)
+        dist, nbr = cKDTree(means).query(means, k=k + 1)
+        a, b = np.repeat(np.arange(n), k), nbr[:, 1:].ravel()
+        lo, hi = np.minimum(a, b), np.maximum(a, b)
+        _, first = np.unique(lo * n + hi, return_index=True)  # each undirected edge once
+        a, b, dist = lo[first], hi[first], dist[:, 1:].ravel()[first]
+
+        def scaled(x: np.ndarray) -> np.ndarray:
+            return x / max(float(np.median(x)), 1e-12)
+
+        d = scaled(dist)
+        c = scaled(np.linalg.norm(colours[a] - colours[b], axis=1))
+        f = scaled(np.linalg.norm(features[a] - features[b], axis=1))
+        length = sp.coo_matrix((d + 2 * (c + f) + 1e-9, (a, b)), shape=(n, n)).tocsr()
+        return cls(a, b, np.exp(-(c**2 + f**2) / 4) / (1 + d), length)
+
+    def split(self, negative: np.ndarray, positive: np.ndarray) -> np.ndarray:
+        """(N,) in [0, 1]: how far each Gaussian lies on the side of the ``negative`` seeds,
+        (d+ - d-) / (d+ + d-) with d+ and d- its distances along the graph to the nearest
+        positive and negative seed; 0 where it is nearer a positive one, 1 where no positive
+        one is reached."""
+        n = self.length.shape[0]
+
+        def reach(sources: np.ndarray) -> np.ndarray:
+            if not len(sources):
+                return np.full(n, np.inf)
+            return dijkstra(self.length, directed=False, indices=sources, min_only=True)
+
+        far, near = reach(positive), reach(negative)
+        side = near < far
+        with np.errstate(invalid="ignore"):
+            ratio = np.where(np.isinf(far), 1.0, (far - near) / np.maximum(far + near, 1e-12))
+        return np.where(side, ratio, 0.0)
+
+
+class RegionVote:
+    """The views' vote over :class:`RegionWeights`: which Gaussians fall in the regions of an
+    object, over the views (of each mask layer) that show it."""
+
+    def __init__(self, regions: RegionWeights):
+        self.matrix = regions.matrix.tocsr().astype(np.float64)
+        self.by_gaussian = self.matrix.T.tocsr()
+        self.label = regions.label
+        self.row_sums = np.asarray(self.matrix.sum(1)).ravel()
+        # A vote unit is one view of one mask layer.
+        _, self.unit = np.unique(
+            regions.layer.astype(np.int64) * (int(regions.view.max(initial=0)) + 1) + regions.view, return_inverse=True
+        )
+        self.n_units = int(self.unit.max(initial=-1)) + 1
+        self.units = sp.csr_matrix(
+            (np.ones(len(self.unit)), (np.arange(len(self.unit)), self.unit)), shape=(len(self.unit), self.n_units)
+        )
+
+    def clicked_regions(self, click: ClickEvidence, seen_share: float, hold: float = 0.0) -> np.ndarray:
+        """(R,) bool: in each vote unit where the click is seen (its Gaussians' weight there is
+        at least ``seen_share`` of their weight in the unit where it is largest), the object
+        region (not the background, label 0) holding most of that weight, where it holds at
+        least ``hold`` of it."""
+        weight = self.matrix @ click.weights
+        per_unit = self.units.T @ weight
+        objects = np.where(self.label != 0, weight, -1.0)
+        order = np.lexsort((-objects, self.unit))
+        best = order[np.unique(self.unit[order], return_index=True)[1]]
+        seen = per_unit[self.unit[best]] >= seen_share * max(float(per_unit.max(initial=0)), 1e-12)
+        out = np.zeros(len(weight), bool)
+        held = weight[best] >= hold * per_unit[self.unit[best]]
+        out[best[seen & held & (self.label[best] != 0) & (weight[best] > 0)]] = True
+        return out
+
+    def shares(self, inside: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Each Gaussian's share of its weight that falls in the ``inside`` (R,) regions, over
+        the vote units holding one (N,), and whether any such unit sees it (N,)."""
+        units_on = (self.units.T @ inside.astype(np.float64)) > 0
+        held = self.by_gaussian @ inside.astype(np.float64)
+        total = self.by_gaussian @ units_on[self.unit].astype(np.float64)
+        seen = total > 0
+        return np.where(seen, held / np.where(seen, total, 1.0), 0.0), seen
+
+    def apart_from(self, regions: np.ndarray, selected: np.ndarray, overlap: float) -> np.ndarray:
+        """(R,) bool: those of ``regions`` that hold under ``overlap`` of the ``selected`` (N,)
+        Gaussians' weight in their vote unit (a part beside the selection, not one the masks
+        joined to it)."""
+        held = self.matrix @ selected.astype(np.float64)
+        per_unit = self.units.T @ held
+        return regions & (held < overlap * per_unit[self.unit])
+
+    def vote(self, clicked: np.ndarray, options: ClickOptions) -> tuple[np.ndarray, np.ndarray]:
+        """(N,) each Gaussian's share of weight in the object's regions, starting from the
+        ``clicked`` (R,) ones, and whether it is seen where the object is, after
+        :attr:`ClickOptions.iterations` rounds."""
+        inside = clicked
+        for _ in range(options.iterations):
+            share, seen = self.shares(inside)
+            covered = (self.matrix @ (share > 0.5)) / np.maximum(self.row_sums, 1e-12)
+            inside = (clicked | (covered > options.region_share)) & (self.label != 0)
+        return share, seen
+
+
+def log_odds(p: np.ndarray) -> np.ndarray:
+    p = np.clip(p, 0.02, 0.98)
+    return np.log(p / (1 - p))
+
+
+class ClickSelector:
+    """Selections of one model by clicks (see the module docstring); the graph and the vote are
+    built once, each click then costs one vote and one cut.
 
     Args:
-        means: (N, 3) Gaussian centres.
-        features: (N, F) their object features.
-        labels: (N,) their labels (0: background).
-        positives: (P, 3) points, P >= 1: each selects the object of :func:`object_at_point`.
-        negatives: (Q, 3) points: each that lands on a selected object splits the selection.
-        k: Gaussians around a point that vote on its object.
-
-    Returns:
-        (N,) bool selection.
-
-    Raises:
-        InputError: no positive point, or one on the background.
+        gaussians: the model. labels: (N,) its labels (0: background).
+        regions: the region weights of the model (``RUN/regions.npz``).
     """
-    positives = _check_points(positives, "positive clicks")
-    negatives = _check_points(np.zeros((0, 3)) if negatives is None else negatives, "negative clicks")
-    if len(means) != len(labels) or len(features) != len(labels):
-        raise ValueError(f"means {means.shape}, features {features.shape} and labels {labels.shape} must have N rows")
-    if not len(positives):
-        raise InputError("a selection needs at least one positive click; add one on the object.")
-    picked = {object_at_point(means, labels, p, k) for p in positives}
-    if 0 in picked:
-        raise InputError("a positive click lies on the background (label 0); click on the object.")
-    selected = np.isin(labels, sorted(picked))
-    inside = [q for q in negatives if object_at_point(means, labels, q, k) in picked]
-    if not inside:
+
+    def __init__(
+        self, gaussians: Gaussians, labels: np.ndarray, regions: RegionWeights, options: ClickOptions = ClickOptions()
+    ):
+        if regions.matrix.shape[1] != len(gaussians) or len(labels) != len(gaussians):
+            raise ValueError(
+                f"{len(gaussians)} Gaussians, {len(labels)} labels and region weights of {regions.matrix.shape[1]}"
+            )
+        self.options = options
+        self.labels = np.asarray(labels)
+        self.graph = GaussianGraph.of(gaussians, options.neighbours)
+        self.vote = RegionVote(regions)
+
+    def select(self, clicks: Sequence[ClickEvidence]) -> np.ndarray:
+        """(N,) bool: the selection after ``clicks`` in order, each made from the one before.
+
+        Raises:
+            InputError: no positive click comes first.
+        """
+        if not clicks or not clicks[0].positive:
+            raise InputError("a selection starts with a click on the object; click on it first.")
+        selected = None
+        for k in range(len(clicks)):
+            selected = self.cut(clicks[: k + 1], selected)
         return selected
-    index = np.flatnonzero(selected)
-    nearest = split_by_graph(means[index], features[index], positives, np.asarray(inside))
-    selected[index[~nearest]] = False
-    return selected
 
-
-def split_by_graph(means: np.ndarray, features: np.ndarray, positives: np.ndarray, negatives: np.ndarray) -> np.ndarray:
-    """(M,) bool: which of M Gaussians lie nearer a positive point than a negative one along
-    their nearest-neighbour graph (:data:`GRAPH_NEIGHBOURS`), edges weighted by position plus
-    feature distance, each over its median. Gaussians no click reaches through the graph
-    follow the nearest click in space."""
-    m = len(means)
-    k = min(GRAPH_NEIGHBOURS, m - 1)
-    tree = cKDTree(means)
-    if k < 1:
-        return np.ones(m, bool)
-    dist, nbr = tree.query(means, k=k + 1)
-    rows, cols, dist = np.repeat(np.arange(m), k), nbr[:, 1:].ravel(), dist[:, 1:].ravel()
-    fdist = np.linalg.norm(features[rows] - features[cols], axis=1)
-    weight = dist / max(np.median(dist), 1e-12) + fdist / max(np.median(fdist), 1e-12) + 1e-9
-    graph = coo_matrix((weight, (rows, cols)), shape=(m, m)).tocsr()
-    seeds, positive = [], []
-    for points, sign in ((positives, True), (negatives, False)):
-        for p in points:
-            _, near = tree.query(p, k=min(SEED_GAUSSIANS, m))
-            seeds += np.atleast_1d(near).tolist()
-            positive += [sign] * np.atleast_1d(near).size
-    sign_of: dict[int, bool] = {}
-    for seed, sign in zip(seeds, positive):  # a Gaussian near clicks of both kinds stays
-        sign_of[seed] = sign_of.get(seed, False) or sign
-    distance, _, source = dijkstra(
-        graph, directed=False, indices=sorted(sign_of), min_only=True, return_predecessors=True
-    )
-    reached = np.isfinite(distance)
-    keep = np.array([sign_of.get(int(s), True) for s in source], bool)
-    if not reached.all():
-        clicks = np.concatenate([positives, negatives])
-        side = np.concatenate([np.ones(len(positives), bool), np.zeros(len(negatives), bool)])
-        _, closest = cKDTree(clicks).query(means[~reached])
-        keep[~reached] = side[closest]
-    return keep
+    def cut(self, clicks: Sequence[ClickEvidence], before: np.ndarray | None) -> np.ndarray:
+        """(N,) bool: the selection of ``clicks`` made from ``before``, the selection of all
+        but the last of them (None for the first click): one step of :meth:`select`."""
+        if not clicks or not clicks[0].positive:
+            raise InputError("a selection starts with a click on the object; click on it first.")
+        o, n = self.options, len(self.labels)
+        clicked = self.vote.clicked_regions(clicks[0], o.seen_share)
+        for later in clicks[1:]:
+            if later.positive and before is not None:  # a part beside the selection joins the vote
+                under = self.vote.clicked_regions(later, o.seen_share, o.part_share)
+                clicked |= self.vote.apart_from(under, before, o.overlap)
+        share, seen = self.vote.vote(clicked, o)
+        cost = o.evidence * np.where(seen, log_odds(share), -1.0)  # > 0: the object's
+        picked = np.setdiff1d(np.unique(self.labels[clicks[0].seeds(o.seed_share)]), [0])
+        labelled = np.isin(self.labels, picked)
+        voted = share > 0.5
+        agree = (labelled & voted).sum() / max(int((labelled | voted).sum()), 1)
+        cost += o.label_weight * float(np.clip((agree - 0.5) / 0.4, 0, 1)) * np.where(labelled, 1.0, -1.0)
+        positive = np.unique(np.concatenate([c.seeds(o.seed_share) for c in clicks if c.positive]))
+        negative = np.unique(np.concatenate([c.seeds(o.seed_share) for c in clicks if not c.positive] or [[]]))
+        negative = negative.astype(np.int64)
+        both = np.intersect1d(positive, negative)
+        positive, negative = np.setdiff1d(positive, both), np.setdiff1d(negative, both)
+        if before is not None:
+            cost += o.stickiness * np.where(before, 1.0, -1.0)
+        if len(negative):  # deep on a negative click's side its word outweighs all else
+            side = np.clip(self.graph.split(negative, positive) / o.split_full, 0, 1)
+            cost = (1 - side) * cost - o.split_weight * side
+        graph = maxflow.Graph[float]()
+        graph.add_nodes(n)
+        edges = o.smoothness * self.graph.affinity
+        graph.add_edges(self.graph.a, self.graph.b, edges, edges)
+        source, sink = np.maximum(cost, 0.0), np.maximum(-cost, 0.0)
+        source[positive], sink[negative] = HARD, HARD
+        nodes = np.arange(n)
+        graph.add_grid_tedges(nodes, source, sink)
+        graph.maxflow()
+        return ~graph.get_grid_segments(nodes)  # the source's side: selected

@@ -10,6 +10,7 @@ from dataset_tools.cameras import PinholeCamera
 from dataset_tools.infra.errors import InputError
 from gsseg.gaussians import Gaussians
 from gsseg.render import Backend, get_backend, render
+from gsseg.segment.clicks import ClickEvidence
 
 
 def object_at_point(means: np.ndarray, labels: np.ndarray, point: np.ndarray, k: int = 20) -> int:
@@ -74,3 +75,47 @@ def point_from_click(
     cam_point = np.array([(u - camera.cx) / camera.fx * z, (v - camera.cy) / camera.fy * z, z])
     R, t = np.asarray(cam_from_world)[:3, :3], np.asarray(cam_from_world)[:3, 3]
     return R.T @ (cam_point - t)
+
+
+def click_weights(
+    gaussians: Gaussians,
+    camera: PinholeCamera,
+    cam_from_world: np.ndarray,
+    u: float,
+    v: float,
+    *,
+    radius: int = 1,
+    backend: str | Backend = "cpu",
+) -> np.ndarray:
+    """(N,) float64: each Gaussian's blended weight alpha_i T_i summed over the pixels within
+    ``radius`` of pixel (u, v) of a view (a (2 radius + 1)^2 window): what a click there saw.
+
+    Raises:
+        InputError: the click lies outside the view, or less than half opaque is rendered there.
+    """
+    if not (0 <= u < camera.width and 0 <= v < camera.height):
+        raise InputError(f"click ({u}, {v}) is outside the {camera.width}x{camera.height} view; click inside it.")
+    backend = get_backend(backend)
+    g = gaussians.detach().to(backend.device)
+    rows = np.full((camera.height, camera.width), -1, np.int64)
+    row, col = int(v), int(u)
+    window = rows[max(0, row - radius) : row + radius + 1, max(0, col - radius) : col + radius + 1]
+    window[:] = 0
+    pose = torch.as_tensor(cam_from_world, dtype=torch.float32, device=backend.device)
+    weights = backend.contributions(g.means, g.quats, g.scales, g.opacities, pose, camera, rows, 1)[0]
+    weights = weights.double().numpy()
+    alpha = weights.sum() / window.size
+    if alpha < 0.5:
+        raise InputError(f"nothing opaque is rendered at ({u}, {v}) (alpha {alpha:.2f}); click on an object.")
+    return weights
+
+
+def point_evidence(gaussians: Gaussians, point: np.ndarray, k: int = 20) -> ClickEvidence:
+    """A 3D point as a positive click: the ``k`` Gaussians nearest to it, each weighted by its
+    opacity."""
+    means = gaussians.means.detach().cpu().numpy()
+    _, nearest = cKDTree(means).query(np.asarray(point, np.float64), k=min(k, len(means)))
+    weights = np.zeros(len(means))
+    nearest = np.atleast_1d(nearest)
+    weights[nearest] = gaussians.opacities.detach().cpu().numpy()[nearest] + 1e-6
+    return ClickEvidence(weights, True)

@@ -8,7 +8,7 @@ from pathlib import Path
 
 from dataset_tools.infra.errors import OptionError
 from gsseg.render import Backend
-from gsseg.render.contributions import Contributions, contribution_matrix
+from gsseg.render.contributions import Contributions, RegionWeights, contribution_matrix
 from gsseg.run import Run, load_run
 from gsseg.segment.reassign import METHODS, MODES, Segmentation, classifier_prior, reassign
 from gsseg.segment.regularize import fill_interiors, smooth_weak_labels, weak_evidence
@@ -47,16 +47,56 @@ def mask_contributions(
     masks: str | None = None,
     split: str = "train",
     backend: str | Backend = "cpu",
+    regions: bool = False,
     progress: bool = True,
 ) -> Contributions:
     """The contribution matrix of a loaded run over the masks of ``split`` (``masks``: the
     folder, by default the one the run was trained on; no labels where no view of ``split`` has
-    a mask)."""
+    a mask), with each view's weights kept apart as well when ``regions`` is asked for."""
     masks = run.voting_masks(masks)
     views = [v for v in run.scene(scene_dir, masks=masks).split(split) if v.mask_path is not None]
-    contributions = contribution_matrix(run.gaussians, views, backend=backend, progress=progress)
+    contributions = contribution_matrix(run.gaussians, views, backend=backend, regions=regions, progress=progress)
     contributions.model, contributions.masks = run.fingerprint, masks
+    if contributions.regions is not None:
+        contributions.regions.layers, contributions.regions.model = (masks,), run.fingerprint
     return contributions
+
+
+def region_layers(run: Run, masks: str | None = None) -> list[str]:
+    """The mask folders whose regions a click is lifted through: the voting masks ``masks``
+    (default: the run's), then the masks the run was trained on where those differ (the masks
+    of colour beside the masks cut at the depth jumps), so that an object one pass holds and the
+    other swallowed is still found."""
+    voting = run.voting_masks(masks)
+    return [voting] + ([run.masks] if run.masks and run.masks != voting else [])
+
+
+def mask_regions(
+    run: Run,
+    scene_dir: Path | str | None = None,
+    *,
+    masks: str | None = None,
+    split: str = "train",
+    backend: str | Backend = "cpu",
+    first: Contributions | None = None,
+    progress: bool = True,
+) -> RegionWeights:
+    """The run's :class:`RegionWeights` over the :func:`region_layers` of ``masks``; ``first``:
+    contributions of the first layer computed already with their regions. A layer whose folder
+    the scene lacks is left out."""
+    parts = []
+    for k, layer in enumerate(region_layers(run, masks)):
+        if k == 0 and first is not None and first.regions is not None:
+            parts.append(first.regions)
+            continue
+        if k and not (Path(scene_dir or run.record.scene) / layer).is_dir():
+            continue
+        parts.append(
+            mask_contributions(
+                run, scene_dir, masks=layer, split=split, backend=backend, regions=True, progress=progress
+            ).regions
+        )
+    return RegionWeights.stack(parts)
 
 
 def label_gaussians(run: Run, contributions: Contributions, options: LabelOptions = LabelOptions()) -> Segmentation:
@@ -89,6 +129,23 @@ def label_gaussians(run: Run, contributions: Contributions, options: LabelOption
     return result
 
 
+def run_regions(
+    run: Run, scene_dir: Path | str | None = None, *, backend: str | Backend = "cpu", progress: bool = False
+) -> RegionWeights:
+    """``RUN/regions.npz`` where it belongs to the run's model; else the region weights of the
+    masks the run's labels were voted with (recorded in ``RUN/contributions.npz``, else the
+    run's own), computed and written there (runs segmented before region weights existed)."""
+    cached = run.folder.read_regions()
+    if cached is not None and cached.model == run.fingerprint:
+        return cached
+    contributions = run.folder.read_contributions()
+    voted = contributions.masks if contributions is not None and contributions.masks else None
+    regions = mask_regions(run, scene_dir, masks=voted, backend=backend, progress=progress)
+    with run.folder.lock():
+        run.folder.write_regions(regions)
+    return regions
+
+
 def segment_run(
     run_dir: Path | str,
     scene_dir: Path | str | None = None,
@@ -102,12 +159,15 @@ def segment_run(
 ) -> Segmentation:
     """Label every Gaussian of a run from the masks of ``split`` (the training views by
     default; ``masks``: the folder, by default the one the run was trained on) and the run's
-    classifier; write ``RUN/labels.npz`` and the contribution matrix they were chosen from,
-    ``RUN/contributions.npz`` (for relabelling without recomputing it); ``other_scene``: vote
+    classifier; write ``RUN/labels.npz``, the contribution matrix they were chosen from,
+    ``RUN/contributions.npz`` (for relabelling without recomputing it), and the region weights
+    of :func:`mask_regions`, ``RUN/regions.npz`` (what clicks select with); ``other_scene``: vote
     with the masks of a scene other than the run's."""
     run = load_run(run_dir, other_scene=other_scene)
     masks = run.voting_masks(masks)
-    contributions = mask_contributions(run, scene_dir, masks=masks, split=split, backend=backend, progress=progress)
+    contributions = mask_contributions(
+        run, scene_dir, masks=masks, split=split, backend=backend, regions=True, progress=progress
+    )
     if not len(contributions.labels) and options.method != "classifier":
         raise OptionError(
             f"holds no masks for the {split} views; build them with `hqmask build` or use {{method}}.",
@@ -115,7 +175,11 @@ def segment_run(
             method="classifier",
         )
     result = label_gaussians(run, contributions, options)
+    regions = mask_regions(
+        run, scene_dir, masks=masks, split=split, backend=backend, first=contributions, progress=progress
+    )
     with run.folder.lock():
         run.folder.write_labels(result)
         run.folder.write_contributions(contributions)
+        run.folder.write_regions(regions)
     return result

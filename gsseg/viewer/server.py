@@ -171,17 +171,15 @@ class Viewer:
         u, v = event.screen_pos[0] * view.camera.width, event.screen_pos[1] * view.camera.height
         try:
             with self._render_lock:
-                object_id = self.session.select_at(view, u, v, mode)
+                selection = self.session.select_at(view, u, v, mode)
         except InputError as e:
             self._say(str(e))
             return
-        selection = self.session.selection()
-        if object_id is not None:
-            self._say(f"Selected object **{object_id}** (ctrl-click joins another, shift-click splits it).")
-        elif selection is None:
-            self._say("Background: nothing selected.")
-        else:
-            self._say(f"Selected {int(selection.sum()):,} Gaussians by {len(self.session.clicks)} clicks.")
+        clicks = len(self.session.clicks)
+        self._say(
+            f"Selected {int(selection.sum()):,} Gaussians by {clicks} click{'s' if clicks > 1 else ''} "
+            "(ctrl-click adds a part, shift-click takes one out)."
+        )
         self.refresh()
 
     # --- the scene and the panel ----------------------------------------------------------

@@ -22,10 +22,10 @@ from gsseg.gaussians import Gaussians
 from gsseg.render import get_backend
 from gsseg.render.contributions import Contributions
 from gsseg.run import Run
-from gsseg.segment.clicks import select_by_points
-from gsseg.segment.prompts import object_at_point, point_from_click
+from gsseg.segment.clicks import ClickEvidence, ClickSelector
+from gsseg.segment.prompts import click_weights
 from gsseg.segment.reassign import Segmentation
-from gsseg.segment.segment_run import LabelOptions, label_gaussians, mask_contributions
+from gsseg.segment.segment_run import LabelOptions, label_gaussians, mask_contributions, run_regions
 from gsseg.sh import rgb_to_sh_dc
 
 HIGHLIGHT = (1.0, 0.85, 0.0)  # the selected object is drawn halfway towards this colour
@@ -96,12 +96,13 @@ class ViewerSession:
         self.scene = run.scene(scene_dir)
         self.segmentation: Segmentation | None = run.labels() if run.folder.labels.is_file() else None
         self.steps: list[EditStep] = []
-        self.selected: int | None = None  # the object selected by one click
-        self.clicks: list[tuple[np.ndarray, bool]] = []  # 3D points (and sides) of the clicks selecting now
-        self._click_selection: np.ndarray | None = None  # (N,) bool: a selection made by several clicks
+        self.selected: int | None = None  # an object chosen by its ID
+        self.clicks: list[ClickEvidence] = []  # the clicks selecting now, in order
+        self._click_selection: np.ndarray | None = None  # (N,) bool: the selection the clicks made
         self.show_segments = False
         self._contributions: Contributions | None = None
-        self._current: tuple[Gaussians, Segmentation | None] | None = None
+        self._current: tuple[Gaussians, Segmentation | None, np.ndarray] | None = None
+        self._selector: ClickSelector | None = None
         self._lock = threading.RLock()
 
     @property
@@ -116,17 +117,34 @@ class ViewerSession:
 
     def current(self) -> tuple[Gaussians, Segmentation | None]:
         """The model after every edit step, and its labels (None without labels)."""
+        g, seg, _ = self._edited()
+        return g, seg
+
+    def _edited(self) -> tuple[Gaussians, Segmentation | None, np.ndarray]:
+        """:meth:`current`, and which of the run's Gaussians (N,) bool it holds."""
         with self._lock:
             if self._current is None:
                 g, seg = self.run.gaussians, self.segmentation
+                kept = np.ones(len(g), bool)
                 for step in self.steps:
                     selected = step.selection if step.object_id is None else seg.selection(step.object_id)
                     rgb = None if step.color is None else tuple(c / 255 for c in step.color)
                     g = apply_edit(g, selected, step.op, rgb)
                     if step.op != "recolor":
-                        seg = seg.subset(~selected if step.op == "remove" else selected)
-                self._current = g, seg
+                        left = ~selected if step.op == "remove" else selected
+                        seg = seg.subset(left)
+                        kept[np.flatnonzero(kept)[~left]] = False
+                self._current = g, seg, kept
+                self._selector = None
             return self._current
+
+    def _click_selector(self) -> ClickSelector:
+        """The click rule of ``gsseg edit`` for the current model (built at the first click)."""
+        g, seg, kept = self._edited()
+        if self._selector is None:
+            regions = run_regions(self.run, self.scene_dir, backend=self.backend)
+            self._selector = ClickSelector(g, seg.labels, regions if kept.all() else regions.subset(kept))
+        return self._selector
 
     def objects(self) -> list[tuple[int, int]]:
         """(object ID, Gaussian count) of every object of the current model."""
@@ -135,41 +153,28 @@ class ViewerSession:
             return []
         return [(int(o), int(s.sum())) for o, s in zip(seg.objects, seg.selections) if s.any()]
 
-    def select_at(self, view: ViewCamera, u: float, v: float, mode: str = "select") -> int | None:
-        """Select what is seen at pixel (u, v) of ``view`` by the rules of ``gsseg edit``.
-
-        ``select`` (a click): the object there (the rendered depth, then the label mode of
-        the ``k`` nearest Gaussians), or nothing on the background. ``add`` (ctrl-click) joins
-        the object there to the selection, ``exclude`` (shift-click) splits the selection
-        there (:func:`gsseg.segment.clicks.select_by_points`). The selected object's ID, or
-        None for the background or a selection of several clicks (see :meth:`selection`)."""
+    def select_at(self, view: ViewCamera, u: float, v: float, mode: str = "select") -> np.ndarray:
+        """Select with a click at pixel (u, v) of ``view`` by the rule of ``gsseg edit --click``
+        (:class:`gsseg.segment.clicks.ClickSelector`): ``select`` (a click) starts a selection,
+        ``add`` (ctrl-click) adds what is there, ``exclude`` (shift-click) takes it out. Each
+        click changes the selection the clicks before it made. Returns the (N,) bool
+        selection of the current model."""
         if mode not in ("select", "add", "exclude"):
             raise ValueError(f"unknown selection mode {mode!r}")
         g, seg = self.current()
         if seg is None:
             raise InputError(self.segments_missing)
-        point = point_from_click(g, view.camera, view.cam_from_world, u, v, backend=self.backend)
+        weights = click_weights(g, view.camera, view.cam_from_world, u, v, backend=self.backend)
         with self._lock:
-            if mode == "select" or not self.clicks:
-                if mode == "exclude":
-                    raise InputError("shift-click splits a selection: click an object first.")
-                object_id = object_at_point(g.means.numpy(), seg.labels, point, self.k)
-                self.selected, self._click_selection = object_id or None, None
-                self.clicks = [(point, True)] if object_id else []
-                return self.selected
-            self.clicks.append((point, mode == "add"))
-            positives = np.stack([p for p, positive in self.clicks if positive])
-            negatives = [p for p, positive in self.clicks if not positive]
-            self._click_selection = select_by_points(
-                g.means.numpy(),
-                g.obj_feat.detach().numpy(),
-                seg.labels,
-                positives,
-                np.stack(negatives) if negatives else None,
-                self.k,
-            )
-            self.selected = None
-            return None
+            if mode == "exclude" and not self.clicks:
+                raise InputError("shift-click takes a part out of a selection: click an object first.")
+            restart = mode == "select" or not self.clicks
+            click = ClickEvidence(weights, restart or mode == "add")
+            clicks = [click] if restart else [*self.clicks, click]
+            selector = self._click_selector()
+            self._click_selection = selector.cut(clicks, None if restart else self._click_selection)
+            self.clicks, self.selected = clicks, None
+            return self._click_selection
 
     def selection(self) -> np.ndarray | None:
         """(N,) bool: the Gaussians of the current model selected now, or None."""
@@ -204,6 +209,7 @@ class ViewerSession:
                 self._forget_clicks()
             elif op == "extract" and self._click_selection is not None:
                 self._click_selection = np.ones(int(selection.sum()), bool)  # the whole model is the selection
+                self.clicks = []  # they saw the model before the extraction; the next click starts anew
             return step
 
     def undo(self) -> EditStep | None:
