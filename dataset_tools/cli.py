@@ -9,7 +9,6 @@ import click
 
 from dataset_tools.infra.cli_support import run_cli
 from dataset_tools.scene import GT_MASKS
-from dataset_tools.sfm.pipeline import FEATURES, SfmConfig
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
@@ -79,14 +78,6 @@ def synth(
     "--neighbours", type=int, default=20, show_default=True, help="Retrieval matching: photos matched with each."
 )
 @click.option("--mapper", type=click.Choice(["incremental", "global"]), default="incremental", show_default=True)
-@click.option(
-    "--features",
-    type=click.Choice(list(FEATURES)),
-    default=SfmConfig.features,
-    show_default=True,
-    help="sift; rich (DSP-SIFT, affine shapes, guided matching: for little texture); auto: sift, then rich "
-    "with the global mapper where too few images register.",
-)
 @click.option("--camera-model", default="SIMPLE_RADIAL", show_default=True, help="COLMAP camera model to fit.")
 @click.option(
     "--single-camera/--camera-per-folder",
@@ -123,7 +114,7 @@ def synth(
 def sfm(photos: Path, out: Path, force: bool, **options) -> None:
     """Camera poses and a sparse model (COLMAP through pycolmap, on the CPU) for a folder of
     PHOTOS or a video; writes a scene folder. A second call continues an interrupted one."""
-    from dataset_tools.sfm import run_sfm
+    from dataset_tools.sfm import SfmConfig, run_sfm
 
     result = run_sfm(photos, out, SfmConfig(**options), overwrite=force)
     others = f"; other models: {result.other_models}" if result.other_models else ""

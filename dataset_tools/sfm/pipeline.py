@@ -7,8 +7,7 @@ changed, with every step after it):
 1. ``images``: the photos as they are, or a video's frames (:mod:`dataset_tools.sfm.frames`);
 2. ``features``: SIFT on every image into ``.sfm/database.db`` (one shared camera for a video,
    one per folder of photos by default), its peak threshold lowered for small images
-   (:func:`sift_peak_threshold`); where too few images register, features, matches and
-   mapping are done again with rich features and the global mapper (:data:`FEATURE_SETS`);
+   (:func:`sift_peak_threshold`);
 3. ``matches``: exhaustive for up to ``EXHAUSTIVE_UP_TO`` photos; past that, each with its
    ``neighbours`` most alike (:mod:`dataset_tools.sfm.retrieval`); for a video, sequential
    (each image with its next ``overlap`` and at powers of two further) plus every pair of
@@ -60,29 +59,12 @@ CAMERA_MODELS = ("SIMPLE_RADIAL", "RADIAL", "OPENCV", "SIMPLE_PINHOLE", "PINHOLE
 
 
 @dataclass(frozen=True)
-class FeatureSet:
-    """How keypoints are found and matched: plain SIFT, or DSP-SIFT with affine shapes, a lower
-    peak threshold and guided matching, which finds the matches a capture with little texture
-    (a toy on a plain floor) needs, at 3-4x the time."""
-
-    domain_size_pooling: bool = False
-    affine_shape: bool = False
-    peak_scale: float = 1.0  # times the peak threshold of sift_peak_threshold
-    guided_matching: bool = False
-
-
-FEATURE_SETS = {"sift": FeatureSet(), "rich": FeatureSet(True, True, 1 / 3, True)}
-FEATURES = ("auto", *FEATURE_SETS)  # auto: sift, then rich with the global mapper where too few images register
-
-
-@dataclass(frozen=True)
 class SfmConfig:
     """Options of ``python -m dataset_tools sfm`` (same names as the CLI)."""
 
     frames: int = 150  # a video's frames to keep
     matcher: str = "auto"  # auto | exhaustive | sequential | retrieval
     mapper: str = "incremental"  # incremental | global
-    features: str = "auto"  # auto | sift | rich (FEATURE_SETS)
     camera_model: str = "SIMPLE_RADIAL"
     single_camera: bool | None = None  # None: one camera for a video, one per folder of photos
     max_image_size: int = 3200  # SIFT runs on images at most this large
@@ -103,8 +85,6 @@ class SfmConfig:
             raise OptionError("{neighbours}: match each photo with at least 1 other.", neighbours=self.neighbours)
         if self.mapper not in ("incremental", "global"):
             raise OptionError("{mapper}: use incremental or global.", mapper=self.mapper)
-        if self.features not in FEATURES:
-            raise OptionError(f"{{features}}: use {', '.join(FEATURES)}.", features=self.features)
         if self.camera_model not in CAMERA_MODELS:
             raise OptionError(
                 f"{{camera_model}}: use one of {', '.join(CAMERA_MODELS)}.", camera_model=self.camera_model
@@ -381,9 +361,8 @@ class _SfmJob:
         done = self.steps.done["images"]
         return done["names"], [tuple(s) for s in done.get("sizes", [])]
 
-    def features(self, names: list[str], sizes: list[tuple[int, int]], kind: str) -> int:
-        """Keypoints of the :data:`FEATURE_SETS` ``kind`` on every image into the database;
-        returns the longest side SIFT saw."""
+    def features(self, names: list[str], sizes: list[tuple[int, int]]) -> int:
+        """SIFT on every image into the database; returns the longest side SIFT saw."""
         single = self.video if self.cfg.single_camera is None else self.cfg.single_camera
         mixed = len(sizes) > 1
         if mixed and single:
@@ -393,10 +372,8 @@ class _SfmJob:
             )
         with Image.open(self.image_dir / names[0]) as im:
             side = min(max(im.size), self.cfg.max_image_size)
-        found = FEATURE_SETS[kind]
-        peak = (self.cfg.peak_threshold or sift_peak_threshold(side)) * found.peak_scale
+        peak = self.cfg.peak_threshold or sift_peak_threshold(side)
         options = {
-            "features": kind,
             "camera_model": self.cfg.camera_model,
             "single_camera": single,
             "max_image_size": self.cfg.max_image_size,
@@ -410,8 +387,6 @@ class _SfmJob:
                 max_image_size=self.cfg.max_image_size, use_gpu=False, num_threads=self.threads
             )
             extraction.sift.peak_threshold = peak
-            extraction.sift.domain_size_pooling = found.domain_size_pooling
-            extraction.sift.estimate_affine_shape = found.affine_shape
             self.pycolmap.extract_features(
                 self.database,
                 self.image_dir,
@@ -424,9 +399,8 @@ class _SfmJob:
             self.steps.record("features", options)
         return side
 
-    def matches(self, names: list[str], kind: str) -> str:
-        """Matched and verified image pairs in the database (of the features ``kind``); returns
-        the matcher used."""
+    def matches(self, names: list[str]) -> str:
+        """Matched and verified image pairs in the database; returns the matcher used."""
         cfg, pycolmap = self.cfg, self.pycolmap
         if cfg.matcher != "auto":
             matcher = cfg.matcher
@@ -440,13 +414,11 @@ class _SfmJob:
             "keyframes": cfg.keyframes,
             "neighbours": cfg.neighbours,
             "seed": cfg.seed,
-            "features": kind,
         }
         if self.steps.finished("matches", options):
             return matcher
         _rebuild_database_without_matches(pycolmap, self.database)
         matching = pycolmap.FeatureMatchingOptions(use_gpu=False, num_threads=self.threads)
-        matching.guided_matching = FEATURE_SETS[kind].guided_matching
         verification = pycolmap.TwoViewGeometryOptions()
         verification.ransac.random_seed = cfg.seed
         if matcher == "exhaustive":
@@ -473,15 +445,15 @@ class _SfmJob:
         self.steps.record("matches", options)
         return matcher
 
-    def mapping(self, names: list[str], side: int, mapper_kind: str) -> dict:
+    def mapping(self, names: list[str], side: int) -> dict:
         """Cameras and points; the model with the most images is kept. Returns its record."""
         cfg, pycolmap, sparse = self.cfg, self.pycolmap, self.work / "sparse"
         scale = pixel_scale(side) if cfg.scale_thresholds else 1.0
-        options = {"mapper": mapper_kind, "seed": cfg.seed, "threshold_scale": scale}
+        options = {"mapper": cfg.mapper, "seed": cfg.seed, "threshold_scale": scale}
         if not self.steps.finished("mapping", options):
             shutil.rmtree(sparse, ignore_errors=True)
             sparse.mkdir()
-            if mapper_kind == "incremental":
+            if cfg.mapper == "incremental":
                 mapper = incremental_options(scale, cfg.seed, self.threads)
                 models = pycolmap.incremental_mapping(self.database, self.image_dir, sparse, mapper)
             else:
@@ -524,38 +496,6 @@ class _SfmJob:
             )
             self.steps.record("undistort", options)
 
-    def attempts(self) -> list[tuple[str, str]]:
-        """The (features, mapper) to try in turn: the options', and for ``features auto`` the
-        rich features with the global mapper where plain SIFT registers too few images (the
-        toy pig on its plain floor: 2 of 27 images with SIFT, 27 with rich features and the
-        global mapper, 7 with rich features and the incremental one)."""
-        if self.cfg.features != "auto":
-            return [(self.cfg.features, self.cfg.mapper)]
-        return [("sift", self.cfg.mapper), ("rich", "global")]
-
-    def pose(self, names: list[str], sizes: list[tuple[int, int]], bar: tqdm) -> tuple[str, str, dict]:
-        """Features, matches and mapping of each of :meth:`attempts` until one registers enough
-        images; returns the features and the matcher used, and the mapping's record."""
-        *earlier, last = self.attempts()
-        for kind, mapper in earlier:
-            try:
-                return self._pose_with(names, sizes, kind, mapper, bar)
-            except InputError as refused:
-                tqdm.write(f"{refused} Trying again with rich features (DSP-SIFT) and the global mapper.")
-        return self._pose_with(names, sizes, *last, bar)
-
-    def _pose_with(
-        self, names: list[str], sizes: list[tuple[int, int]], kind: str, mapper: str, bar: tqdm
-    ) -> tuple[str, str, dict]:
-        bar.n = 1
-        side = self.features(names, sizes, kind)
-        bar.update(1)
-        matcher = self.matches(names, kind)
-        bar.update(1)
-        mapped = self.mapping(names, side, mapper)
-        bar.update(1)
-        return kind, matcher, mapped
-
     def run(self, overwrite: bool) -> SfmResult:
         """Every step, then the scene folder."""
         start = time.perf_counter()
@@ -564,12 +504,16 @@ class _SfmJob:
             names, sizes = self.images()
             bar.set_postfix_str(f"{len(names)} images")
             bar.update(1)
-            features, matcher, mapped = self.pose(names, sizes, bar)
+            side = self.features(names, sizes)
+            bar.update(1)
+            matcher = self.matches(names)
+            bar.update(1)
+            mapped = self.mapping(names, side)
+            bar.update(1)
             self.undistort(mapped)
             bar.update(1)
             provenance = {
                 **asdict(self.cfg),
-                "features_used": features,
                 "matcher_used": matcher,
                 "source": str(self.photos.resolve()),
                 "images": len(names),
