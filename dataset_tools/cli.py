@@ -3,6 +3,7 @@ corruption, scene inspection and the HQ dataset."""
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import click
@@ -176,6 +177,8 @@ def inspect(scene_dir: Path, images: str, masks: str, sheet: Path | None) -> Non
     sheet = sheet or scene_dir / "contact_sheet.png"
     refuse_overlap(sheet, scene_inputs(scene_dir, [masks]))
     scene = load_scene(scene_dir, images=images, masks=masks)
+    if scene.mask_dir is None:
+        warnings.warn(f"{scene_dir / masks}: no such mask folder; the summary shows no masks.", stacklevel=1)
     click.echo(str(summarize(scene)))
     path = contact_sheet(scene, sheet)
     click.echo(f"contact sheet {path}")

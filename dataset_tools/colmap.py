@@ -1,20 +1,37 @@
 """COLMAP models through pycolmap: reading, writing, and undistortion to pinhole cameras.
 
-pycolmap is imported inside the functions, never at module level: importing it before the
-image libraries breaks every later PNG write (seen with pycolmap 4.2.1).
+pycolmap is imported inside the functions (:func:`load_pycolmap`), never at module level:
+importing it before the image libraries breaks every later PNG write (seen with pycolmap 4.2.1).
 """
 
 from __future__ import annotations
 
+import signal
 import struct
+import threading
 from dataclasses import dataclass
 from pathlib import Path
+from types import ModuleType
 
 import cv2
 import numpy as np
 
 from dataset_tools.cameras import PINHOLE_MODELS, PinholeCamera, SourceCamera
 from dataset_tools.infra.errors import InputError
+
+
+def load_pycolmap() -> ModuleType:
+    """pycolmap, with Python's SIGINT and SIGTERM handlers kept: on its first import its logging
+    library installs its own, which print a native stack trace and kill the process where a
+    command would stop cleanly with one line."""
+    import pycolmap
+
+    if threading.current_thread() is threading.main_thread():
+        for number in (signal.SIGINT, signal.SIGTERM):
+            handler = signal.getsignal(number)
+            if handler is not None:
+                signal.signal(number, handler)  # re-installs Python's own handler at the OS level
+    return pycolmap
 
 
 @dataclass
@@ -38,7 +55,7 @@ class ColmapModel:
 def _check_cameras_bin(path: Path) -> None:
     """Refuse a binary camera file whose length is not the one its records declare (pycolmap
     reads a truncated one, filling the missing parameters with the last value read)."""
-    import pycolmap
+    pycolmap = load_pycolmap()
 
     if not path.is_file():
         return
@@ -60,9 +77,33 @@ def _check_cameras_bin(path: Path) -> None:
         )
 
 
+# The smallest record of each binary file: an image (id, rotation, translation, camera, an empty
+# name, a point count), a 3D point (id, position, colour, error, an empty track).
+SMALLEST_RECORD = {"images.bin": 4 + 32 + 24 + 4 + 1 + 8, "points3D.bin": 8 + 24 + 3 + 8 + 8}
+
+
+def _check_record_counts(sparse_dir: Path) -> None:
+    """Refuse a binary images or points file too short for the records its header counts (an
+    empty or garbage file, which pycolmap would try to allocate for: minutes at full CPU, then
+    std::bad_alloc)."""
+    for name, smallest in SMALLEST_RECORD.items():
+        path = sparse_dir / name
+        if not path.is_file():
+            continue
+        size = path.stat().st_size
+        with open(path, "rb") as f:
+            header = f.read(8)
+        count = struct.unpack("<Q", header)[0] if len(header) == 8 else None
+        if count is None or 8 + count * smallest > size:
+            raise InputError(
+                f"{path}: {size} bytes, too short for the records its header counts; the model is damaged, "
+                "export it from COLMAP again."
+            )
+
+
 def read_model(sparse_dir: Path) -> ColmapModel:
     """Read a binary or text COLMAP model (cameras, images, points3D) from ``sparse_dir``."""
-    import pycolmap
+    pycolmap = load_pycolmap()
 
     sparse_dir = Path(sparse_dir)
     if not sparse_dir.is_dir():
@@ -70,6 +111,7 @@ def read_model(sparse_dir: Path) -> ColmapModel:
             f"{sparse_dir}: COLMAP model folder not found; run COLMAP (or `python -m dataset_tools "
             "synth`) so that the scene has sparse/0 with cameras, images and points3D."
         )
+    _check_record_counts(sparse_dir)
     try:
         rec = pycolmap.Reconstruction(str(sparse_dir))
     except Exception as e:  # pycolmap raises plain RuntimeError/ValueError for broken files
@@ -138,7 +180,7 @@ def write_model(
         observations: per view, (point_ids (M,) rows of ``xyz``, uv (M, 2) pixel coordinates).
         xyz: (P, 3) point positions. rgb: (P, 3) uint8 point colours.
     """
-    import pycolmap
+    pycolmap = load_pycolmap()
 
     rec = pycolmap.Reconstruction()
     camera_ids: dict[PinholeCamera, int] = {}
@@ -182,7 +224,7 @@ def write_model(
 
 
 def _pycolmap_camera(cam: SourceCamera):
-    import pycolmap
+    pycolmap = load_pycolmap()
 
     return pycolmap.Camera(model=cam.model, width=cam.width, height=cam.height, params=list(cam.params))
 
@@ -198,7 +240,7 @@ def resize_source_camera(cam: SourceCamera, width: int, height: int) -> SourceCa
 
 def pinhole_camera(cam: SourceCamera) -> PinholeCamera:
     """The pinhole camera of an image: itself for pinhole models, else COLMAP's undistorted camera."""
-    import pycolmap
+    pycolmap = load_pycolmap()
 
     if cam.model in PINHOLE_MODELS:
         p = cam.params

@@ -36,10 +36,12 @@ def read_depth(path: Path, size: tuple[int, int]) -> np.ndarray:
         raise InputError(f"{path}: depth map not found; {fix}.") from None
     except (OSError, ValueError) as e:
         raise InputError(f"{path}: not a depth map ({e}); {fix}.") from None
-    if depth.shape != (size[1], size[0]) or not np.issubdtype(depth.dtype, np.floating):
+    if not np.issubdtype(depth.dtype, np.floating):
+        raise InputError(f"{path}: a map of {depth.dtype}, not of floating-point depths; {fix}.")
+    if depth.shape != (size[1], size[0]):
         raise InputError(
-            f"{path}: a {depth.dtype} map of shape {depth.shape}, but the view is {size[0]}x{size[1]}; "
-            f"{fix} (the image folder the masks are built on)."
+            f"{path}: a map of shape {depth.shape}, but the view is {size[0]}x{size[1]}; {fix} (the image folder "
+            "the masks are built on)."
         )
     depth = depth.astype(np.float32)
     if not np.isfinite(depth).all() or (depth < 0).any():

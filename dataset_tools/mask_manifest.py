@@ -12,6 +12,7 @@ import json
 from pathlib import Path
 
 from dataset_tools.infra.cli_support import package_version
+from dataset_tools.infra.errors import OptionError
 
 MANIFEST = "manifest.json"
 FORMAT = 1
@@ -42,3 +43,16 @@ def describe(record: dict | None) -> str:
     shown = {k: v for k, v in record.items() if k not in ("format", "made_by", "version") and v is not None}
     options = ", ".join(f"{k} {v}" for k, v in sorted(shown.items()))
     return f"{record['made_by']} {record.get('version', '')}".strip() + (f": {options}" if options else "")
+
+
+def refuse_truth(mask_dir: Path, force: str) -> None:
+    """Refuse ``mask_dir`` as an output where its manifest marks it as ground truth: truth is
+    an input of every command, never an output, whatever the option ``force`` (the keyword
+    that replaces outputs) says."""
+    record = read_manifest(mask_dir)
+    if record is not None and record.get("truth"):
+        raise OptionError(
+            f"holds ground truth (its {MANIFEST} says so), which no command writes over, with or without "
+            f"{{{force}}}; choose another {{out_masks}}.",
+            file=mask_dir,
+        )

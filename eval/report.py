@@ -371,8 +371,15 @@ def compare_runs(run_dirs: list[Path]) -> str:
     head = ["run", "scene", "mIoU visible", "mAcc visible", "mIoU extracted", "mAcc extracted", "PSNR", "SSIM"]
     rows = []
     for run in run_dirs:
-        ev = Evaluation.from_json(RunFolder(run).read_evaluation())
-        s = ev.summary()
+        folder = RunFolder(run)
+        try:
+            ev = Evaluation.from_json(folder.read_evaluation())
+            s = ev.summary()
+        except (TypeError, KeyError, ValueError, AttributeError) as e:
+            raise InputError(
+                f"{folder.evaluation}: does not hold a report's scores ({type(e).__name__}); run `gseval report` "
+                "on the run again."
+            ) from None
         rows.append(
             [
                 str(run),

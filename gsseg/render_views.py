@@ -42,9 +42,10 @@ def render_run(
     ``out/<kind>_color/<stem>.png``. The folder appears complete or not at all; ``other_scene``
     renders on a scene other than the run's."""
     unknown = set(what) - set(PRODUCTS)
-    if unknown:
+    if not what or unknown:
         raise OptionError(
-            f"{{what}}: unknown products {', '.join(sorted(unknown))}; choose from {', '.join(PRODUCTS)}.",
+            f"{{what}}: unknown products {', '.join(sorted(unknown)) or '(none given)'}; choose from "
+            f"{', '.join(PRODUCTS)}.",
             what=",".join(what),
         )
     out = Path(out)

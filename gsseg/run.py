@@ -96,6 +96,11 @@ class Run:
         """The scene the run was trained on, at the run's image size; ``scene_dir`` names it
         where it moved, and is refused when it is not the scene the run recorded (its views,
         cameras, poses or images differ) unless the run was loaded with ``other_scene``."""
+        if scene_dir is None and not Path(self.record.scene).is_dir():
+            raise OptionError(
+                "the scene this run was trained on is no longer there; pass where it moved as {scene_dir}.",
+                file=self.record.scene,
+            )
         scene = load_scene(scene_dir or self.record.scene, images=images or self.images, masks=masks)
         difference = None if self.other_scene else scene_difference(self.record, scene)
         if difference is not None:

@@ -56,6 +56,7 @@ FORMAT_VERSIONS = {
     "evaluation.json": 1,
     "edit.json": 1,
 }
+HISTORY_KEYS = ("step", "psnr")  # what every logged step of the training curve holds, at least
 DAMAGED = (OSError, ValueError, KeyError, TypeError, AttributeError, EOFError, zipfile.BadZipFile)
 
 
@@ -199,7 +200,11 @@ class RunFolder:
         if not self.metrics.is_file():
             return []
         try:
-            return list(_read_json(self.metrics).get("train", {}).get("history", []))
+            history = list(_read_json(self.metrics).get("train", {}).get("history", []))
+            for entry in history:
+                if not (isinstance(entry, dict) and all(isinstance(entry.get(k), (int, float)) for k in HISTORY_KEYS)):
+                    raise ValueError(f"a step without {' and '.join(HISTORY_KEYS)}")
+            return history
         except DAMAGED as e:
             raise damaged(self.metrics, e) from None
 
@@ -331,11 +336,11 @@ def read_edit_record(edit_dir: Path) -> dict:
 
 
 def damaged(path: Path, e: Exception) -> InputError:
-    """The refusal of a damaged run file."""
-    return InputError(
-        f"{path}: damaged run file ({type(e).__name__}: {str(e).splitlines()[0] if str(e) else ''}); "
-        "restore it or train the run again."
-    )
+    """The refusal of a damaged run file: what went wrong in one line, without the library's
+    advice (PyTorch's to load the file unsafely)."""
+    first = str(e).splitlines()[0] if str(e) else ""
+    what = type(e).__name__ + (f": {first}" if first and "weights_only" not in first else "")
+    return InputError(f"{path}: damaged run file ({what}); restore it or train the run again.")
 
 
 def _check_version(path: Path, data) -> None:

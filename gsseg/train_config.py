@@ -7,7 +7,7 @@ import math
 from dataclasses import asdict, dataclass, field, fields, replace
 
 from dataset_tools.fingerprint import fingerprint_difference
-from dataset_tools.infra.errors import InputError, OptionError
+from dataset_tools.infra.errors import InputError, OptionError, check_seed
 from dataset_tools.scene import Scene
 
 
@@ -67,6 +67,7 @@ SCHEDULES = {
 # per pixel of a 128x128 view). 1500 steps on the embedded 128x128 scene; 1000 on the user's,
 # whose views of up to 640 px cost several times more a step (497x372: 5 steps a second on
 # 2 cores), so that photos to edits take about 5 minutes.
+MAX_ITERS = 10_000_000  # more than 300 times the paper's schedule; past it a run is a typo
 DEMO_ITERS = 1_500
 DEMO_SCENE_ITERS = 1_000
 DEMO_MAX_GAUSSIANS = 30_000
@@ -124,8 +125,9 @@ class TrainConfig:
     def __post_init__(self) -> None:
         if self.schedule not in SCHEDULES:
             raise InputError(f"unknown schedule {self.schedule!r}; choose {' or '.join(SCHEDULES)}.")
-        if self.iters is not None and self.iters < 1:
-            raise OptionError("{iters}: give 1 or more iterations.", iters=self.iters)
+        if self.iters is not None and not 1 <= self.iters <= MAX_ITERS:
+            raise OptionError(f"{{iters}}: give 1 to {MAX_ITERS:,} iterations.", iters=self.iters)
+        check_seed(self.seed)
         if not 0 <= self.sh_degree <= 3:
             raise OptionError("{sh_degree}: give a degree of 0..3.", sh_degree=self.sh_degree)
         if self.environment_degree is not None and not 0 <= self.environment_degree <= 3:

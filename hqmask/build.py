@@ -29,7 +29,7 @@ from dataset_tools.infra.errors import InputError, OptionError, OutputExists
 from dataset_tools.infra.locks import exclusive_folder
 from dataset_tools.infra.names import plain_name
 from dataset_tools.infra.overlap import refuse_overlap, scene_entries, scene_inputs
-from dataset_tools.mask_manifest import MANIFEST, manifest_bytes
+from dataset_tools.mask_manifest import MANIFEST, manifest_bytes, refuse_truth
 from dataset_tools.scene import Scene, View, load_scene, mask_folder
 from hqmask.association import associate_flow, associate_tracks
 from hqmask.association.anchors import sighting, triangulate
@@ -239,6 +239,7 @@ def build_masks(
         embedding_cache=scene_dir / CACHE / "sam-hq-embeddings" if cfg.cache_embeddings else None,
     )
     proposer = make()  # an unknown or unavailable one fails before any work
+    refuse_truth(out_dir, "force")
     if out_dir.exists() and not cfg.force:
         raise OutputExists(out_dir, option="force")
     if cfg.dataset and Path(cfg.dataset).exists() and not cfg.force:
@@ -336,6 +337,7 @@ def clean_scene_masks(
     if not src.is_dir():
         raise OptionError("mask folder not found; check {masks}.", file=src)
     refuse_overlap(dst, scene_inputs(scene_dir, [masks]))
+    refuse_truth(dst, "force")
     if dst.exists() and not force:
         raise OutputExists(dst, option="force")
     files = sorted(src.rglob("*.png"))

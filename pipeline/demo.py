@@ -31,8 +31,9 @@ import numpy as np
 import torch
 
 from dataset_tools.image_files import IMAGE_SUFFIXES, image_size, write_downsampled
-from dataset_tools.infra.atomic import require_folder_path
+from dataset_tools.infra.atomic import first_missing, require_folder_path
 from dataset_tools.infra.errors import InputError, OptionError
+from dataset_tools.infra.interrupts import Interrupted
 from dataset_tools.infra.overlap import refuse_overlap, scene_entries
 from dataset_tools.scene import GT_MASKS, linked_scene
 from dataset_tools.sfm import run_sfm
@@ -184,12 +185,14 @@ def run_demo(
             (out / owned).unlink()
         elif (out / owned).exists():
             shutil.rmtree(out / owned)
-    created = not out.exists()
+    created = first_missing(out)
     try:
         return _run_demo(out, scene, images, cfg, backend, start, progress)
-    except BaseException:
-        if created:  # a failed first run leaves nothing, so that the plain retry is not refused
-            shutil.rmtree(out, ignore_errors=True)
+    except BaseException as e:
+        if created is not None:  # a failed first run leaves nothing, so that the plain retry is not refused
+            shutil.rmtree(created, ignore_errors=True)
+            if isinstance(e, Interrupted):  # its advice to resume names what was just removed
+                raise Interrupted(f"the demo stopped; {out} was removed, run `gsseg demo` again.") from None
         raise
 
 

@@ -11,6 +11,7 @@ import os
 import re
 import shutil
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -56,6 +57,7 @@ def _damage_scenes(world: Path) -> None:
     cams.write_bytes(cams.read_bytes()[: len(cams.read_bytes()) // 2])
     (variant("no_images_bin") / sparse / "images.bin").unlink()
     (variant("junk_points") / sparse / "points3D.bin").write_bytes(os.urandom(300))
+    (variant("empty_points") / sparse / "points3D.bin").write_bytes(b"")
     (variant("missing_image") / "images" / first.name).unlink()
     png = variant("cut_image") / "images" / first.name
     png.write_bytes(png.read_bytes()[: len(png.read_bytes()) // 2])
@@ -118,6 +120,16 @@ def _damage_runs(world: Path) -> None:
     data["selections"] = data["selections"][:, :-3]
     np.savez(stale, **data)
     (variant("cut_evaluation") / "evaluation.json").write_text('{"summary": ')
+    (variant("odd_evaluation") / "evaluation.json").write_text(json.dumps({"format_version": 1, "views": 3}))
+    metrics = variant("odd_metrics") / "metrics.json"
+    metrics.write_text(json.dumps({**json.loads(metrics.read_text()), "train": {"history": [1, 2]}}))
+    no_checkpoints = variant("no_checkpoints")
+    shutil.rmtree(no_checkpoints / "checkpoints")
+    import torch
+
+    keyless = variant("keyless_checkpoint")
+    for path in (keyless / "checkpoints").glob("*.pt"):
+        torch.save({"step": 3}, path)
     unfinished = world / "unfinished"
     unfinished.mkdir()
     shutil.copy(run / "config.json", unfinished / "config.json")
@@ -171,7 +183,11 @@ CASES = [
     ("dataset_tools", "inspect {w}/no_sparse", "COLMAP model folder not found"),
     ("dataset_tools", "inspect {w}/cut_cameras", "the model is damaged"),
     ("dataset_tools", "inspect {w}/no_images_bin", "not a readable COLMAP model"),
-    ("dataset_tools", "inspect {w}/junk_points", "not a readable COLMAP model"),
+    ("dataset_tools", "inspect {w}/junk_points", "too short for the records its header counts"),
+    ("dataset_tools", "inspect {w}/empty_points", "too short for the records its header counts"),
+    ("dataset_tools", "synth --out {w}/new --seed -1", "give a seed of 0 or more"),
+    ("dataset_tools", "corrupt --scene {w}/scene --out-masks n --seed -1", "give a seed of 0 or more"),
+    ("dataset_tools", "corrupt --scene {w}/scene --masks object_mask --out-masks gt_mask --force", "ground truth"),
     ("dataset_tools", "inspect {w}/missing_image", "missing on disk"),
     ("dataset_tools", "inspect {w}/text_image", "not a readable image"),
     ("dataset_tools", "inspect {w}/bad_json", "not valid JSON"),
@@ -185,6 +201,8 @@ CASES = [
     ("hqmask", "build {w}/scene --engine spark", "spark"),
     ("hqmask", "build {w}/scene --address 10.0.0.1:6379", "with --engine ray"),
     ("hqmask", "build {w}/scene --proposer nope", "nope"),
+    ("hqmask", "build {w}/scene --out-masks gt_mask --force", "holds ground truth"),
+    ("hqmask", "clean {w}/scene --masks object_mask --out-masks gt_mask --force", "holds ground truth"),
     ("hqmask", "build {w}/scene --out-masks n --depth {w}/nowhere", "depth folder not found"),
     ("hqmask", "build {w}/scene --out-masks n --depth {w}/run", "depth map not found"),
     (
@@ -227,7 +245,13 @@ CASES = [
     ("hqmask", "export-onnx --checkpoint {w}/nowhere.pth --model-type vit_b --out {w}/exported", ""),
     # gsseg train
     ("gsseg", "train {w}/nowhere --out {w}/new", "scene folder not found"),
-    ("gsseg", "train {w}/scene --out {w}/new --iters 0", "--iters 0: give 1 or more iterations"),
+    ("gsseg", "train {w}/scene --out {w}/new --iters 0", "--iters 0: give 1 to 10,000,000 iterations"),
+    ("gsseg", "train {w}/scene --out {w}/new --iters 99999999999999999999", "give 1 to 10,000,000 iterations"),
+    ("gsseg", "train {w}/scene --out {w}/new --seed -1", "--seed -1: give a seed of 0 or more"),
+    ("gsseg", "train {w}/scene --out {w}/new/sub/run --masks objectmask", "mask folder not found"),
+    ("gsseg", "train {w}/scene --out {w}/no_checkpoints --iters 10 --resume", "a finished model but no checkpoints"),
+    ("gsseg", "train {w}/scene --out {w}/keyless_checkpoint --iters 10 --resume", "damaged checkpoint (KeyError"),
+    ("gsseg", "render {w}/run --out {w}/new --what ,", "(none given)"),
     ("gsseg", "train {w}/scene --out {w}/new --stop-after 0", "--stop-after 0"),
     ("gsseg", "train {w}/scene --out {w}/new --stop-after -5", "--stop-after -5"),
     ("gsseg", "train {w}/scene --out {w}/new --max-gaussians 0", "--max-gaussians"),
@@ -298,7 +322,7 @@ CASES = [
     ("gsseg", "export {w}/nan_ply --out {w}/new.ply", "NaN or infinite"),
     ("gsseg", "export {w}/run --out {w}/new.ply --format obj", "obj"),
     # gsseg demo
-    ("gsseg", "demo --out {w}/new --iters 0", "--iters 0: give 1 or more iterations"),
+    ("gsseg", "demo --out {w}/new --iters 0", "--iters 0: give 1 to 10,000,000 iterations"),
     ("gsseg", "demo --out {w}/new --max-gaussians 0", "--max-gaussians"),
     ("gsseg", "demo --out {w}/new --scene {w}/nowhere", "not found; pass a scene folder"),
     ("gsseg", "demo --out {w}/a_file", "a file stands there"),
@@ -314,6 +338,8 @@ CASES = [
     ("gseval", "report {w}/run --scene {w}/other --out {w}/new", "not the scene"),
     ("gseval", "compare {w}/unfinished", "evaluation.json: missing"),
     ("gseval", "compare {w}/cut_evaluation", "damaged"),
+    ("gseval", "compare {w}/odd_evaluation", "does not hold a report's scores"),
+    ("gseval", "report {w}/odd_metrics --out {w}/new --gt-masks none", "damaged run file"),
     ("gseval", "compare {w}/run --out {w}/run", ""),
     ("gseval", "paper-tables --out {w}/a_file --quick", "a file stands there"),
     ("gseval", "paper-tables --out {w}/new --quick --address 10.0.0.1:6379", "with --engine ray"),
@@ -539,3 +565,44 @@ def test_an_error_after_a_progress_bar_starts_on_its_own_line(world, tmp_path):
     assert r.returncode == 2
     assert any(line.startswith("error: ") for line in r.stderr.split("\n")), r.stderr
     assert not (tmp_path / "s" / "n").exists()
+
+
+def test_a_first_run_on_an_empty_kernel_cache_gives_the_bits_of_every_later_run(world, tmp_path):
+    """numba's kernels compiled in a process round unlike the same kernels loaded from its
+    cache; the trainer fills an empty cache from a child process and loads from it, so a
+    machine's first run equals the runs after it, a stop and resume included."""
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache"), "TQDM_DISABLE": "1"}
+    first = subprocess.run(_train_command(world / "scene", tmp_path / "first"), env=env, capture_output=True, text=True)
+    assert first.returncode == 0, first.stderr
+    later = _train_command(world / "scene", tmp_path / "later")
+    stopped = subprocess.run([*later, "--stop-after", "20"], env=env, capture_output=True, text=True)
+    assert stopped.returncode == 0, stopped.stderr
+    resumed = subprocess.run([*later, "--resume"], env=env, capture_output=True, text=True)
+    assert resumed.returncode == 0, resumed.stderr
+    assert (tmp_path / "first" / "gaussians.ply").read_bytes() == (tmp_path / "later" / "gaussians.ply").read_bytes()
+
+
+def test_sigterm_after_pycolmap_loaded_is_one_line_and_exit_130(world, tmp_path):
+    """pycolmap's logging library installs a handler that prints a native stack trace and
+    kills the process; the commands keep Python's: SIGTERM to the viewer (which has read the
+    scene through pycolmap) is one line and exit code 130."""
+    pytest.importorskip("viser")
+    run = _copy(world / "run", tmp_path / "run")
+    with socket.socket() as free:
+        free.bind(("127.0.0.1", 0))
+        port = free.getsockname()[1]
+    env = {**os.environ, "TQDM_DISABLE": "1", "PYTHONUNBUFFERED": "1"}
+    proc = subprocess.Popen(
+        [script("gsseg"), "view", str(run), "--port", str(port), "--backend", "cpu"],
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    seen = ""
+    while "http://" not in seen and proc.poll() is None:
+        seen += proc.stdout.readline()
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, (seen, err)
+    assert "stack trace" not in err and "Traceback" not in err and len(_message_lines(err)) == 1, err

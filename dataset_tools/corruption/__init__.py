@@ -25,10 +25,11 @@ from dataset_tools.corruption.blobs import PERMUTE_ONLY, BlobModel, corrupt_mask
 from dataset_tools.corruption.ops import coarsen
 from dataset_tools.image_files import encode_png
 from dataset_tools.infra.atomic import atomic_directory, write_bytes_atomic
-from dataset_tools.infra.errors import InputError, OptionError, OutputExists
+from dataset_tools.infra.errors import InputError, OptionError, OutputExists, check_seed
 from dataset_tools.infra.names import plain_name
 from dataset_tools.infra.overlap import refuse_overlap, scene_inputs
 from dataset_tools.label_maps import matched_error
+from dataset_tools.mask_manifest import MANIFEST, manifest_bytes, refuse_truth
 from dataset_tools.scene import GT_MASKS, load_scene, mask_folder
 
 FAMILIES = ("blobs", "proposer")
@@ -69,6 +70,7 @@ def corrupt_scene(
     """
     scene_dir = Path(scene_dir)
     _check(model, severity, coarse)
+    check_seed(seed)
     read = mask_folder(scene_dir, masks)  # an old scene's truth lies in object_mask/
     refuse_overlap(scene_dir / plain_name(out_masks, "out_masks"), scene_inputs(scene_dir, [read]))
     scene = load_scene(scene_dir, masks=masks)
@@ -77,6 +79,7 @@ def corrupt_scene(
             f"{scene_dir / masks}: no masks to corrupt; generate the scene with `python -m dataset_tools synth`."
         )
     target = scene_dir / out_masks
+    refuse_truth(target, "overwrite")
     if target.exists() and not overwrite:
         raise OutputExists(target, " or choose another {out_masks}")
     views = [(v, m) for v in scene.views if (m := v.load_mask()) is not None]
@@ -104,4 +107,6 @@ def corrupt_scene(
             "error_per_view": errors,
         }
         write_bytes_atomic(tmp / "corruption.json", json.dumps(report, indent=2, sort_keys=True).encode())
+        how = {"from_masks": masks, "model": model, "severity": severity, "coarse": coarse, "seed": seed}
+        write_bytes_atomic(tmp / MANIFEST, manifest_bytes("dataset_tools corrupt", **how))
     return report

@@ -27,6 +27,14 @@ def require_folder_path(path: Path) -> None:
         raise InputError(f"{path}: a file stands there; write the output elsewhere.")
 
 
+def first_missing(path: Path) -> Path | None:
+    """The outermost of ``path`` and its parents that does not exist (what a failed command
+    that created ``path`` with its parents removes), None when ``path`` exists."""
+    path = Path(path).absolute()
+    missing = [p for p in (path, *path.parents) if not p.exists()]
+    return missing[-1] if missing else None
+
+
 def _default_mode(kind: int) -> int:
     """``kind`` (0o666 for files, 0o777 for folders) less the process umask, the mode a plain
     ``open``/``mkdir`` would give; temporary files start private (0o600/0o700)."""

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import errno
 import functools
+import signal
 import sys
 import warnings
 from collections.abc import Callable
@@ -34,7 +35,7 @@ OS_FIXES = {
 
 
 # Library keywords that the command lines take under another name.
-KEYWORD_OPTIONS = {"overwrite": "force", "clicks": "click_"}
+KEYWORD_OPTIONS = {"overwrite": "force", "clicks": "click_", "scene_dir": "scene"}
 
 
 class WordedError(click.ClickException):
@@ -167,6 +168,12 @@ def _show_warning(show: Callable, message, category: type[Warning], *args, **kwa
         show(message, category, *args, **kwargs)
 
 
+def _terminate(signum, frame) -> None:
+    """SIGTERM as Ctrl-C: long work stops at a clean point where it listens for it
+    (:func:`dataset_tools.infra.interrupts.stop_requests`), anything else unwinds."""
+    raise KeyboardInterrupt
+
+
 def run_cli(group: click.Group, prog_name: str) -> Callable[[], None]:
     """An entry point that runs ``group`` and turns an ``InputError`` (worded with the flags of
     the command, :func:`word_errors_by_flags`) or an ``OSError`` into ``error: ...`` on stderr
@@ -179,6 +186,7 @@ def run_cli(group: click.Group, prog_name: str) -> Callable[[], None]:
 
     def main() -> None:
         configure_threads()
+        signal.signal(signal.SIGTERM, _terminate)  # as Ctrl-C: one line, exit code 130
         try:
             with warnings.catch_warnings():
                 warnings.showwarning = functools.partial(_show_warning, warnings.showwarning)
@@ -196,5 +204,11 @@ def run_cli(group: click.Group, prog_name: str) -> Callable[[], None]:
             message, code = _failure(e, prog_name)
             click.echo(message, err=True)
             sys.exit(code)
+        except SystemError as e:  # Ctrl-C inside a numba kernel surfaces as the kernel's SystemError
+            if not isinstance(e.__cause__ or e.__context__, KeyboardInterrupt):
+                raise
+            _close_progress_bars()
+            click.echo(_failure(KeyboardInterrupt(), prog_name)[0], err=True)
+            sys.exit(130)
 
     return main

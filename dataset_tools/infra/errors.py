@@ -93,3 +93,9 @@ class RunFailed(Exception):
     """Work that failed on good input (training that diverged). The message says what was
     kept and how to go on; command-line front ends print it (no traceback) and exit with
     code 1."""
+
+
+def check_seed(seed: int) -> None:
+    """Refuse a seed that numpy's and torch's generators cannot take (a negative one)."""
+    if seed < 0:
+        raise OptionError("{seed}: give a seed of 0 or more.", seed=seed)

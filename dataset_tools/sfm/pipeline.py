@@ -39,6 +39,7 @@ from PIL import Image
 from tqdm import tqdm
 
 from dataset_tools.cameras import turned_frames
+from dataset_tools.colmap import load_pycolmap
 from dataset_tools.image_files import IMAGE_SUFFIXES, write_downsampled
 from dataset_tools.infra.atomic import require_folder_path, write_bytes_atomic
 from dataset_tools.infra.errors import InputError, OptionError, OutputExists
@@ -207,7 +208,7 @@ def incremental_options(scale: float, seed: int, threads: int) -> pycolmap.Incre
     0.8-1.3 degrees by seed at 4 px, 0.4 at the scaled thresholds; docs/sfm.md). The two-view
     verification keeps COLMAP's 4 px: it only proposes matches, which the mapper then judges
     at its own thresholds, and a tighter one loses images."""
-    import pycolmap
+    pycolmap = load_pycolmap()
 
     options = pycolmap.IncrementalPipelineOptions(random_seed=seed, num_threads=threads)
     for owner, name in (
@@ -282,7 +283,7 @@ def run_sfm(
     photos: Path | str, out: Path | str, cfg: SfmConfig = SfmConfig(), *, overwrite: bool = False, progress: bool = True
 ) -> SfmResult:
     """Make a scene folder at ``out`` from a folder of photos or a video file ``photos``."""
-    import pycolmap  # after the image libraries: importing it first breaks PNG writes
+    pycolmap = load_pycolmap()  # after the image libraries: importing it first breaks PNG writes
 
     cfg.check()
     photos, out = Path(photos), Path(out)

@@ -15,7 +15,7 @@ from dataset_tools import colmap
 from dataset_tools.cameras import PinholeCamera
 from dataset_tools.image_files import encode_png
 from dataset_tools.infra.atomic import atomic_directory, write_bytes_atomic
-from dataset_tools.infra.errors import OptionError, OutputExists
+from dataset_tools.infra.errors import OptionError, OutputExists, check_seed
 from dataset_tools.mask_manifest import MANIFEST, manifest_bytes
 from dataset_tools.scene import GT_MASKS, llff_test_names
 from dataset_tools.synth import camera_paths
@@ -56,6 +56,7 @@ class SynthConfig:
             raise OptionError("{path}: use orbit or forward.", path=self.path)
         if self.ground not in ("checker", "speckle"):
             raise OptionError("{ground}: use checker or speckle.", ground=self.ground)
+        check_seed(self.seed)
 
 
 @dataclass(frozen=True)

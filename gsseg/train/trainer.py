@@ -25,7 +25,7 @@ from tqdm import tqdm
 
 from dataset_tools.cameras import PinholeCamera
 from dataset_tools.fingerprint import scene_fingerprint
-from dataset_tools.infra.atomic import require_folder_path
+from dataset_tools.infra.atomic import first_missing, require_folder_path
 from dataset_tools.infra.errors import InputError, OptionError, RunFailed
 from dataset_tools.infra.interrupts import Interrupted, stop_requests
 from dataset_tools.infra.overlap import refuse_overlap, scene_entries
@@ -47,6 +47,7 @@ from gsseg.train_config import RunRecord, TrainConfig, scene_difference
 
 LOG_EVERY = 10
 KEEP_CHECKPOINTS = 2
+CHECKPOINT_KEYS = frozenset(("step", "gaussians", "classifier", "environment", "classifier_adam", "densify", "history"))
 
 
 class TrainingDiverged(RunFailed):
@@ -84,6 +85,7 @@ class _State:
     history: list[dict]
 
     def state_dict(self) -> dict:
+        """Everything a checkpoint holds, under :data:`CHECKPOINT_KEYS`."""
         return {
             "step": self.step,
             "gaussians": self.gaussians.state_dict(),
@@ -180,14 +182,21 @@ def _settled_config(
     folder: RunFolder, cfg: TrainConfig, resume: bool, given: Collection[str] | None
 ) -> tuple[TrainConfig, bool]:
     """The config to train with and whether to resume: the saved one when resuming (where
-    :func:`_resumed_config` allows). A folder whose start never reached a checkpoint is
-    started afresh either way."""
+    :func:`_resumed_config` allows), which needs a checkpoint. A folder whose start never
+    reached a checkpoint is started afresh without ``resume``."""
     started = folder.config.is_file()
     has_checkpoint = bool(folder.checkpoint_files())
     if resume:
-        if not started:
-            raise OptionError("holds no run to resume; start it without {resume}.", file=folder.root, resume=True)
-        return _resumed_config(_saved_config(folder), cfg, _asked_options(cfg, given), folder), has_checkpoint
+        if not has_checkpoint:
+            found = (
+                "a finished model but no checkpoints"
+                if folder.finished
+                else ("a config.json but no checkpoint" if started else "no run")
+            )
+            raise OptionError(
+                f"holds {found} to resume; start it without {{resume}} in a new folder.", file=folder.root, resume=True
+            )
+        return _resumed_config(_saved_config(folder), cfg, _asked_options(cfg, given), folder), True
     if started and (has_checkpoint or folder.finished):
         raise OptionError(
             "already holds a run; continue it with {resume} or choose another folder.", file=folder.root, resume=True
@@ -196,23 +205,31 @@ def _settled_config(
 
 
 def _latest_good_checkpoint(folder: RunFolder, device: str) -> dict:
-    """The newest checkpoint that loads; a damaged newest one falls back to the one before."""
-    candidates = folder.checkpoint_files()[::-1]
-    for k, path in enumerate(candidates):
+    """The newest checkpoint that loads and holds every part of a training state
+    (:meth:`_State.state_dict`); a damaged newest one falls back to the one before (with a
+    warning), and none that loads is one error naming the newest."""
+    skipped: list[tuple[Path, Exception]] = []
+    for path in folder.checkpoint_files()[::-1]:
         try:
             ckpt = torch.load(path, map_location=device, weights_only=True)
-        except Exception as e:  # a truncated or foreign file: torch raises several types
-            if k + 1 < len(candidates):
-                warnings.warn(
-                    f"{path}: damaged checkpoint ({type(e).__name__}); resuming from {candidates[k + 1].name}.",
-                    stacklevel=2,
-                )
-                continue
-            raise InputError(
-                f"{path}: damaged checkpoint and none older to fall back on; start the run again in a new folder."
-            ) from None
+            missing = sorted(CHECKPOINT_KEYS - set(ckpt)) if isinstance(ckpt, dict) else ["everything"]
+            if missing:
+                raise KeyError(f"no {', '.join(missing)}")
+        except Exception as e:  # a truncated, foreign or partial file: torch raises several types
+            skipped.append((path, e))
+            continue
+        for damaged_path, e in skipped:
+            warnings.warn(
+                f"{damaged_path}: damaged checkpoint ({type(e).__name__}); resuming from {path.name}.", stacklevel=2
+            )
         return ckpt
-    raise OptionError("holds no checkpoint to resume; start it without {resume}.", file=folder.root, resume=True)
+    if not skipped:
+        raise InputError(f"{folder.checkpoints}: no checkpoint to resume from; start the run again in a new folder.")
+    path, e = skipped[0]
+    raise InputError(
+        f"{path}: damaged checkpoint ({type(e).__name__}: {e}), and no older one loads; start the run again in a "
+        "new folder."
+    ) from None
 
 
 def _new_state(scene: Scene, cfg: TrainConfig, train_views: list[View], extent: float, device: str) -> _State:
@@ -355,14 +372,14 @@ def train(
         raise OptionError("{stop_after}: give a step of 1 or more.", stop_after=stop_after)
     require_folder_path(folder.root)
     refuse_overlap(folder.root, scene_entries(scene_dir))
-    created = not folder.root.exists()
+    created = first_missing(folder.root)
     try:
         with folder.lock():
             cfg, restore = _settled_config(folder, cfg, resume, given)
             return _train_locked(folder, Path(scene_dir), cfg, restore, stop_after, other_scene, cache_views, progress)
     except BaseException:
-        if created and not folder.config.exists():  # a start that wrote nothing leaves nothing
-            shutil.rmtree(folder.root, ignore_errors=True)
+        if created is not None and not folder.config.exists():  # a start that wrote nothing leaves nothing
+            shutil.rmtree(created, ignore_errors=True)
         raise
 
 
@@ -410,7 +427,13 @@ def _train_locked(
     try:
         state = _new_state(scene, cfg, train_views, extent, backend.device)
         if restore:
-            state.load_state_dict(_latest_good_checkpoint(folder, backend.device))
+            try:
+                state.load_state_dict(_latest_good_checkpoint(folder, backend.device))
+            except (KeyError, ValueError, TypeError, RuntimeError, AttributeError) as e:
+                raise InputError(
+                    f"{folder.checkpoints}: the newest checkpoint does not hold this run's training state "
+                    f"({type(e).__name__}); start the run again in a new folder."
+                ) from None
         folder.write_config(
             RunRecord(
                 cfg,
