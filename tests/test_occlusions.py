@@ -137,7 +137,7 @@ def test_a_depth_map_of_the_wrong_size_is_refused_naming_it(small_scene, scene_c
     depth = _exact_depths(small_scene, tmp_path / "depth")
     first = sorted(depth.glob("*.npy"))[0]
     write_depth(first, np.ones((5, 5), np.float32))
-    with pytest.raises(InputError, match=rf"{first.name}: a float32 map of shape \(5, 5\)"):
+    with pytest.raises(InputError, match=rf"{first.name}: a map of shape \(5, 5\)"):
         build_masks(scene_copy, BuildConfig(out_masks="cut", depth=str(depth)), progress=False)
     assert not (scene_copy / "cut").exists()
     with pytest.raises(InputError, match="only the graph proposer"):
