@@ -18,6 +18,7 @@ from gsseg.edits import apply_edit
 from gsseg.render import Backend, get_backend, to_uint8
 from gsseg.run import Run
 from gsseg.segment.reassign import Segmentation
+from gsseg.segment.served import complete_selection
 
 
 def edit_rows(
@@ -40,7 +41,12 @@ def edit_rows(
         for obj in sorted(label_of if objects is None else objects):
             if obj not in label_of:
                 continue
-            selected = segmentation.selection(label_of[obj])
+            selected = complete_selection(
+                run.gaussians,
+                segmentation.selection(label_of[obj]),
+                run.scene(scene_dir).split("train"),
+                backend=backend,
+            ).mask  # as gsseg edit removes and extracts
             removed = apply_edit(run.gaussians, selected, "remove")
             alone = apply_edit(run.gaussians, selected, "extract")
             for view in views:

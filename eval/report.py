@@ -25,11 +25,12 @@ from eval.evaluate import PROTOCOLS, Evaluation, evaluate, load_inputs
 from eval.lpips import LPIPS
 from eval.renders import ViewRenders
 from eval.training_curve import psnr_levels
-from gsseg.edits import Selection, apply_edit, edit_background
+from gsseg.edits import COMPLETED_OPS, Selection, apply_edit, edit_background
 from gsseg.render import Backend, get_backend
 from gsseg.run import Run
 from gsseg.run_folder import RunFolder
 from gsseg.segment.reassign import Segmentation
+from gsseg.segment.served import complete_selection
 
 PANELS = ("photo", "ground truth", "predicted (visible)", "removal", "extraction", "recolour")
 TRUTH_PANELS = ("removal", "the view without the object", "extraction", "the object alone")
@@ -60,16 +61,19 @@ def default_object(segmentation: Segmentation) -> int:
 def edit_panels(
     run: Run,
     selected: np.ndarray,
+    completed: np.ndarray,
     views: list[View],
     color: tuple[int, int, int],
     backend: str | Backend,
 ) -> dict[str, list[np.ndarray]]:
-    """Renders of ``views`` after removing, extracting (on white) and recolouring the (N,) bool
-    ``selected`` Gaussians."""
+    """Renders of ``views`` after removing and extracting (on white) the (N,) bool ``completed``
+    Gaussians (the selection with what served it alone, as ``gsseg edit`` takes them) and
+    recolouring the ``selected`` ones."""
     backend = get_backend(backend)
     out: dict[str, list[np.ndarray]] = {}
     for op in ("remove", "extract", "recolor"):
-        edited = apply_edit(run.gaussians, selected, op, tuple(c / 255 for c in color)).to(backend.device)
+        chosen = completed if op in COMPLETED_OPS else selected
+        edited = apply_edit(run.gaussians, chosen, op, tuple(c / 255 for c in color)).to(backend.device)
         background = edit_background([op])
         out[op] = [run.render_rgb(v, gaussians=edited, background=background, backend=backend) for v in views]
     return out
@@ -343,7 +347,8 @@ def report_run(
     label = selection.object_id if selection.object_id is not None else selection.main_label(segmentation.labels)
     if gt_masks is not None:
         ev.edits = edit_rows(run, segmentation, views, scene_dir, ev.id_map, backend=backend)
-    edits = edit_panels(run, selection.mask, views, color, backend)
+    completed = complete_selection(run.gaussians, selection.mask, run.scene(scene_dir).split("train"), backend=backend)
+    edits = edit_panels(run, selection.mask, completed.mask, views, color, backend)
     truth = truth_rows(scene_dir, views, ev.id_map.get(label), edits) if ev.edits else None
     history = run.folder.read_history()
     trained = len(run.record.train_views)

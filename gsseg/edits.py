@@ -26,9 +26,11 @@ from gsseg.segment.clicks import Click, ClickEvidence, ClickSelector
 from gsseg.segment.prompts import click_weights, pick_object, point_evidence
 from gsseg.segment.reassign import Segmentation
 from gsseg.segment.segment_run import run_regions
+from gsseg.segment.served import complete_selection
 from gsseg.sh import C0, rgb_to_sh_dc
 
 OPS = ("remove", "extract", "recolor")
+COMPLETED_OPS = ("remove", "extract")  # they take the Gaussians that served the selection alone too
 LUMA = torch.tensor([0.299, 0.587, 0.114])
 
 
@@ -161,7 +163,8 @@ def edit_run(
     other_scene: bool = False,
     progress: bool = True,
 ) -> Path:
-    """Select Gaussians (:func:`select`), apply ``op`` and write ``RUN/edits/NAME/``:
+    """Select Gaussians (:func:`select`), with those that served the selection alone for a
+    removal or an extraction (:mod:`gsseg.segment.served`), apply ``op`` and write ``RUN/edits/NAME/``:
     ``gaussians.ply``, ``renders/<view>.png`` of the scene's ``split`` views, ``video.mp4`` of
     those renders, and ``edit.json``."""
     check_prompts(point, clicks, object_id)
@@ -176,7 +179,11 @@ def edit_run(
     scene = run.scene(scene_dir)
     chosen = select(run, segmentation, scene, point=point, clicks=clicks, object_id=object_id, k=k, backend=backend)
     rgb = tuple(c / 255 for c in color) if color is not None else None
-    edited = apply_edit(run.gaussians, chosen.mask, op, rgb)
+    mask, served = chosen.mask, None
+    if op in COMPLETED_OPS:
+        served = complete_selection(run.gaussians, mask, scene.split("train"), backend=backend)
+        mask = served.mask
+    edited = apply_edit(run.gaussians, mask, op, rgb)
     record = {
         "op": op,
         "object_id": chosen.object_id,
@@ -185,6 +192,11 @@ def edit_run(
         "color": color,
         "selected_gaussians": int(chosen.mask.sum()),
         "labels": segmentation.settings(),
+        **(
+            {}
+            if served is None
+            else {"served_alone": served.added, "ghost_share": [served.ghost_before, served.ghost_after]}
+        ),
     }
     return write_edit(
         run,

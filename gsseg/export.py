@@ -27,6 +27,7 @@ from gsseg.gaussians import Gaussians
 from gsseg.ply import write_ply
 from gsseg.run import Run, load_run
 from gsseg.segment.clicks import Click
+from gsseg.segment.served import complete_selection
 from gsseg.sh import C0
 
 FORMATS = ("ply", "splat")
@@ -115,16 +116,18 @@ def export_run(
         check_prompts(point, clicks, object_id)
     segmentation = run.labels() if object_id is not None or prompted or run.folder.labels.is_file() else None
     labels = None if segmentation is None else segmentation.labels
-    if object_id is not None:
-        keep = labels == object_id
-        if not keep.any():
-            raise InputError(
-                f"object {object_id} holds no Gaussian in {run.folder.labels}; pick one of "
-                f"{sorted(set(np.unique(labels).tolist()) - {0})}."
-            )
-        g, labels = g.select(torch.from_numpy(keep)), labels[keep]
-    elif prompted:
-        keep = select(run, segmentation, run.scene(scene_dir), point=point, clicks=clicks).mask
+    if object_id is not None or prompted:
+        if object_id is not None:
+            keep = labels == object_id
+            if not keep.any():
+                raise InputError(
+                    f"object {object_id} holds no Gaussian in {run.folder.labels}; pick one of "
+                    f"{sorted(set(np.unique(labels).tolist()) - {0})}."
+                )
+        else:
+            keep = select(run, segmentation, run.scene(scene_dir), point=point, clicks=clicks).mask
+        if object_id != 0:  # an object, as an extraction takes it: with what served it alone
+            keep = complete_selection(g, keep, run.scene(scene_dir).split("train")).mask
         g, labels = g.select(torch.from_numpy(keep)), labels[keep]
     whole = object_id is None and not prompted
     if environment or (environment is None and whole and run.environment is not None):

@@ -27,6 +27,7 @@ from gsseg.render.pixel_labels import segment_pixels
 from gsseg.run import load_run
 from gsseg.segment.clicks import ClickEvidence, ClickSelector
 from gsseg.segment.segment_run import segment_run
+from gsseg.segment.served import complete_selection
 
 # --- the rule on a drawn model: two blobs, what the views and the labels say of them ----------
 
@@ -116,7 +117,8 @@ def _clickable(run, labels: np.ndarray, objects: list[int]) -> dict[int, tuple[s
 
 
 def _edit(run_dir: Path, *args: str) -> np.ndarray:
-    """The Gaussians ``gsseg edit RUN --op extract ARGS`` keeps, (N,) bool over the run's."""
+    """The Gaussians ``gsseg edit RUN --op extract ARGS`` keeps, (N,) bool over the run's (the
+    selection with what served it alone)."""
     r = subprocess.run(
         [script("gsseg"), "edit", str(run_dir), "--op", "extract", "--backend", "cpu", *args],
         capture_output=True,
@@ -210,8 +212,10 @@ def test_the_viewers_clicks_select_what_gsseg_edit_selects(segmented, tmp_path):
     scene = run.scene()
 
     def at(obj: int, mode: str) -> np.ndarray:
+        """The viewer's selection after a click on ``obj``, as an extraction takes it."""
         view = scene.view(clicks[obj][0])
-        return session.select_at(ViewCamera(view.camera, view.cam_from_world), clicks[obj][1], clicks[obj][2], mode)
+        chosen = session.select_at(ViewCamera(view.camera, view.cam_from_world), clicks[obj][1], clicks[obj][2], mode)
+        return complete_selection(run.gaussians, chosen, scene.split("train")).mask
 
     with pytest.raises(InputError, match="click an object first"):
         at(b, "exclude")

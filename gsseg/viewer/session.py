@@ -17,7 +17,7 @@ from scipy.spatial.transform import Rotation
 from dataset_tools.cameras import PinholeCamera
 from dataset_tools.image_files import label_palette
 from dataset_tools.infra.errors import InputError
-from gsseg.edits import apply_edit, check_edit, edit_background, write_edit
+from gsseg.edits import COMPLETED_OPS, apply_edit, check_edit, edit_background, write_edit
 from gsseg.gaussians import Gaussians
 from gsseg.render import get_backend
 from gsseg.render.contributions import Contributions
@@ -26,6 +26,7 @@ from gsseg.segment.clicks import ClickEvidence, ClickSelector
 from gsseg.segment.prompts import click_weights
 from gsseg.segment.reassign import Segmentation
 from gsseg.segment.segment_run import LabelOptions, label_gaussians, mask_contributions, run_regions
+from gsseg.segment.served import complete_selection
 from gsseg.sh import rgb_to_sh_dc
 
 HIGHLIGHT = (1.0, 0.85, 0.0)  # the selected object is drawn halfway towards this colour
@@ -63,8 +64,9 @@ def browser_camera(
 @dataclass(frozen=True)
 class EditStep:
     """One edit of the viewer: ``op`` on object ``object_id`` (``color`` R G B for recolour),
-    or, for a selection made by several clicks (``object_id`` None), on the (N,) bool
-    ``selection`` of the model the step was applied to."""
+    or on the (N,) bool ``selection`` of the model the step was applied to where there is one
+    (a selection made by clicks, ``object_id`` None; a removal or extraction, with what served
+    the selection alone)."""
 
     op: str
     object_id: int | None
@@ -127,7 +129,7 @@ class ViewerSession:
                 g, seg = self.run.gaussians, self.segmentation
                 kept = np.ones(len(g), bool)
                 for step in self.steps:
-                    selected = step.selection if step.object_id is None else seg.selection(step.object_id)
+                    selected = step.selection if step.selection is not None else seg.selection(step.object_id)
                     rgb = None if step.color is None else tuple(c / 255 for c in step.color)
                     g = apply_edit(g, selected, step.op, rgb)
                     if step.op != "recolor":
@@ -196,11 +198,15 @@ class ViewerSession:
             selection = self.selection()
             if selection is None:
                 raise InputError("select an object first: click on it in the scene.")
+            if op in COMPLETED_OPS:  # as gsseg edit: with what served the selection alone
+                selection = complete_selection(
+                    self.current()[0], selection, self.scene.split("train"), backend=self.backend
+                ).mask
             step = EditStep(
                 op,
                 self.selected,
                 None if color is None else tuple(int(c) for c in color),
-                None if self.selected is not None else selection.copy(),
+                selection.copy() if self.selected is None or op in COMPLETED_OPS else None,
             )
             self.steps.append(step)
             self._current = None
