@@ -321,7 +321,13 @@ def _pinhole_view(im: colmap.ColmapImage, image_root: Path, mask_root: Path | No
 def _test_names(root: Path, meta: dict, names: list[str], test_every: int) -> frozenset[str]:
     """The held-out views: scene.json's ``split.test`` when it lists them, else every
     ``test_every``-th of ``names`` (LLFF's hold-out)."""
-    listed = meta.get("split", {}).get("test")
+    split = meta.get("split", {})
+    listed = split.get("test") if isinstance(split, dict) else split
+    if listed is not None and not (isinstance(listed, list) and all(isinstance(n, str) for n in listed)):
+        raise InputError(
+            f"{root / 'scene.json'}: split.test is {type(listed).__name__}, not a list of view names; write it as "
+            '{"split": {"test": ["name.png", ...]}}.'
+        )
     test_names = frozenset(listed) if listed is not None else llff_test_names(names, test_every)
     unknown = test_names - set(names)
     if unknown:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
@@ -102,6 +103,12 @@ class Run:
                 file=self.record.scene,
             )
         scene = load_scene(scene_dir or self.record.scene, images=images or self.images, masks=masks)
+        if self.record.scene_fingerprint is None and not self.other_scene:
+            warnings.warn(
+                f"{self.folder.config}: records no fingerprint of its scene (trained before they were recorded); "
+                f"{scene.root} is checked by its view names alone.",
+                stacklevel=2,
+            )
         difference = None if self.other_scene else scene_difference(self.record, scene)
         if difference is not None:
             raise OptionError(

@@ -71,6 +71,7 @@ def _damage_scenes(world: Path) -> None:
     cut.write_bytes(cut.read_bytes()[:40])
     (variant("bad_json") / "scene.json").write_text("{ not json")
     (variant("bad_split") / "scene.json").write_text(json.dumps({"split": {"test": ["nope.png"]}}))
+    (variant("string_split") / "scene.json").write_text(json.dumps({"split": {"test": "./0.png"}}))
     other = scene_with_exact_masks(SynthConfig(views=5, res=64, objects=2, seed=9), world / "other").root
     assert other.is_dir()
     same_names = variant("same_names")  # the same views, one photo changed
@@ -185,6 +186,7 @@ CASES = [
     ("dataset_tools", "inspect {w}/no_images_bin", "not a readable COLMAP model"),
     ("dataset_tools", "inspect {w}/junk_points", "too short for the records its header counts"),
     ("dataset_tools", "inspect {w}/empty_points", "too short for the records its header counts"),
+    ("dataset_tools", "inspect {w}/string_split", "split.test is str, not a list of view names"),
     ("dataset_tools", "synth --out {w}/new --seed -1", "give a seed of 0 or more"),
     ("dataset_tools", "corrupt --scene {w}/scene --out-masks n --seed -1", "give a seed of 0 or more"),
     ("dataset_tools", "corrupt --scene {w}/scene --masks object_mask --out-masks gt_mask --force", "ground truth"),
