@@ -584,11 +584,15 @@ def test_a_first_run_on_an_empty_kernel_cache_gives_the_bits_of_every_later_run(
     assert (tmp_path / "first" / "gaussians.ply").read_bytes() == (tmp_path / "later" / "gaussians.ply").read_bytes()
 
 
-def test_sigterm_after_pycolmap_loaded_is_one_line_and_exit_130(world, tmp_path):
-    """pycolmap's logging library installs a handler that prints a native stack trace and
-    kills the process; the commands keep Python's: SIGTERM to the viewer (which has read the
-    scene through pycolmap) is one line and exit code 130."""
-    pytest.importorskip("viser")
+def test_the_viewer_answers_a_malformed_frame_and_sigterm_with_a_line_each(world, tmp_path):
+    """A browser connection sending a frame that is no message is one warning line, and the
+    viewer keeps serving; pycolmap's logging library installs a handler that prints a native
+    stack trace and kills the process, but the commands keep Python's: SIGTERM to the viewer
+    (which has read the scene through pycolmap) is one line and exit code 130."""
+    viser = pytest.importorskip("viser")
+    import asyncio
+
+    import websockets
     run = _copy(world / "run", tmp_path / "run")
     with socket.socket() as free:
         free.bind(("127.0.0.1", 0))
@@ -604,7 +608,22 @@ def test_sigterm_after_pycolmap_loaded_is_one_line_and_exit_130(world, tmp_path)
     seen = ""
     while "http://" not in seen and proc.poll() is None:
         seen += proc.stdout.readline()
+
+    async def malformed() -> None:
+        protocol = [f"viser-v{viser.__version__}"]
+        async with websockets.connect(f"ws://127.0.0.1:{port}", subprotocols=protocol) as ws:
+            await ws.send(b"\x93 not a message")
+            await asyncio.sleep(1)
+
+    try:
+        asyncio.run(malformed())
+    except websockets.exceptions.ConnectionClosed:
+        pass  # the server may close it before the client is done
+    time.sleep(1)
+    assert proc.poll() is None  # still serving
     proc.send_signal(signal.SIGTERM)
     _, err = proc.communicate(timeout=60)
     assert proc.returncode == 130, (seen, err)
-    assert "stack trace" not in err and "Traceback" not in err and len(_message_lines(err)) == 1, err
+    lines = _message_lines(err)
+    assert "stack trace" not in err and "Traceback" not in err and len(lines) == 2, err
+    assert lines[0].startswith("warning: a browser connection ended") and lines[1].startswith("interrupted"), err

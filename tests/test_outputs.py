@@ -135,3 +135,33 @@ def test_a_folder_the_project_owns_is_swept_of_every_killed_write(tmp_path):
     _age(edits / ".notes")
     remove_stale_temporaries(edits / "*")
     assert sorted(p.name for p in edits.iterdir()) == [".notes", "remove_1"]
+
+
+def test_a_full_or_read_only_disk_is_named_by_the_output_not_its_temporary(tmp_path, monkeypatch):
+    """A write that fails names the output the user asked for: a full disk's error names no
+    file at all, a read-only folder's names the hidden temporary sibling."""
+    import errno
+    import tempfile
+
+    from dataset_tools.infra.cli_support import describe_os_error
+
+    def full(*args, **kwargs):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(os, "replace", full)
+    with pytest.raises(OSError) as failed:
+        write_bytes_atomic(tmp_path / "out.png", b"data")
+    assert failed.value.filename == str(tmp_path / "out.png") and "no space left" in describe_os_error(failed.value)
+    with pytest.raises(OSError) as failed:
+        with atomic_directory(tmp_path / "masks") as tmp:
+            write_bytes_atomic(tmp / "0001.png", b"data")
+    assert failed.value.filename == str(tmp_path / "masks" / "0001.png")
+    monkeypatch.undo()
+
+    def read_only(prefix, suffix, dir):
+        raise PermissionError(errno.EACCES, "Permission denied", str(Path(dir) / f"{prefix}abc{suffix}"))
+
+    monkeypatch.setattr(tempfile, "mkstemp", read_only)
+    with pytest.raises(OSError) as failed:
+        write_bytes_atomic(tmp_path / "out.png", b"data")
+    assert failed.value.filename == str(tmp_path / "out.png") and not list(tmp_path.glob(".*"))

@@ -68,21 +68,37 @@ def remove_stale_temporaries(path: Path) -> None:
             os.close(fd)
 
 
+def _named(error: OSError, temporary: Path | str, final: Path) -> OSError:
+    """``error`` naming the output ``final`` where it named its ``temporary`` sibling (or what
+    lies inside it) or nothing (a full disk's write): the user's path, not a hidden one."""
+    name = error.filename
+    if name is None or str(name).startswith(str(temporary)):
+        inside = "" if name is None else str(name)[len(str(temporary)) :]
+        return OSError(error.errno, error.strerror, str(final) + inside)
+    return error
+
+
 def write_bytes_atomic(path: Path, data: bytes) -> None:
-    """Write ``data`` to ``path`` through a temporary file in the same folder."""
+    """Write ``data`` to ``path`` through a temporary file in the same folder; an
+    operating-system error names ``path``."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     remove_stale_temporaries(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    except OSError as e:  # the folder is read-only or full
+        raise OSError(e.errno, e.strerror, str(path)) from None
     try_lock(fd)
     try:
         with os.fdopen(fd, "wb") as f:
             f.write(data)
         os.chmod(tmp, _default_mode(0o666))
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as e:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
+        if isinstance(e, OSError):
+            raise _named(e, tmp, path) from None
         raise
 
 
@@ -90,12 +106,16 @@ def write_bytes_atomic(path: Path, data: bytes) -> None:
 def atomic_directory(path: Path, *, overwrite: bool = False) -> Iterator[Path]:
     """Yield a temporary folder that replaces ``path`` only if the block succeeds.
 
-    On any exception the temporary folder is deleted and ``path`` is left as it was.
+    On any exception the temporary folder is deleted and ``path`` is left as it was; an
+    operating-system error names ``path`` (and the file inside it), not the temporary folder.
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     remove_stale_temporaries(path)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent))
+    try:
+        tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent))
+    except OSError as e:  # the folder is read-only or full
+        raise OSError(e.errno, e.strerror, str(path)) from None
     held = os.open(tmp, os.O_RDONLY)
     try_lock(held)
     try:
@@ -111,8 +131,10 @@ def atomic_directory(path: Path, *, overwrite: bool = False) -> Iterator[Path]:
             shutil.rmtree(old, ignore_errors=True)
         else:
             os.replace(tmp, path)
-    except BaseException:
+    except BaseException as e:
         shutil.rmtree(tmp, ignore_errors=True)
+        if isinstance(e, OSError):
+            raise _named(e, tmp, path) from None
         raise
     finally:
         os.close(held)

@@ -10,6 +10,7 @@ clicks as (u, v) on the canvas; the panel drives a :class:`~gsseg.viewer.session
 from __future__ import annotations
 
 import html
+import logging
 import socket
 import threading
 import time
@@ -21,7 +22,7 @@ from scipy.spatial.transform import Rotation
 
 from dataset_tools.image_files import label_palette
 from dataset_tools.infra.errors import InputError, OptionError
-from dataset_tools.infra.interrupts import stop_requests
+from dataset_tools.infra.interrupts import Interrupted, stop_requests
 from gsseg.run import load_run
 from gsseg.segment.reassign import METHODS
 from gsseg.viewer.session import ViewCamera, ViewerSession, browser_camera
@@ -66,6 +67,17 @@ def require_free_port(host: str, port: int) -> None:
             ) from None
 
 
+def _one_line_connection_errors(record: logging.LogRecord) -> bool:
+    """A browser connection that fails (a malformed frame, a dropped socket) is one line on
+    stderr, not the server library's traceback; the viewer keeps serving the others."""
+    if record.exc_info and record.exc_info[1] is not None:
+        error = record.exc_info[1]
+        first = str(error).splitlines()[0] if str(error) else ""
+        record.msg, record.args = f"warning: a browser connection ended: {type(error).__name__}: {first}", ()
+        record.exc_info, record.exc_text = None, None
+    return True
+
+
 class Viewer:
     """A running viewer: one viser server, one session, one render thread per browser tab.
 
@@ -85,6 +97,7 @@ class Viewer:
         self.session = session
         self.max_size = max_size
         self.views = session.scene.split("train")
+        logging.getLogger("websockets.server").addFilter(_one_line_connection_errors)
         self.server = viser.ViserServer(host=host, port=port, verbose=False)
         self.host = host
         self._dirty: dict[int, threading.Event] = {}
@@ -330,8 +343,9 @@ def serve(
     other_scene: bool = False,
     on_ready=print,
 ) -> None:
-    """Serve a run until Ctrl-C or SIGTERM; ``on_ready`` is called with a line saying where;
-    ``other_scene``: show it on a scene other than the run's."""
+    """Serve a run until Ctrl-C or SIGTERM (then :class:`Interrupted`, which the command line
+    prints as one line with exit code 130, as every command); ``on_ready`` is called with a
+    line saying where; ``other_scene``: show it on a scene other than the run's."""
     # A frame queued for a tab that closed meanwhile is dropped; viser warns of it with a source line.
     warnings.filterwarnings("ignore", message=r"Queued a \w+ on a closed connection", category=UserWarning)
     session = ViewerSession(load_run(run_dir, other_scene=other_scene), scene_dir=scene_dir, backend=backend)
@@ -345,3 +359,4 @@ def serve(
                 time.sleep(0.2)
     finally:
         viewer.stop()
+    raise Interrupted(f"{stop.signal_name}: the viewer of {run_dir} stopped; the run is as it was.")
