@@ -341,7 +341,7 @@ def clean_scene_masks(
     if dst.exists() and not force:
         raise OutputExists(dst, option="force")
     files = sorted(src.rglob("*.png"))
-    with atomic_directory(dst, overwrite=force) as tmp:
+    with exclusive_folder(scene_dir, "masks"), atomic_directory(dst, overwrite=force) as tmp:
         for f in tqdm(files, desc="cleaning", disable=not progress):
             target = tmp / f.relative_to(src)
             write_bytes_atomic(target, encode_png(clean_mask(read_mask(f), min_area)))

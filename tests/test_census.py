@@ -556,6 +556,36 @@ def test_a_second_writer_is_refused_while_the_first_trains(world, tmp_path):
     assert first.returncode == 130  # SIGTERM, like Ctrl-C, stops after a checkpoint
 
 
+def test_the_masks_a_training_reads_are_not_rewritten_under_it(world, tmp_path):
+    """A training holds the scene's masks: rewriting them (``corrupt --force``, ``hqmask clean
+    --force``) is refused in one line while it runs, and the masks stay as they were."""
+    scene = _copy(world / "scene", tmp_path / "scene")
+    env = {**os.environ, "TQDM_DISABLE": "1"}
+    training = subprocess.Popen(
+        [*_train_command(scene, tmp_path / "run", "--iters", "400"), "--cache-views", "disk"],
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    deadline = time.time() + 120
+    while not (tmp_path / "run" / "config.json").exists() and time.time() < deadline:
+        time.sleep(0.05)
+    before = _snapshot(scene)
+    writers = [
+        [sys.executable, "-m", "dataset_tools", "corrupt", "--scene", str(scene), "--masks", "gt_mask"]
+        + ["--out-masks", "object_mask", "--force"],
+        [script("hqmask"), "clean", str(scene), "--masks", "gt_mask", "--out-masks", "object_mask", "--force"],
+    ]
+    refusals = [subprocess.run(w, env=env, capture_output=True, text=True) for w in writers]
+    training.send_signal(signal.SIGTERM)
+    training.communicate(timeout=120)
+    for r in refusals:
+        assert r.returncode == 2 and "training on masks" in r.stderr, r.stderr
+        assert len(_message_lines(r.stderr)) == 1, r.stderr
+    assert _snapshot(scene) == before
+
+
 def test_an_error_after_a_progress_bar_starts_on_its_own_line(world, tmp_path):
     shutil.copytree(world / "cut_image", tmp_path / "s")
     r = subprocess.run(
@@ -593,6 +623,7 @@ def test_the_viewer_answers_a_malformed_frame_and_sigterm_with_a_line_each(world
     import asyncio
 
     import websockets
+
     run = _copy(world / "run", tmp_path / "run")
     with socket.socket() as free:
         free.bind(("127.0.0.1", 0))

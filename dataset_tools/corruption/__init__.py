@@ -26,6 +26,7 @@ from dataset_tools.corruption.ops import coarsen
 from dataset_tools.image_files import encode_png
 from dataset_tools.infra.atomic import atomic_directory, write_bytes_atomic
 from dataset_tools.infra.errors import InputError, OptionError, OutputExists, check_seed
+from dataset_tools.infra.locks import exclusive_folder
 from dataset_tools.infra.names import plain_name
 from dataset_tools.infra.overlap import refuse_overlap, scene_inputs
 from dataset_tools.label_maps import matched_error
@@ -90,7 +91,7 @@ def corrupt_scene(
         labels = sorted({int(label) for _, m in views for label in np.unique(m) if label > 0})
         runs = proposer.plan_runs(labels, len(views), params, np.random.default_rng([seed, RUNS_STREAM]))
     errors = {}
-    with atomic_directory(target, overwrite=overwrite) as tmp:
+    with exclusive_folder(scene_dir, "masks"), atomic_directory(target, overwrite=overwrite) as tmp:
         for k, (view, gt) in enumerate(tqdm(views, desc=f"corrupting ({model}, {severity})", disable=not progress)):
             rng = np.random.default_rng([seed, k])
             noisy = (

@@ -45,12 +45,28 @@ def exclusive(lock_file: Path, owner: Path, what: str) -> Iterator[None]:
 @contextlib.contextmanager
 def exclusive_folder(folder: Path, what: str) -> Iterator[None]:
     """Hold an exclusive lock on the existing ``folder`` itself (no lock file is left in it)
-    while the block runs; a second holder is refused in one sentence saying ``what`` it
-    writes."""
+    while the block runs, to write ``what`` there; another writer, or a reader holding
+    :func:`shared_folder`, refuses it in one sentence."""
     fd = os.open(folder, os.O_RDONLY)
     try:
         if not try_lock(fd):
-            raise InputError(f"{folder}: another command is writing {what} here; wait for it to finish.")
+            raise InputError(f"{folder}: another command is writing or training on {what} here; wait for it to finish.")
+        yield
+    finally:
+        os.close(fd)
+
+
+@contextlib.contextmanager
+def shared_folder(folder: Path, what: str) -> Iterator[None]:
+    """Hold a shared lock on the existing ``folder`` while the block reads ``what`` there: any
+    number of readers together, no writer (:func:`exclusive_folder`) meanwhile; a writer
+    holding it refuses the reader in one sentence."""
+    fd = os.open(folder, os.O_RDONLY)
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise InputError(f"{folder}: another command is writing {what} here; wait for it to finish.") from None
         yield
     finally:
         os.close(fd)

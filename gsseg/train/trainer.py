@@ -9,6 +9,7 @@ step; Ctrl-C and SIGTERM stop after the step in progress and write one, so that
 
 from __future__ import annotations
 
+import contextlib
 import math
 import shutil
 import subprocess
@@ -28,6 +29,7 @@ from dataset_tools.fingerprint import scene_fingerprint
 from dataset_tools.infra.atomic import first_missing, require_folder_path
 from dataset_tools.infra.errors import InputError, OptionError, RunFailed
 from dataset_tools.infra.interrupts import Interrupted, stop_requests
+from dataset_tools.infra.locks import shared_folder
 from dataset_tools.infra.overlap import refuse_overlap, scene_entries
 from dataset_tools.scene import Scene, View, load_scene
 from gsseg.environment import Environment, background_image, mean_up, profile_bins
@@ -376,7 +378,12 @@ def train(
     try:
         with folder.lock():
             cfg, restore = _settled_config(folder, cfg, resume, given)
-            return _train_locked(folder, Path(scene_dir), cfg, restore, stop_after, other_scene, cache_views, progress)
+            # The scene's masks may not change while it trains (read view by view with --cache-views disk).
+            masks_read = cfg.masks is not None and Path(scene_dir).is_dir()
+            with shared_folder(Path(scene_dir), "masks") if masks_read else contextlib.nullcontext():
+                return _train_locked(
+                    folder, Path(scene_dir), cfg, restore, stop_after, other_scene, cache_views, progress
+                )
     except BaseException:
         if created is not None and not folder.config.exists():  # a start that wrote nothing leaves nothing
             shutil.rmtree(created, ignore_errors=True)
