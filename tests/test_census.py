@@ -124,6 +124,8 @@ def _damage_runs(world: Path) -> None:
     (variant("odd_evaluation") / "evaluation.json").write_text(json.dumps({"format_version": 1, "views": 3}))
     metrics = variant("odd_metrics") / "metrics.json"
     metrics.write_text(json.dumps({**json.loads(metrics.read_text()), "train": {"history": [1, 2]}}))
+    moved = variant("moved_scene") / "config.json"
+    moved.write_text(json.dumps({**json.loads(moved.read_text()), "scene": str(world / "gone")}))
     no_checkpoints = variant("no_checkpoints")
     shutil.rmtree(no_checkpoints / "checkpoints")
     import torch
@@ -341,6 +343,7 @@ CASES = [
     ("gseval", "compare {w}/unfinished", "evaluation.json: missing"),
     ("gseval", "compare {w}/cut_evaluation", "damaged"),
     ("gseval", "compare {w}/odd_evaluation", "does not hold a report's scores"),
+    ("gsseg", "segment {w}/moved_scene", "no longer there; pass where it moved as --scene"),
     ("gseval", "report {w}/odd_metrics --out {w}/new --gt-masks none", "damaged run file"),
     ("gseval", "compare {w}/run --out {w}/run", ""),
     ("gseval", "paper-tables --out {w}/a_file --quick", "a file stands there"),
@@ -658,3 +661,13 @@ def test_the_viewer_answers_a_malformed_frame_and_sigterm_with_a_line_each(world
     lines = _message_lines(err)
     assert "stack trace" not in err and "Traceback" not in err and len(lines) == 2, err
     assert lines[0].startswith("warning: a browser connection ended") and lines[1].startswith("interrupted"), err
+
+
+def test_inspect_says_when_the_mask_folder_asked_for_is_missing(world, tmp_path, monkeypatch, capsys):
+    sheet = tmp_path / "sheet.png"
+    monkeypatch.setattr(
+        sys, "argv", ["dataset_tools", "inspect", str(world / "scene"), "--masks", "nomask", "--sheet", str(sheet)]
+    )
+    ENTRY["dataset_tools"]()
+    err = capsys.readouterr().err
+    assert "nomask: no such mask folder" in err and sheet.is_file(), err

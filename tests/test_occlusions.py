@@ -140,6 +140,9 @@ def test_a_depth_map_of_the_wrong_size_is_refused_naming_it(small_scene, scene_c
     with pytest.raises(InputError, match=rf"{first.name}: a map of shape \(5, 5\)"):
         build_masks(scene_copy, BuildConfig(out_masks="cut", depth=str(depth)), progress=False)
     assert not (scene_copy / "cut").exists()
+    np.save(first, np.ones((96, 96), np.int64))  # the right size, but no depths
+    with pytest.raises(InputError, match=rf"{first.name}: a map of int64, not of floating-point depths"):
+        build_masks(scene_copy, BuildConfig(out_masks="cut", depth=str(depth)), progress=False)
     with pytest.raises(InputError, match="only the graph proposer"):
         build_masks(
             scene_copy,
