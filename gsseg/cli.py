@@ -259,7 +259,6 @@ def view(run: Path, scene: Path | None, **options) -> None:
         raise click.UsageError(f"the viewer needs viser ({e}); install it with `pip install -e .[viewer]`.") from None
 
     serve(run, scene_dir=scene, on_ready=click.echo, **options)
-    click.echo("viewer stopped")
 
 
 def _object_option(ctx: click.Context, param: click.Parameter, value: str | None) -> int | None:

@@ -119,7 +119,7 @@ def test_a_second_writer_is_refused_and_the_lock_leaves_no_file(tmp_path):
         pass
     before = sorted(tmp_path.rglob("*"))
     with exclusive_folder(tmp_path, "masks"):
-        with pytest.raises(InputError, match="another command is writing masks here"):
+        with pytest.raises(InputError, match="another command is writing or training on masks here"):
             with exclusive_folder(tmp_path, "masks"):
                 pass
     assert sorted(tmp_path.rglob("*")) == before
