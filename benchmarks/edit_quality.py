@@ -35,7 +35,8 @@ from eval.edit_scores import edit_rows, summarize_edits
 from eval.evaluate import evaluate
 from eval.report import markdown_table
 from gsseg.run import load_run
-from gsseg.segment.segment_run import LabelOptions, label_gaussians, mask_contributions
+from gsseg.segment.label_options import LabelOptions
+from gsseg.segment.segment_run import label_gaussians, mask_contributions
 from gsseg.train import TrainConfig
 from pipeline.experiment import SceneSpec, associate_masks, corrupt_masks, synthetic_scene, train_run
 

@@ -27,7 +27,7 @@ from pathlib import Path
 from benchmarks import record
 from dataset_tools.scene import GT_MASKS
 from eval.report import markdown_table
-from gsseg.segment.segment_run import LabelOptions
+from gsseg.segment.label_options import LabelOptions
 from gsseg.train import TrainConfig
 from pipeline.experiment import (
     SceneSpec,

@@ -21,7 +21,8 @@ from benchmarks.render_speed import scene
 from eval.report import markdown_table
 from gsseg.render import BACKENDS, get_backend, render
 from gsseg.render.contributions import Contributions, MaskedView, contribution_matrix
-from gsseg.segment import reassign
+from gsseg.segment.label_options import LabelOptions
+from gsseg.segment.reassign import reassign
 
 
 def seed_style_binary(
@@ -99,8 +100,8 @@ def main() -> None:
     contrib = Contributions(labels=labels, weights=weights)
     prior = torch.randint(0, k, (n,), generator=gen)
     probs = torch.rand(n, generator=gen)
-    t_multi, _ = timed(lambda: reassign(contrib, prior, probs, mode="multi"))
-    t_binary, seg = timed(lambda: reassign(contrib, prior, probs, mode="binary"))
+    t_multi, _ = timed(lambda: reassign(contrib, prior, probs, LabelOptions(mode="multi")))
+    t_binary, seg = timed(lambda: reassign(contrib, prior, probs, LabelOptions(mode="binary")))
     t_loop, ref = timed(lambda: seed_style_binary(weights, labels, prior, probs, 0.2), repeats=1)
     agree = all(np.array_equal(seg.selection(obj), sel.numpy()) for obj, sel in ref.items())
     out["reassignment"] = {

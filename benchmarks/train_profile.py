@@ -27,9 +27,9 @@ from benchmarks import record
 from benchmarks.real_scenes import posed_scene
 from eval.report import markdown_table
 from gsseg.train import TrainConfig, train
-from gsseg.train_config import DEMO_MAX_GAUSSIANS, DEMO_SCENE_ITERS
 from hqmask.build import BuildConfig, build_masks
 from pipeline.demo import MASKS, demo_images
+from pipeline.demo_options import SCENE_ITERS, DemoOptions
 
 # (file path suffix, function name) of the functions whose cumulative time the phases are made of
 FUNCTIONS = {
@@ -88,8 +88,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--real", type=Path, default=Path("../shared/data/real"))
     parser.add_argument("--scene", default="statue")
-    parser.add_argument("--iters", type=int, default=DEMO_SCENE_ITERS)
-    parser.add_argument("--max-gaussians", type=int, default=DEMO_MAX_GAUSSIANS)
+    parser.add_argument("--iters", type=int, default=SCENE_ITERS)
+    parser.add_argument("--max-gaussians", type=int, default=DemoOptions.max_gaussians)
     parser.add_argument("--work", type=Path, default=Path("/tmp/train_profile"))
     parser.add_argument("--tag", default="", help="Suffix of the JSON file's name.")
     parser.add_argument("--out", default=None, help="JSON file (default: benchmarks/results/train_profile.json).")

@@ -14,7 +14,7 @@ from dataset_tools.cameras import PinholeCamera
 from dataset_tools.image_files import as_label_map, encode_png
 from dataset_tools.infra.atomic import atomic_directory, write_bytes_atomic
 from dataset_tools.infra.errors import InputError, OutputExists
-from dataset_tools.scene import Scene
+from dataset_tools.scene import MASKS, Scene
 
 COLUMNS = ("image", "mask", "intrinsics", "width", "height", "cam_from_world", "view", "scene", "split")
 
@@ -77,7 +77,7 @@ def export_dataset(scene: Scene, out: Path, *, overwrite: bool = False, shard_vi
 
 
 def write_scenes_from_rows(
-    rows, out: Path, *, scenes: list[str] | None = None, masks: str = "object_mask", overwrite: bool = False
+    rows, out: Path, *, scenes: list[str] | None = None, masks: str = MASKS, overwrite: bool = False
 ) -> list[Path]:
     """Write the scenes of a ``datasets.Dataset`` of view rows (:data:`COLUMNS`) as scene
     folders ``out/<scene>/`` (PNG images, ``<masks>/`` ID maps, a pinhole COLMAP model without

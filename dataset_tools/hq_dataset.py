@@ -23,7 +23,7 @@ from dataset_tools.dataset_rows import write_scenes_from_rows
 from dataset_tools.infra.atomic import atomic_directory
 from dataset_tools.infra.errors import InputError, OptionError, OutputExists
 from dataset_tools.infra.overlap import refuse_overlap
-from dataset_tools.scene import load_scene
+from dataset_tools.scene import MASKS, load_scene
 
 HQ_REPO = "joshir/3D-Scene-Segmentation-HQ"
 ARCHIVE_SUFFIXES = (".zip", ".tar", ".tar.gz", ".tgz")
@@ -89,7 +89,7 @@ def convert_hq(
     out: Path | str,
     *,
     scenes: list[str] | None = None,
-    masks: str = "object_mask",
+    masks: str = MASKS,
     overwrite: bool = False,
     progress: bool = True,
 ) -> list[Path]:
@@ -161,7 +161,7 @@ def fetch_hq(
     *,
     local: Path | str | None = None,
     scenes: list[str] | None = None,
-    masks: str = "object_mask",
+    masks: str = MASKS,
     revision: str | None = None,
     overwrite: bool = False,
     progress: bool = True,

@@ -33,6 +33,7 @@ from dataset_tools.infra.errors import InputError, OutputExists
 from dataset_tools.mask_manifest import read_manifest
 
 Split = Literal["train", "test", "all"]
+IMAGES = "images"  # the photos; downsampled copies are images_<factor>
 MASKS = "object_mask"  # the masks that train
 GT_MASKS = "gt_mask"  # the exact masks of a synthetic scene
 
@@ -145,7 +146,7 @@ class Scene:
     root: Path
     views: list[View]
     points: SparsePoints
-    image_dir: str = "images"
+    image_dir: str = IMAGES
     mask_dir: str | None = MASKS
     test_names: frozenset[str] = frozenset()
     meta: dict = field(default_factory=dict)
@@ -237,7 +238,7 @@ def read_scene_json(root: Path) -> dict:
 def load_scene(
     root: Path | str,
     *,
-    images: str = "images",
+    images: str = IMAGES,
     masks: str | None = MASKS,
     test_every: int = 8,
 ) -> Scene:
@@ -383,7 +384,7 @@ def linked_scene(source: Path | str, out: Path | str) -> Path:
         raise InputError(f"{source}: no sparse/ COLMAP model; make one with `python -m dataset_tools sfm`.")
     out.mkdir(parents=True, exist_ok=True)
     for entry in source.iterdir():
-        if entry.name in ("sparse", "scene.json") or (entry.is_dir() and entry.name.split("_")[0] == "images"):
+        if entry.name in ("sparse", "scene.json") or (entry.is_dir() and entry.name.split("_")[0] == IMAGES):
             link = out / entry.name
             if not link.exists():
                 link.symlink_to(entry, target_is_directory=entry.is_dir())

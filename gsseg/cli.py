@@ -3,12 +3,27 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import get_args
 
 import click
-from click.core import ParameterSource
 
-from dataset_tools.infra.cli_support import none_means_off, other_scene_option, run_cli
-from gsseg.train_config import DEMO_ITERS, DEMO_MAX_GAUSSIANS, DEMO_SCENE_ITERS
+from dataset_tools.infra.cli_support import (
+    Registry,
+    field_option,
+    given_fields,
+    none_means_off,
+    other_scene_option,
+    run_cli,
+)
+from dataset_tools.scene import Split
+from gsseg.segment.label_options import METHODS, MODES, LabelOptions
+from gsseg.train_config import SCHEDULES, TrainConfig
+from pipeline.demo_options import EMBEDDED_ITERS, SCENE_ITERS, DemoOptions
+
+BACKEND = Registry("gsseg.render.backends:BACKENDS", ("auto",))
+SPLITS = get_args(Split)
+SCHEDULE_LENGTHS = ", ".join(f"{s.iters} on {name}" for name, s in SCHEDULES.items())
+SCHEDULE_CAPS = ", ".join(f"{s.max_gaussians:,} on {name}" for name, s in SCHEDULES.items())
 
 
 @click.group(name="gsseg", context_settings={"help_option_names": ["-h", "--help"]})
@@ -19,64 +34,61 @@ def cli() -> None:
 @cli.command()
 @click.argument("scene", type=click.Path(path_type=Path))
 @click.option("--out", "run", required=True, type=click.Path(path_type=Path), help="Run folder to write.")
-@click.option(
-    "--masks",
-    default="object_mask",
-    show_default=True,
+@field_option(
+    TrainConfig,
+    "masks",
     callback=none_means_off,
     help="Object-ID map folder (views without a mask train colour only); none: train colour alone.",
 )
-@click.option("--images", default="images", show_default=True, help="Image folder (images or images_N).")
-@click.option(
-    "--iters",
+@field_option(TrainConfig, "images", help="Image folder (images or images_N).")
+@field_option(
+    TrainConfig,
+    "iters",
     type=int,
-    default=None,
-    help="Iterations (default: 3000 on cpu, 30000 with gsplat); the schedule scales with it.",
+    help=f"Iterations (default: the schedule's, {SCHEDULE_LENGTHS}); the schedule scales with it.",
 )
-@click.option(
-    "--schedule",
-    type=click.Choice(["auto", "cpu", "gpu"]),
-    default="auto",
-    show_default=True,
-    help="cpu: the short laptop schedule; gpu: the paper's 30k schedule; auto picks by backend.",
+@field_option(
+    TrainConfig,
+    "schedule",
+    type=click.Choice(["auto", *SCHEDULES]),
+    help="cpu: the short laptop schedule; gpu: the paper's 30k schedule; auto: the backend's.",
 )
-@click.option("--backend", type=click.Choice(["auto", "cpu", "torch", "gsplat"]), default="auto", show_default=True)
-@click.option("--gamma-obj", type=float, default=1.0, show_default=True, help="Weight of the object cross-entropy.")
-@click.option(
-    "--geometry-from-masks",
-    is_flag=True,
+@field_option(TrainConfig, "backend", type=BACKEND)
+@field_option(TrainConfig, "gamma_obj", type=float, help="Weight of the object cross-entropy.")
+@field_option(
+    TrainConfig,
+    "geometry_from_masks",
     help="Let the object loss also move, reshape and densify the Gaussians (it then spends the "
     "Gaussian budget on mask noise; off: the masks train the object features alone).",
 )
-@click.option(
-    "--knn-reg",
+@field_option(
+    TrainConfig,
+    "knn_reg",
     type=float,
-    default=0.0,
-    show_default=True,
     help="Weight of Gaussian Grouping's 3D identity term (nearest Gaussians agree on their object); 0: off.",
 )
-@click.option(
-    "--environment",
+@field_option(
+    TrainConfig,
     "environment_degree",
+    "--environment",
     type=click.Choice(["none", "0", "1", "2", "3"]),
-    default="3",
-    show_default=True,
+    spell=lambda degree: "none" if degree is None else str(degree),
     callback=lambda ctx, param, v: None if v == "none" else int(v),
     help="SH degree of the learned background behind the Gaussians (sky, far ground); none: black.",
 )
-@click.option(
+@field_option(
+    TrainConfig,
+    "environment_profile",
     "--environment-profile/--no-environment-profile",
-    default=True,
-    show_default=True,
     help="Add a colour per elevation angle to the background: a sharp horizon.",
 )
-@click.option(
-    "--max-gaussians",
+@field_option(
+    TrainConfig,
+    "max_gaussians",
     type=int,
-    default=None,
-    help="Densification stops at this many Gaussians (default: 150 000 on the cpu schedule, 6 000 000 on gpu).",
+    help=f"Densification stops at this many Gaussians (default: the schedule's, {SCHEDULE_CAPS}).",
 )
-@click.option("--seed", type=int, default=0, show_default=True)
+@field_option(TrainConfig, "seed", type=int)
 @click.option(
     "--resume",
     is_flag=True,
@@ -87,37 +99,25 @@ def cli() -> None:
 @click.option("--stop-after", type=int, default=None, help="Checkpoint and stop at this step; continue with --resume.")
 @click.option(
     "--cache-views",
-    type=click.Choice(["auto", "memory", "disk"]),
+    type=Registry("gsseg.train.views:CACHE_MODES"),
     default="auto",
     show_default=True,
     help="Keep the views in memory (uint8) or read them from disk a few steps ahead; auto: memory while "
     "they take at most a quarter of the RAM.",
 )
 def train(
-    scene: Path,
-    run: Path,
-    schedule: str,
-    resume: bool,
-    allow_other_scene: bool,
-    stop_after: int | None,
-    cache_views: str,
-    **options,
+    scene: Path, run: Path, resume: bool, allow_other_scene: bool, stop_after: int | None, cache_views: str, **_
 ) -> None:
     """Train 3D-GS jointly with 16-d object features on SCENE."""
-    from gsseg.render import get_backend
-    from gsseg.train import TrainConfig
     from gsseg.train import train as run_training
 
-    ctx = click.get_current_context()
-    given = {name for name in ("schedule", *options) if ctx.get_parameter_source(name) == ParameterSource.COMMANDLINE}
-    if schedule == "auto":
-        schedule = get_backend(options["backend"]).default_schedule
+    options = given_fields(click.get_current_context(), TrainConfig)
     result = run_training(
         scene,
         run,
-        TrainConfig(schedule=schedule, **options),
+        TrainConfig(**options),
         resume=resume,
-        given=given,
+        given=set(options),
         stop_after=stop_after,
         other_scene=allow_other_scene,
         cache_views=cache_views,
@@ -135,7 +135,7 @@ def train(
     help="Scene folder whose views to render (default: the one the run was trained on).",
 )
 @click.option("--out", required=True, type=click.Path(path_type=Path), help="Folder to write.")
-@click.option("--split", type=click.Choice(["train", "test", "all"]), default="test", show_default=True)
+@click.option("--split", type=click.Choice(SPLITS), default="test", show_default=True)
 @click.option(
     "--what",
     default="rgb,labels",
@@ -145,7 +145,7 @@ def train(
 )
 @click.option("--colorize", is_flag=True, help="Also write colour versions of the label maps.")
 @click.option("--images", default=None, help="Image folder defining the cameras (default: the run's).")
-@click.option("--backend", type=click.Choice(["auto", "cpu", "torch", "gsplat"]), default="auto", show_default=True)
+@click.option("--backend", type=BACKEND, default="auto", show_default=True)
 @click.option("--force", is_flag=True, help="Replace --out if it exists.")
 @other_scene_option
 def render(run: Path, scene: Path, out: Path, what: str, force: bool, **options) -> None:
@@ -164,29 +164,27 @@ def render(run: Path, scene: Path, out: Path, what: str, force: bool, **options)
     type=click.Path(path_type=Path),
     help="The scene the run was trained on, where it moved (default: the recorded one).",
 )
-@click.option("--method", type=click.Choice(["prior", "flashsplat", "classifier"]), default="prior", show_default=True)
-@click.option("--mode", type=click.Choice(["multi", "binary"]), default="multi", show_default=True)
-@click.option("--gamma-p", type=float, default=0.2, show_default=True, help="Weight of the learned prior (any real).")
-@click.option("--slack", type=float, default=0.0, show_default=True, help="Background bias of --method flashsplat.")
-@click.option(
-    "--smooth",
+@field_option(LabelOptions, "method", type=click.Choice(METHODS))
+@field_option(LabelOptions, "mode", type=click.Choice(MODES))
+@field_option(LabelOptions, "gamma_p", type=float, help="Weight of the learned prior (any real).")
+@field_option(LabelOptions, "slack", type=float, help="Background bias of --method flashsplat.")
+@field_option(
+    LabelOptions,
+    "smooth",
     type=int,
-    default=0,
-    show_default=True,
     help="Gaussians with weak evidence take the label majority of this many nearest Gaussians (0: off).",
 )
-@click.option("--fill-interiors", "fill", is_flag=True, help="Objects take the Gaussians they enclose.")
+@field_option(LabelOptions, "fill", "--fill-interiors", help="Objects take the Gaussians they enclose.")
 @click.option("--masks", default=None, help="Mask folder that votes (default: the one the run was trained on).")
-@click.option("--backend", type=click.Choice(["auto", "cpu", "torch", "gsplat"]), default="auto", show_default=True)
+@click.option("--backend", type=BACKEND, default="auto", show_default=True)
 @other_scene_option
-def segment(run: Path, scene: Path, masks: str, backend: str, other_scene: bool, **options) -> None:
+def segment(run: Path, scene: Path, masks: str, backend: str, other_scene: bool, **_) -> None:
     """Prior-guided label reassignment of every Gaussian of RUN; writes RUN/labels.npz."""
     from gsseg.run_folder import RunFolder
-    from gsseg.segment.segment_run import LabelOptions, segment_run
+    from gsseg.segment.segment_run import segment_run
 
-    result = segment_run(
-        run, scene, options=LabelOptions(**options), masks=masks, backend=backend, other_scene=other_scene
-    )
+    options = LabelOptions(**given_fields(click.get_current_context(), LabelOptions))
+    result = segment_run(run, scene, options=options, masks=masks, backend=backend, other_scene=other_scene)
     counts = {int(o): int(s.sum()) for o, s in zip(result.objects, result.selections)}
     click.echo(f"wrote {RunFolder(run).labels}: {len(result.labels)} Gaussians; per object {counts}")
 
@@ -218,14 +216,14 @@ def _clicks(click_: tuple, exclude_click: tuple) -> list:
     "VIEW U V: a pixel on what must not be selected; inside the selection it splits it.",
 )
 @click.option("--object-id", type=int, default=None, help="The object's label.")
-@click.option("--op", type=click.Choice(["remove", "extract", "recolor"]), required=True)
+@click.option("--op", type=Registry("gsseg.edits:OPS"), required=True)
 @click.option("--color", type=click.IntRange(0, 255), nargs=3, default=None, help="R G B (0..255) for --op recolor.")
 @click.option("--name", default=None, help="Edit folder name (default: <op>_<id>).")
 @click.option(
     "--scene", default=None, type=click.Path(path_type=Path), help="Scene whose views to render (default: the run's)."
 )
-@click.option("--split", type=click.Choice(["train", "test", "all"]), default="test", show_default=True)
-@click.option("--backend", type=click.Choice(["auto", "cpu", "torch", "gsplat"]), default="auto", show_default=True)
+@click.option("--split", type=click.Choice(SPLITS), default="test", show_default=True)
+@click.option("--backend", type=BACKEND, default="auto", show_default=True)
 @click.option("--force", is_flag=True, help="Replace the edit folder if it exists.")
 @other_scene_option
 def edit(run: Path, point, click_, exclude_click, scene, force: bool, **options) -> None:
@@ -249,7 +247,7 @@ def edit(run: Path, point, click_, exclude_click, scene, force: bool, **options)
     show_default=True,
     help="Frames are rendered at most this many pixels on their long side.",
 )
-@click.option("--backend", type=click.Choice(["auto", "cpu", "torch", "gsplat"]), default="auto", show_default=True)
+@click.option("--backend", type=BACKEND, default="auto", show_default=True)
 @other_scene_option
 def view(run: Path, scene: Path | None, **options) -> None:
     """Open RUN in the browser: click an object to select it, remove / extract / recolour it, save the edit."""
@@ -290,7 +288,7 @@ def _object_option(ctx: click.Context, param: click.Parameter, value: str | None
 @click.option(
     "--format",
     "fmt",
-    type=click.Choice(["ply", "splat"]),
+    type=Registry("gsseg.export:FORMATS"),
     default=None,
     help="ply: 3D-GS PLY + a label property; splat: 32-byte records for web viewers (default: from --out).",
 )
@@ -333,38 +331,33 @@ def export(
 
 @cli.command()
 @click.option("--out", default="demo", show_default=True, type=click.Path(path_type=Path), help="Folder to write.")
-@click.option(
-    "--scene",
-    default=None,
+@field_option(
+    DemoOptions,
+    "scene",
     type=click.Path(path_type=Path),
     help="Your scene folder, folder of photos or video instead of the synthetic scene (photos and video "
     "go through `python -m dataset_tools sfm` first).",
 )
-@click.option("--images", default=None, help="Image folder of --scene (default: the largest copy at most 640 px).")
-@click.option(
-    "--iters",
-    type=int,
-    default=None,
-    help=f"Training iterations [default: {DEMO_ITERS} on the embedded scene, {DEMO_SCENE_ITERS} on --scene].",
+@field_option(
+    DemoOptions,
+    "images",
+    help=f"Image folder of --scene (default: the largest copy at most {DemoOptions.max_side} px).",
 )
-@click.option(
-    "--max-gaussians",
+@field_option(
+    DemoOptions,
+    "iters",
     type=int,
-    default=DEMO_MAX_GAUSSIANS,
-    show_default=True,
-    help="Densification stops at this many Gaussians.",
+    help=f"Training iterations [default: {EMBEDDED_ITERS} on the embedded scene, {SCENE_ITERS} on --scene].",
 )
-@click.option("--backend", type=click.Choice(["auto", "cpu", "torch", "gsplat"]), default="auto", show_default=True)
+@field_option(DemoOptions, "max_gaussians", type=int, help="Densification stops at this many Gaussians.")
+@field_option(DemoOptions, "backend", type=BACKEND)
 @click.option("--force", is_flag=True, help="Replace the outputs in --out.")
-def demo(
-    out: Path, scene: Path | None, images: str | None, iters: int | None, max_gaussians: int, backend: str, force: bool
-) -> None:
+def demo(out: Path, force: bool, **_) -> None:
     """The whole pipeline: scene, masks, training, segmentation, a 3D-point edit, the report."""
     from pipeline.demo import run_demo
 
-    result = run_demo(
-        out, scene=scene, images=images, iters=iters, max_gaussians=max_gaussians, backend=backend, overwrite=force
-    )
+    options = DemoOptions(**given_fields(click.get_current_context(), DemoOptions))
+    result = run_demo(out, options, overwrite=force)
     score = "" if result.miou is None else f"mIoU {result.miou:.3f} (visible); "
     match = "" if result.match is None else f" (ground-truth match: object {result.match})"
     click.echo(

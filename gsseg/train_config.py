@@ -7,8 +7,8 @@ import math
 from dataclasses import asdict, dataclass, field, fields, replace
 
 from dataset_tools.fingerprint import fingerprint_difference
-from dataset_tools.infra.errors import InputError, OptionError, check_seed
-from dataset_tools.scene import Scene
+from dataset_tools.infra.errors import OptionError, check_seed
+from dataset_tools.scene import IMAGES, MASKS, Scene
 
 
 @dataclass(frozen=True)
@@ -63,14 +63,7 @@ SCHEDULES = {
     ),
 }
 
-# ``gsseg demo``'s training: the cpu schedule shortened and at most 30k Gaussians (about two
-# per pixel of a 128x128 view). 1500 steps on the embedded 128x128 scene; 1000 on the user's,
-# whose views of up to 640 px cost several times more a step (497x372: 5 steps a second on
-# 2 cores), so that photos to edits take about 5 minutes.
 MAX_ITERS = 10_000_000  # more than 300 times the paper's schedule; past it a run is a typo
-DEMO_ITERS = 1_500
-DEMO_SCENE_ITERS = 1_000
-DEMO_MAX_GAUSSIANS = 30_000
 
 
 @dataclass(frozen=True)
@@ -94,14 +87,16 @@ class LearningRates:
 class TrainConfig:
     """Every option of a training run; written to ``RUN/config.json``.
 
-    ``schedule`` picks the defaults of the timing fields; ``iters`` overrides its length and
-    scales the other timings with it.
+    ``schedule`` picks the defaults of the timing fields (``auto``: the one the backend is fast
+    enough for, :attr:`gsseg.render.backends.Backend.default_schedule`, resolved here, so that
+    Python and the command line train alike); ``iters`` overrides its length and scales the
+    other timings with it.
     """
 
-    schedule: str = "cpu"
+    schedule: str = "auto"
     iters: int | None = None
-    images: str = "images"
-    masks: str | None = "object_mask"
+    images: str = IMAGES
+    masks: str | None = MASKS
     backend: str = "auto"
     gamma_obj: float = 1.0
     geometry_from_masks: bool = False  # the object loss also moves, reshapes and densifies the Gaussians
@@ -123,8 +118,12 @@ class TrainConfig:
     seed: int = 0
 
     def __post_init__(self) -> None:
+        if self.schedule == "auto":
+            from gsseg.render.backends import backend_schedule
+
+            object.__setattr__(self, "schedule", backend_schedule(self.backend))
         if self.schedule not in SCHEDULES:
-            raise InputError(f"unknown schedule {self.schedule!r}; choose {' or '.join(SCHEDULES)}.")
+            raise OptionError(f"{{schedule}}: choose auto, {', '.join(SCHEDULES)}.", schedule=self.schedule)
         if self.iters is not None and not 1 <= self.iters <= MAX_ITERS:
             raise OptionError(f"{{iters}}: give 1 to {MAX_ITERS:,} iterations.", iters=self.iters)
         check_seed(self.seed)

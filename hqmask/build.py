@@ -33,6 +33,7 @@ from dataset_tools.mask_manifest import MANIFEST, manifest_bytes, refuse_truth
 from dataset_tools.scene import Scene, View, load_scene, mask_folder
 from hqmask.association import associate_flow, associate_tracks
 from hqmask.association.anchors import sighting, triangulate
+from hqmask.build_options import BuildConfig, check_min_area
 from hqmask.cleanup import clean_mask
 from hqmask.consensus import multiview_consensus
 from hqmask.depth_prior import depth_from_anchors, depth_from_points
@@ -40,29 +41,7 @@ from hqmask.proposers.base import Proposer
 from hqmask.proposers.registry import make_proposer
 from hqmask.support_plane import SupportPlane, support_plane
 
-ASSOCIATIONS = ("auto", "flow", "tracks")
 CACHE = ".hqmask_cache"
-
-
-@dataclass(frozen=True)
-class BuildConfig:
-    """Options of ``hqmask build`` (same names as the CLI)."""
-
-    proposer: str = "graph"
-    from_masks: str | None = None
-    model: str | None = None
-    associate: str = "auto"  # tracks where the scene has SfM observations, flow otherwise
-    consensus: int = 4  # neighbouring views that vote on each view's labels; 0: off
-    min_area: int | None = None  # None: the paper's 500 px at 1008x756, scaled to each view
-    out_masks: str = "object_mask"
-    images: str = "images"
-    dataset: str | None = None
-    force: bool = False
-    device: str = "auto"
-    threads: int = 0
-    points_per_side: int = 32
-    cache_embeddings: bool = False
-    depth: str | None = None  # folder of <stem>.npy depth maps (``gsseg render --what depth``); graph only
 
 
 @dataclass
@@ -186,11 +165,6 @@ def depth_priors(scene: Scene, ids: list[np.ndarray], associate: str) -> list[np
     return [depth_from_anchors(v, m, anchors) for v, m in zip(scene.views, ids)]
 
 
-def _check_min_area(min_area: int | None) -> None:
-    if min_area is not None and min_area < 1:
-        raise OptionError("{min_area}: give a number of pixels of 1 or more (or leave it out).", min_area=min_area)
-
-
 def build_scene(job: tuple[Path, BuildConfig]) -> BuildResult:
     """:func:`build_masks` of one (scene, options) pair without progress bars: a task for
     :meth:`dataset_tools.infra.engine.Engine.map` over several scenes."""
@@ -203,25 +177,6 @@ def build_masks(
     """Write consistent, cleaned object-ID maps of every view to ``scene_dir/cfg.out_masks``;
     the views' proposals are made on ``engine``."""
     scene_dir = Path(scene_dir)
-    if cfg.associate not in ASSOCIATIONS:
-        raise OptionError("{associate}: use auto, flow or tracks.", associate=cfg.associate)
-    plain_name(cfg.out_masks, "out_masks")
-    _check_min_area(cfg.min_area)
-    if cfg.points_per_side < 1:
-        raise OptionError(
-            "{points_per_side}: give 1 or more points per side of the grid.", points_per_side=cfg.points_per_side
-        )
-    if cfg.threads < 0:
-        raise OptionError("{threads}: give 0 (ONNX Runtime's choice) or a number of threads.", threads=cfg.threads)
-    if cfg.consensus < 0:
-        raise OptionError("{consensus}: use 0 (off) or a number of neighbouring views.", consensus=cfg.consensus)
-    if cfg.proposer == "existing" and not cfg.from_masks:
-        raise OptionError("{proposer} needs {from_masks}, the mask folder to re-associate.", proposer="existing")
-    if cfg.depth is not None and cfg.proposer != "graph":
-        raise OptionError(
-            "{depth}: only the graph proposer cuts its masks at depth jumps; leave {depth} out with {proposer}.",
-            proposer=cfg.proposer,
-        )
     out_dir = scene_dir / cfg.out_masks
     reads = scene_inputs(scene_dir, [cfg.from_masks and mask_folder(scene_dir, cfg.from_masks)])
     if cfg.depth is not None:
@@ -229,15 +184,7 @@ def build_masks(
     refuse_overlap(out_dir, reads)
     if cfg.dataset:  # a dataset is no part of the scene: it may replace nothing in it
         refuse_overlap(cfg.dataset, [*scene_entries(scene_dir), ("the mask folder it writes", out_dir)])
-    make = partial(
-        make_proposer,
-        cfg.proposer,
-        cfg.model,
-        device=cfg.device,
-        threads=cfg.threads,
-        points_per_side=cfg.points_per_side,
-        embedding_cache=scene_dir / CACHE / "sam-hq-embeddings" if cfg.cache_embeddings else None,
-    )
+    make = partial(make_proposer, cfg, scene_dir / CACHE / "sam-hq-embeddings" if cfg.cache_embeddings else None)
     proposer = make()  # an unknown or unavailable one fails before any work
     refuse_truth(out_dir, "force")
     if out_dir.exists() and not cfg.force:
@@ -333,7 +280,7 @@ def clean_scene_masks(
     """Noise removal alone: ``scene_dir/masks`` -> ``scene_dir/out_masks``."""
     scene_dir = Path(scene_dir)
     src, dst = scene_dir / masks, scene_dir / plain_name(out_masks, "out_masks")
-    _check_min_area(min_area)
+    check_min_area(min_area)
     if not src.is_dir():
         raise OptionError("mask folder not found; check {masks}.", file=src)
     refuse_overlap(dst, scene_inputs(scene_dir, [masks]))

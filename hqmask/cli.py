@@ -6,7 +6,9 @@ from pathlib import Path
 
 import click
 
-from dataset_tools.infra.cli_support import engine_options, run_cli
+from dataset_tools.infra.cli_support import Registry, engine_options, field_option, given_fields, run_cli
+from hqmask.build_options import ASSOCIATIONS, BuildConfig
+from hqmask.sam_hq.model import DEVICES
 
 
 @click.group(name="hqmask", context_settings={"help_option_names": ["-h", "--help"]})
@@ -16,63 +18,65 @@ def cli() -> None:
 
 @cli.command()
 @click.argument("scenes", nargs=-1, required=True, type=click.Path(path_type=Path))
-@click.option("--proposer", default="graph", show_default=True, help="graph, sam-hq or existing.")
-@click.option("--from-masks", default=None, help="Mask folder read by --proposer existing.")
-@click.option("--model", default=None, help="SAM-HQ ONNX model folder (--proposer sam-hq).")
-@click.option(
-    "--associate",
-    type=click.Choice(["auto", "flow", "tracks"]),
-    default="auto",
-    show_default=True,
+@field_option(
+    BuildConfig, "proposer", type=Registry("hqmask.proposers.registry:PROPOSERS"), help="How masks are proposed."
+)
+@field_option(BuildConfig, "from_masks", help="Mask folder read by --proposer existing.")
+@field_option(BuildConfig, "model", help="SAM-HQ ONNX model folder (--proposer sam-hq).")
+@field_option(
+    BuildConfig,
+    "associate",
+    type=click.Choice(ASSOCIATIONS),
     help="tracks (through SfM points), flow (optical flow and camera poses); auto: tracks where the scene "
     "has SfM observations, flow otherwise.",
 )
-@click.option(
-    "--consensus",
+@field_option(
+    BuildConfig,
+    "consensus",
     type=int,
-    default=4,
-    show_default=True,
     help="Nearest views whose ID maps, carried by optical flow, vote on each view's labels (0: off).",
 )
-@click.option(
-    "--min-area",
+@field_option(
+    BuildConfig,
+    "min_area",
     type=int,
-    default=None,
     help="Components under this many pixels are reassigned (default: the paper's 500 px at 1008x756, "
     "scaled to each view's size).",
 )
-@click.option("--out-masks", default="object_mask", show_default=True, help="Mask folder to write inside SCENE.")
-@click.option("--images", default="images", show_default=True, help="Image folder (images or images_N).")
-@click.option("--dataset", default=None, help="Also write a Hugging Face dataset (with parquet shards) here.")
-@click.option("--force", is_flag=True, help="Recompute cached proposals and replace existing outputs.")
-@click.option(
-    "--device",
-    type=click.Choice(["auto", "cpu", "cuda"]),
-    default="auto",
-    show_default=True,
+@field_option(BuildConfig, "out_masks", help="Mask folder to write inside SCENE.")
+@field_option(BuildConfig, "images", help="Image folder (images or images_N).")
+@field_option(BuildConfig, "dataset", help="Also write a Hugging Face dataset (with parquet shards) here.")
+@field_option(BuildConfig, "force", help="Recompute cached proposals and replace existing outputs.")
+@field_option(
+    BuildConfig,
+    "device",
+    type=click.Choice(DEVICES),
     help="ONNX Runtime device for sam-hq (auto: CUDA when onnxruntime-gpu sees a GPU).",
 )
-@click.option(
-    "--threads", type=int, default=0, show_default=True, help="ONNX Runtime threads for sam-hq (0: its choice)."
+@field_option(BuildConfig, "threads", type=int, help="ONNX Runtime threads for sam-hq (0: its choice).")
+@field_option(
+    BuildConfig,
+    "points_per_side",
+    type=int,
+    help="Point grid of the sam-hq generator (default: SAM's).",
 )
-@click.option("--points-per-side", type=int, default=32, show_default=True, help="Point grid of the sam-hq generator.")
-@click.option("--cache-embeddings", is_flag=True, help="Keep sam-hq image embeddings under SCENE/.hqmask_cache.")
-@click.option(
-    "--depth",
-    default=None,
+@field_option(BuildConfig, "cache_embeddings", help="Keep sam-hq image embeddings under SCENE/.hqmask_cache.")
+@field_option(
+    BuildConfig,
+    "depth",
     help="Folder of depth maps (`gsseg render RUN --what depth --split all` writes OUT/depth): "
     "the graph proposer cuts its masks where depth jumps.",
 )
 @engine_options
-def build(scenes: tuple[Path, ...], engine, **options) -> None:
+def build(scenes: tuple[Path, ...], engine, **_) -> None:
     """Propose, clean and associate consistent object masks for every view of each SCENE.
 
     With --engine ray, one SCENE has its views' proposals spread over Ray workers (each loads
     the model once); several SCENEs are a task each."""
     from dataset_tools.scene import load_scene
-    from hqmask.build import BuildConfig, build_masks, build_scene
+    from hqmask.build import build_masks, build_scene
 
-    cfg = BuildConfig(**options)
+    cfg = BuildConfig(**given_fields(click.get_current_context(), BuildConfig))
     if len(scenes) > 1:  # every scene is checked before any work: a bad last scene must not cost the first ones
         for scene in scenes:
             load_scene(scene, images=cfg.images)
@@ -107,7 +111,7 @@ def clean(scene: Path, masks: str, out_masks: str, min_area: int, force: bool) -
 
 @cli.command(name="export-onnx")
 @click.option("--checkpoint", required=True, type=click.Path(path_type=Path), help="Official SAM-HQ .pth file.")
-@click.option("--model-type", required=True, type=click.Choice(["vit_tiny", "vit_b", "vit_l", "vit_h"]))
+@click.option("--model-type", required=True, type=Registry("hqmask.sam_hq.export:MODEL_TYPES"))
 @click.option("--out", required=True, type=click.Path(path_type=Path), help="Model folder to write.")
 @click.option("--opset", type=int, default=17, show_default=True)
 @click.option("--hq-token-only", is_flag=True, help="Use the HQ mask alone instead of adding it to SAM's.")

@@ -44,17 +44,17 @@ from gsseg.render import Backend, get_backend
 from gsseg.render_views import render_run
 from gsseg.run import Run, load_run
 from gsseg.segment.clicks import Click
+from gsseg.segment.label_options import LabelOptions
 from gsseg.segment.reassign import Segmentation
-from gsseg.segment.segment_run import LabelOptions, run_regions, segment_run
+from gsseg.segment.segment_run import run_regions, segment_run
 from gsseg.train import TrainConfig, train
-from gsseg.train_config import DEMO_ITERS, DEMO_MAX_GAUSSIANS, DEMO_SCENE_ITERS
 from hqmask.build import BuildConfig, build_masks
+from pipeline.demo_options import DemoOptions
 
 # Masks are proposed at 256x256, where the graph proposer separates these objects well;
 # training, segmentation and the report use the 128x128 copies (images_2).
 DEMO_SCENE = SynthConfig(views=24, res=256, objects=4, seed=1)
 DEMO_IMAGES = "images_2"
-DEMO_MAX_SIDE = 640  # on your scene: the largest image copy at most this large
 MASKS = "hqmask"
 DEPTH_MASKS = "hqmask_depth"  # the masks built again at the trained model's depth jumps
 # A removed object's rim and interior stay behind without the 3D regularisations (the can of
@@ -102,15 +102,15 @@ def _demo_selection(
         return select(run, segmentation, scene, object_id=largest, backend=backend), {"object_id": largest}
 
 
-def demo_images(scene: Path) -> str:
+def demo_images(scene: Path, max_side: int = DemoOptions.max_side) -> str:
     """The first of ``images``, ``images_2``, ``images_4``, ``images_8`` of ``scene`` whose
-    longest side is at most ``DEMO_MAX_SIDE`` pixels (the smallest there is otherwise)."""
+    longest side is at most ``max_side`` pixels (the smallest there is otherwise)."""
     present = [f for f in ("images", "images_2", "images_4", "images_8") if (scene / f).is_dir()]
     if not present:
         raise InputError(f"{scene}: no images/ folder; pass a scene folder, a folder of photos or a video.")
     for folder in present:
         first = next((p for p in sorted((scene / folder).rglob("*")) if p.suffix in IMAGE_SUFFIXES), None)
-        if first is not None and max(image_size(first)) <= DEMO_MAX_SIDE:
+        if first is not None and max(image_size(first)) <= max_side:
             return folder
     return present[-1]
 
@@ -142,37 +142,29 @@ def masks_at_depth_jumps(
 
 
 def run_demo(
-    out: Path | str,
-    *,
-    scene: Path | str | None = None,
-    images: str | None = None,
-    iters: int | None = None,
-    max_gaussians: int = DEMO_MAX_GAUSSIANS,
-    backend: str = "auto",
-    overwrite: bool = False,
-    progress: bool = True,
+    out: Path | str, options: DemoOptions = DemoOptions(), *, overwrite: bool = False, progress: bool = True
 ) -> DemoResult:
     """Run the pipeline into ``out``: ``out/scene`` (the synthetic scene; for photos or a video,
     the scene structure from motion makes of them; for a scene folder, links to it, so that
     its masks are written here and never into ``scene``), ``out/run``, ``out/depth`` (the
     run's depth maps), ``out/report``. Every
-    option is checked before any work; ``images`` defaults to the largest copy at most 640 px,
-    ``iters`` to ``DEMO_ITERS`` on the embedded scene and ``DEMO_SCENE_ITERS`` on ``scene``."""
+    option is checked before any work (:class:`pipeline.demo_options.DemoOptions`)."""
     start = time.perf_counter()
-    out = Path(out)
-    backend = get_backend(backend)
+    if options.scene is not None:
+        options = replace(options, scene=Path(options.scene))
+    out, scene = Path(out), options.scene
+    backend = get_backend(options.backend)
     cfg = TrainConfig(
-        iters=iters if iters is not None else DEMO_ITERS if scene is None else DEMO_SCENE_ITERS,
+        iters=options.train_iters,
         masks=MASKS,
-        images=images or "images",
+        images=options.images or TrainConfig.images,
         backend=backend.name,
-        max_gaussians=max_gaussians,
+        max_gaussians=options.max_gaussians,
     )
-    if scene is not None and not Path(scene).exists():
+    if scene is not None and not scene.exists():
         raise OptionError("not found; pass a scene folder, a folder of photos or a video as {scene}.", file=scene)
     require_folder_path(out)
     if scene is not None:
-        scene = Path(scene)
         refuse_overlap(
             out, scene_entries(scene) if scene.is_dir() and (scene / "sparse").is_dir() else [("the photos", scene)]
         )
@@ -187,7 +179,7 @@ def run_demo(
             shutil.rmtree(out / owned)
     created = first_missing(out)
     try:
-        return _run_demo(out, scene, images, cfg, backend, start, progress)
+        return _run_demo(out, options, cfg, backend, start, progress)
     except BaseException as e:
         if created is not None:  # a failed first run leaves nothing, so that the plain retry is not refused
             shutil.rmtree(created, ignore_errors=True)
@@ -197,9 +189,9 @@ def run_demo(
 
 
 def _run_demo(
-    out: Path, scene: Path | None, images: str | None, cfg: TrainConfig, backend: Backend, start: float, progress: bool
+    out: Path, options: DemoOptions, cfg: TrainConfig, backend: Backend, start: float, progress: bool
 ) -> DemoResult:
-    synth_point, warning = None, None
+    synth_point, warning, scene = None, None, options.scene
     if scene is None:
         result = generate_scene(DEMO_SCENE, out / "scene", progress=progress)
         write_downsampled(result.root / "images", result.root / DEMO_IMAGES, 2)
@@ -213,7 +205,7 @@ def _run_demo(
             posed = run_sfm(scene, out / "scene", progress=progress)
             scene_dir, warning = posed.scene, posed.warning()
         gt_masks = None
-        images = images or demo_images(scene_dir)
+        images = options.images or demo_images(scene_dir, options.max_side)
         mask_images = images
     cfg = replace(cfg, images=images)
     build_masks(

@@ -29,7 +29,8 @@ from gsseg.render import Backend, to_uint8
 from gsseg.render.pixel_labels import classify_pixels
 from gsseg.run import load_run
 from gsseg.run_folder import RunFolder
-from gsseg.segment.segment_run import LabelOptions, label_gaussians, mask_contributions
+from gsseg.segment.label_options import LabelOptions
+from gsseg.segment.segment_run import label_gaussians, mask_contributions
 from gsseg.train import TrainConfig, train
 from hqmask.build import BuildConfig, build_masks
 

@@ -37,10 +37,10 @@ import numpy as np
 
 from dataset_tools.infra.atomic import require_folder_path, write_bytes_atomic
 from dataset_tools.infra.engine import Engine
-from dataset_tools.scene import GT_MASKS
+from dataset_tools.scene import GT_MASKS, IMAGES
 from eval.report import markdown_table
 from gsseg.render import Backend, get_backend
-from gsseg.segment.segment_run import LabelOptions
+from gsseg.segment.label_options import LabelOptions
 from gsseg.train import TrainConfig
 from hqmask.build import clean_scene_masks
 from pipeline.experiment import (
@@ -70,7 +70,7 @@ class TableSetup:
     views: int
     objects: int
     iters: int | None  # None: the CPU default schedule
-    images: str = "images"  # trained on: ``images`` or a downsampled copy such as ``images_2``
+    images: str = IMAGES  # trained on: ``images`` or a downsampled copy such as ``images_2``
     severity: str = "medium"
     min_area: int = 500  # noise removal, at the resolution the masks are made and corrupted at
     max_gaussians: int | None = None  # None: the schedule's cap
@@ -101,7 +101,7 @@ SETUPS = {
 def _prepare_scene(root: Path, path: str, seed: int, setup: TableSetup) -> Path:
     """The synthetic scene with every mask folder of :data:`MASK_FOLDERS` (and the
     noise-removal-only masks), made once and reused."""
-    factor = () if setup.images == "images" else (int(setup.images.rsplit("_", 1)[1]),)
+    factor = () if setup.images == IMAGES else (int(setup.images.rsplit("_", 1)[1]),)
     spec = SceneSpec(path=path, seed=seed, res=setup.res, views=setup.views, objects=setup.objects)
     scene = synthetic_scene(root / "scene", spec, downsample=factor)
     corrupt_masks(scene, "coarse", severity="low", coarse=True, seed=seed)

@@ -13,7 +13,7 @@ import pytest
 from dataset_tools.infra.cli_support import WordedError, flag_spelling, word_errors_by_flags
 from dataset_tools.infra.errors import InputError, OptionError, OutputExists
 from dataset_tools.synth import SynthConfig
-from gsseg.segment.segment_run import LabelOptions
+from gsseg.segment.label_options import LabelOptions
 from gsseg.train import TrainConfig
 
 ROOT = Path(__file__).resolve().parents[1]

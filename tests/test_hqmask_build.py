@@ -122,19 +122,20 @@ def test_clean_writes_a_new_folder(scene_copy):
 
 
 @pytest.mark.parametrize(
-    "cfg, message",
+    "options, message",
     [
-        (BuildConfig(proposer="nope"), "unknown proposer"),
-        (BuildConfig(proposer="sam-hq"), "sam-hq"),
-        (BuildConfig(proposer="existing"), "needs from_masks"),
-        (BuildConfig(proposer="existing", from_masks="missing", out_masks="x"), "mask folder not found"),
-        (BuildConfig(associate="magic"), "use auto, flow or tracks"),
-        (BuildConfig(out_masks="object_mask"), "already exists"),
+        ({"proposer": "nope"}, "unknown proposer"),
+        ({"proposer": "sam-hq"}, "sam-hq"),
+        ({"proposer": "existing"}, "needs from_masks"),
+        ({"proposer": "existing", "from_masks": "missing", "out_masks": "x"}, "mask folder not found"),
+        ({"associate": "magic"}, "use auto, flow, tracks"),
+        ({"out_masks": "object_mask"}, "already exists"),
     ],
 )
-def test_bad_options_are_refused_before_writing(scene_copy, cfg, message):
+def test_bad_options_are_refused_before_writing(scene_copy, options, message):
+    """By the options when they are made, or by the build before it writes."""
     with pytest.raises(InputError, match=message):
-        build_masks(scene_copy, cfg, progress=False)
+        build_masks(scene_copy, BuildConfig(**options), progress=False)
     assert not (scene_copy / "x").exists()
 
 

@@ -174,7 +174,8 @@ def test_the_rendered_depth_of_a_run_is_the_scenes(trained, small_scene, tmp_pat
 def test_voting_with_masks_the_run_was_not_trained_on_leaves_the_prior_out(segmented, small_scene, tmp_path):
     import shutil
 
-    from gsseg.segment.segment_run import LabelOptions, segment_run
+    from gsseg.segment.label_options import LabelOptions
+    from gsseg.segment.segment_run import segment_run
 
     run = tmp_path / "run"
     shutil.copytree(segmented, run)

@@ -16,7 +16,9 @@ from gsseg.ply import read_ply
 from gsseg.render import BACKENDS, render
 from gsseg.render.contributions import Contributions, MaskedView, contribution_matrix
 from gsseg.run_folder import RunFolder
-from gsseg.segment import object_at_point, reassign
+from gsseg.segment.label_options import LabelOptions
+from gsseg.segment.prompts import object_at_point
+from gsseg.segment.reassign import reassign
 
 F, SIZE = 20.0, 16
 
@@ -87,7 +89,7 @@ def test_gamma_zero_reduces_prior_to_plain_voting():
     w = rng.random((3, 500)) * (rng.random(500) > 0.1)  # 10% of the Gaussians never observed
     prior = torch.as_tensor(rng.integers(0, 3, 500))
     p = torch.as_tensor(rng.random(500), dtype=torch.float32)
-    seg = reassign(_contributions(w), prior, p, method="prior", gamma_p=0.0)
+    seg = reassign(_contributions(w), prior, p, LabelOptions(method="prior", gamma_p=0.0))
     observed = w.sum(0) > 0
     assert np.array_equal(seg.labels[observed], w.argmax(0)[observed])
     assert np.array_equal(seg.labels[~observed], prior.numpy()[~observed])
@@ -99,7 +101,7 @@ def test_prior_is_added_to_per_gaussian_shares_so_gamma_is_scale_free():
         c = _contributions([[0.0], [0.55 * scale], [0.45 * scale]])
 
         def label(gamma: float) -> int:
-            return reassign(c, torch.tensor([2]), torch.tensor([1.0]), gamma_p=gamma).labels[0]
+            return reassign(c, torch.tensor([2]), torch.tensor([1.0]), LabelOptions(gamma_p=gamma)).labels[0]
 
         assert label(0.0) == 1 and label(0.2) == 2 and label(0.05) == 1 and label(-1.0) == 1
 
@@ -109,7 +111,7 @@ def test_binary_mode_matches_a_per_object_loop():
     w = rng.random((4, 300)) ** 3
     prior = torch.as_tensor(rng.integers(0, 4, 300))
     p = torch.as_tensor(rng.random(300), dtype=torch.float32)
-    seg = reassign(_contributions(w, (0, 1, 2, 5)), prior, p, mode="binary", gamma_p=0.2)
+    seg = reassign(_contributions(w, (0, 1, 2, 5)), prior, p, LabelOptions(mode="binary"))
     share = w / w.sum(0)
     for row, obj in enumerate([1, 2, 5], start=1):
         mine = prior.numpy() == obj
@@ -118,7 +120,7 @@ def test_binary_mode_matches_a_per_object_loop():
         assert np.array_equal(seg.selection(obj), fg > rest)
     # a Gaussian's label is the last object, in ID order, that selects it (0 if none does);
     # a negative prior lowers the rest side of every other object, so selections overlap
-    seg = reassign(_contributions(w, (0, 1, 2, 5)), prior, p, mode="binary", gamma_p=-1.0)
+    seg = reassign(_contributions(w, (0, 1, 2, 5)), prior, p, LabelOptions(mode="binary", gamma_p=-1.0))
     sel = np.stack([seg.selection(obj) for obj in (1, 2, 5)])
     assert sel.sum(0).max() > 1 and not sel.any(0).all()
     expected = np.where(sel.any(0), np.array([1, 2, 5])[2 - np.argmax(sel[::-1], axis=0)], 0)

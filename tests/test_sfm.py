@@ -21,6 +21,7 @@ from dataset_tools.sfm.pipeline import _input_images, incremental_options, pixel
 from dataset_tools.synth import SynthConfig, generate_scene
 from eval.metrics import camera_errors, similarity_alignment
 from pipeline.demo import run_demo
+from pipeline.demo_options import DemoOptions
 
 
 def test_similarity_alignment_recovers_a_known_similarity():
@@ -274,7 +275,7 @@ def test_photos_that_do_not_overlap_are_refused(tmp_path):
     assert not (tmp_path / "scene").exists()
     for _ in range(2):  # a refused demo leaves nothing, so the plain retry is refused for the same reason
         with pytest.raises(InputError, match="need more overlap"):
-            run_demo(tmp_path / "demo", scene=photos, backend="cpu", progress=False)
+            run_demo(tmp_path / "demo", DemoOptions(scene=photos, backend="cpu"), progress=False)
         assert not (tmp_path / "demo").exists()
 
 

@@ -4,8 +4,10 @@ continue; and ``--version``."""
 
 from __future__ import annotations
 
+import dataclasses
 import errno
 import functools
+import importlib
 import signal
 import sys
 import warnings
@@ -13,6 +15,7 @@ from collections.abc import Callable
 from importlib.metadata import PackageNotFoundError, version
 
 import click
+from click.core import ParameterSource
 from tqdm import tqdm
 
 from dataset_tools.infra.errors import NO_VALUE, InputError, RunFailed, Spelling
@@ -99,6 +102,63 @@ def describe_os_error(e: OSError) -> str:
     where = e.filename if e.filename is not None else "writing the output"
     what = e.strerror or str(e)
     return f"{where}: {what.lower()}; {OS_FIXES.get(e.errno, 'check the path and try again')}."
+
+
+class Registry(click.Choice):
+    """A choice among the names of a registry (a dict or tuple of names), read when the command
+    line is parsed: ``where`` is ``module:NAME``, imported then rather than when the commands
+    load, so that ``--help`` of the group stays quick; ``extra``: names put before them (such
+    as ``auto``). A name added to the registry is a choice of every option that reads it."""
+
+    def __init__(self, where: str, extra: tuple[str, ...] = ()) -> None:
+        self.where, self.extra, self.case_sensitive = where, extra, True
+
+    @functools.cached_property
+    def choices(self) -> tuple[str, ...]:
+        module, name = self.where.split(":")
+        return (*self.extra, *getattr(importlib.import_module(module), name))
+
+
+def field_default(config: type, name: str) -> object:
+    """The default of the field ``name`` of the dataclass ``config``."""
+    field = next(f for f in dataclasses.fields(config) if f.name == name)
+    if field.default_factory is not dataclasses.MISSING:
+        return field.default_factory()
+    return field.default
+
+
+def field_option(config: type, name: str, *decls: str, spell: Callable | None = None, **kwargs) -> Callable:
+    """A click option for the field ``name`` of the options dataclass ``config``, whose default
+    (shown in the help) is the field's, written for the command line by ``spell`` where the
+    option's values are words. A field that defaults to None shows no default (its help says
+    what None means); a bool field without a ``--x/--no-x`` pair is a flag. ``decls``: the
+    flags (default ``--name-with-dashes``); the keyword arguments are click's. The command
+    hands on only the options the user gave (:func:`given_fields`), so that the dataclass
+    alone decides the rest."""
+    default = field_default(config, name)
+    if isinstance(default, bool) and not any("/" in d for d in decls):
+        kwargs.setdefault("is_flag", True)
+    if spell is not None:
+        default = spell(default)
+    return click.option(
+        *(decls or ("--" + name.replace("_", "-"),)),
+        name,
+        default=default,
+        show_default=default is not None and not kwargs.get("is_flag"),
+        **kwargs,
+    )
+
+
+def given_fields(ctx: click.Context, config: type) -> dict:
+    """The options of ``ctx`` that the user gave and that are fields of the dataclass ``config``,
+    by name: what the command hands to ``config``, whose defaults fill in the rest."""
+    names = {f.name for f in dataclasses.fields(config)}
+    defaults = (ParameterSource.DEFAULT, ParameterSource.DEFAULT_MAP)
+    return {
+        name: value
+        for name, value in ctx.params.items()
+        if name in names and ctx.get_parameter_source(name) not in defaults
+    }
 
 
 def none_means_off(ctx: click.Context, param: click.Parameter, value: str | None) -> str | None:

@@ -25,7 +25,7 @@ from tqdm import tqdm
 from dataset_tools.image_files import read_image, read_mask, write_png
 from dataset_tools.infra.atomic import atomic_directory
 from dataset_tools.infra.errors import InputError, OptionError, OutputExists
-from dataset_tools.scene import View, load_scene
+from dataset_tools.scene import IMAGES, View, load_scene
 from dataset_tools.synth.generator import Layout, SynthConfig, make_layout, observe, render_view
 
 WHITE = (1.0, 1.0, 1.0)
@@ -115,7 +115,7 @@ def _seen_by(points: np.ndarray, pixels: np.ndarray, seers: list[tuple[View, np.
 def write_edit_truth(
     scene_dir: Path | str,
     *,
-    images: str = "images",
+    images: str = IMAGES,
     split: str = "test",
     overwrite: bool = False,
     progress: bool = True,

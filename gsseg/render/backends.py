@@ -236,6 +236,17 @@ class GsplatBackend(Backend):
 BACKENDS: dict[str, Backend] = {b.name: b for b in (CpuBackend(), TorchBackend(), GsplatBackend())}
 
 
+def backend_schedule(backend: str) -> str:
+    """The training schedule of the backend called ``backend``
+    (:attr:`Backend.default_schedule`); ``auto`` is the one it resolves to here. A backend
+    that cannot run here still names its schedule (training then says why it cannot run)."""
+    if backend == "auto":
+        return get_backend(backend).default_schedule
+    if backend not in BACKENDS:
+        raise OptionError(f"{{backend}}: choose one of auto, {', '.join(BACKENDS)}.", backend=backend)
+    return BACKENDS[backend].default_schedule
+
+
 def get_backend(backend: str | Backend = "auto") -> Backend:
     """The backend called ``backend`` (or ``backend`` itself): ``auto`` is ``gsplat`` where it
     can run, else ``cpu``. Raises InputError for an unknown or unavailable name."""

@@ -1,15 +1,4 @@
-"""Segmentation: prior-guided label reassignment from the contribution matrix, and prompts."""
-
-from gsseg.segment.prompts import object_at_point, pick_object, point_from_click
-from gsseg.segment.reassign import METHODS, MODES, Segmentation, classifier_prior, reassign
-
-__all__ = [
-    "object_at_point",
-    "pick_object",
-    "point_from_click",
-    "METHODS",
-    "MODES",
-    "Segmentation",
-    "classifier_prior",
-    "reassign",
-]
+"""Segmentation: prior-guided label reassignment from the contribution matrix
+(:mod:`~gsseg.segment.reassign`, its options in :mod:`~gsseg.segment.label_options`), the
+3D regularisations, prompts (a point, clicks) and what served a selection. The package
+loads nothing itself: the command lines read the options without loading the code."""

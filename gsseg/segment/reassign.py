@@ -19,9 +19,7 @@ import torch
 
 from dataset_tools.infra.errors import InputError
 from gsseg.render.contributions import Contributions
-
-METHODS = ("prior", "flashsplat", "classifier")
-MODES = ("multi", "binary")
+from gsseg.segment.label_options import LabelOptions
 
 
 @dataclass
@@ -88,87 +86,136 @@ def classifier_prior(obj_feat: torch.Tensor, classifier: torch.nn.Linear) -> tup
     return label, p
 
 
+@dataclass(frozen=True)
+class _Votes:
+    """What every method and mode reads: the contributions normalised per Gaussian and the
+    prior placed on them.
+
+    Attributes:
+        labels: (K,) int64 mask label of each row of ``share``.
+        share: (K, N) each Gaussian's share of its blended weight per label.
+        observed: (N,) bool Gaussians some view saw.
+        objects: (M,) uint8 the labels other than 0.
+        prior_row: (N,) int64 the row of each Gaussian's prior label, -1 where no row has it.
+        bonus: (N,) gamma_p * p(i, l_i).
+    """
+
+    labels: np.ndarray
+    share: torch.Tensor
+    observed: torch.Tensor
+    objects: np.ndarray
+    prior_row: torch.Tensor
+    bonus: torch.Tensor
+
+    @property
+    def object_ids(self) -> torch.Tensor:
+        return torch.as_tensor(self.objects.astype(np.int64))
+
+
+def _votes(
+    contributions: Contributions, prior_labels: torch.Tensor, prior_probs: torch.Tensor, gamma_p: float
+) -> _Votes:
+    labels = contributions.labels.astype(np.int64)
+    share, observed = normalize(contributions.weights)
+    # The row of each Gaussian's prior label l_i in A (-1 where no mask shows that label):
+    # the prior touches one entry per Gaussian, so it is added there, not as a (K, N) matrix.
+    row_of = torch.full((256,), -1, dtype=torch.int64)
+    row_of[torch.as_tensor(labels)] = torch.arange(len(labels))
+    return _Votes(
+        labels=labels,
+        share=share,
+        observed=observed,
+        objects=contributions.labels[contributions.labels > 0],
+        prior_row=row_of[prior_labels.clamp(0, 255)],
+        bonus=gamma_p * prior_probs,
+    )
+
+
+def _classifier_labels(votes: _Votes, prior_labels: torch.Tensor, options: LabelOptions) -> torch.Tensor:
+    """(N,) l_i alone."""
+    return prior_labels.clamp(0, 255)
+
+
+def _multi_labels(votes: _Votes, prior_labels: torch.Tensor, options: LabelOptions) -> torch.Tensor:
+    """(N,) the argmax over labels (Eq. 9 of the paper): of A plus the prior at l_i
+    (``prior``), or of A with ``slack`` added to the background (``flashsplat``). Unobserved
+    Gaussians keep l_i (``prior``) or take 0 (``flashsplat``)."""
+    score, labels = votes.share, votes.labels
+    if options.method == "prior":
+        has_row = torch.nonzero(votes.prior_row >= 0).squeeze(1)
+        score[votes.prior_row[has_row], has_row] += votes.bonus[has_row]
+    elif len(labels) and labels[0] == 0:
+        score[0] += options.slack
+    n = score.shape[1]
+    best = torch.as_tensor(labels)[score.argmax(dim=0)] if len(labels) else torch.zeros(n, dtype=torch.int64)
+    fallback = prior_labels if options.method == "prior" else torch.zeros_like(prior_labels)
+    return torch.where(votes.observed, best, fallback)
+
+
+def _binary_selections(votes: _Votes, options: LabelOptions) -> torch.Tensor:
+    """(M, N) bool one object at a time: its share against the rest, plus the prior (or
+    ``slack`` under ``flashsplat``) on the rest's side, except in the row of l_i, where the
+    prior sides with the object. Unobserved Gaussians are selected by their l_i alone."""
+    first = int(votes.labels[0] == 0) if len(votes.labels) else 0  # object rows start after label 0
+    fg = votes.share[first:]
+    rest = torch.sub(1.0, fg)
+    rest += (votes.bonus if options.method == "prior" else torch.full_like(votes.bonus, options.slack))[None, :]
+    selections = fg > rest
+    mine = torch.zeros_like(selections)
+    if options.method == "prior":
+        has_row = torch.nonzero(votes.prior_row >= 0).squeeze(1)
+        on_obj = has_row[votes.prior_row[has_row] >= first]
+        r = votes.prior_row[on_obj] - first
+        selections[r, on_obj] = fg[r, on_obj] + votes.bonus[on_obj] > 1.0 - fg[r, on_obj]
+        mine[r, on_obj] = True
+    return torch.where(votes.observed[None, :], selections, mine)
+
+
+def _last_selecting(selections: torch.Tensor, object_ids: torch.Tensor) -> torch.Tensor:
+    """(N,) the last object in ID order whose (M, N) ``selections`` hold each Gaussian; 0
+    where none does."""
+    if not len(object_ids):
+        return torch.zeros(selections.shape[1], dtype=torch.int64)
+    # the largest 1-based row number that selects (uint8 holds it: at most 255 objects)
+    rank = torch.arange(1, len(object_ids) + 1, dtype=torch.uint8)[:, None]
+    last = (selections.to(torch.uint8) * rank).amax(dim=0).long()
+    return torch.where(last > 0, object_ids[(last - 1).clamp_min(0)], 0)
+
+
 def reassign(
     contributions: Contributions,
     prior_labels: torch.Tensor,
     prior_probs: torch.Tensor,
-    *,
-    method: str = "prior",
-    mode: str = "multi",
-    gamma_p: float = 0.2,
-    slack: float = 0.0,
+    options: LabelOptions = LabelOptions(),
 ) -> Segmentation:
-    """Labels of every Gaussian.
+    """Labels of every Gaussian (the 3D regularisations of ``options`` are applied after it,
+    :func:`gsseg.segment.segment_run.label_gaussians`).
 
     Args:
         contributions: A (K, N) over the mask labels.
         prior_labels, prior_probs: (N,) l_i and p(i, l_i) from :func:`classifier_prior`.
-        method: ``prior`` (A + gamma_p p(i, l_i) [l = l_i], the default), ``flashsplat`` (A with
-            ``slack`` added to the background's share), ``classifier`` (l_i alone).
-        mode: ``multi``: argmax over labels (Eq. 9 of the paper); ``binary``: one object at a
-            time, object share against the rest (plus the prior on whichever side l_i is),
-            so selections may overlap; ``labels`` then give each Gaussian the last object
-            (in ID order) that selected it.
-        gamma_p: prior weight, any real number.
-        slack: FlashSplat's background bias.
+        options: ``method``: ``prior`` (A + gamma_p p(i, l_i) [l = l_i], the default),
+            ``flashsplat`` (A with ``slack`` added to the background's share), ``classifier``
+            (l_i alone). ``mode``: ``multi``: argmax over labels (Eq. 9 of the paper);
+            ``binary``: one object at a time, object share against the rest (plus the prior
+            on whichever side l_i is), so selections may overlap; ``labels`` then give each
+            Gaussian the last object (in ID order) that selected it. ``gamma_p``: the prior's
+            weight, any real number.
     """
-    if method not in METHODS:
-        raise InputError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}.")
-    if mode not in MODES:
-        raise InputError(f"unknown mode {mode!r}; choose multi or binary.")
-    labels_k = contributions.labels.astype(np.int64)
-    share, observed = normalize(contributions.weights)
-    n = share.shape[1]
-    objects = contributions.labels[contributions.labels > 0]
-    obj_ids = torch.as_tensor(objects.astype(np.int64))
-    # The row of each Gaussian's prior label l_i in A (-1 where no mask shows that label):
-    # the prior touches one entry per Gaussian, so it is added there, not as a (K, N) matrix.
-    row_of = torch.full((256,), -1, dtype=torch.int64)
-    row_of[torch.as_tensor(labels_k)] = torch.arange(len(labels_k))
-    prior_row = row_of[prior_labels.clamp(0, 255)]
-    has_row = torch.nonzero(prior_row >= 0).squeeze(1)
-    bonus = gamma_p * prior_probs
-
-    if method == "classifier":
-        labels = prior_labels.clamp(0, 255)
-        selections = labels[None, :] == obj_ids[:, None]
-    elif mode == "multi":
-        score = share
-        if method == "prior":
-            score[prior_row[has_row], has_row] += bonus[has_row]
-        elif len(labels_k) and labels_k[0] == 0:
-            score[0] += slack
-        best = torch.as_tensor(labels_k)[score.argmax(dim=0)] if len(labels_k) else torch.zeros(n, dtype=torch.int64)
-        fallback = prior_labels if method == "prior" else torch.zeros_like(prior_labels)
-        labels = torch.where(observed, best, fallback)
-        selections = labels[None, :] == obj_ids[:, None]
+    votes = _votes(contributions, prior_labels, prior_probs, options.gamma_p)
+    ids = votes.object_ids
+    if options.method == "classifier" or options.mode == "multi":
+        rule = _classifier_labels if options.method == "classifier" else _multi_labels
+        labels = rule(votes, prior_labels, options)
+        selections = labels[None, :] == ids[:, None]
     else:
-        first = int(labels_k[0] == 0) if len(labels_k) else 0  # object rows start after label 0
-        fg = share[first:]
-        rest = torch.sub(1.0, fg)
-        rest += (bonus if method == "prior" else torch.full_like(bonus, slack))[None, :]
-        selections = fg > rest
-        mine = torch.zeros_like(selections)
-        if method == "prior":
-            # the l_i row: the prior sides with the object instead of the rest
-            on_obj = has_row[prior_row[has_row] >= first]
-            r = prior_row[on_obj] - first
-            selections[r, on_obj] = fg[r, on_obj] + bonus[on_obj] > 1.0 - fg[r, on_obj]
-            mine[r, on_obj] = True
-        selections = torch.where(observed[None, :], selections, mine)
-        # the last selecting object in ID order: the largest 1-based row number that selects
-        # (uint8 holds it: there are at most 255 objects); 0 where none does
-        if len(obj_ids):
-            rank = torch.arange(1, len(obj_ids) + 1, dtype=torch.uint8)[:, None]
-            last = (selections.to(torch.uint8) * rank).amax(dim=0).long()
-            labels = torch.where(last > 0, obj_ids[(last - 1).clamp_min(0)], 0)
-        else:
-            labels = torch.zeros(n, dtype=torch.int64)
+        selections = _binary_selections(votes, options)
+        labels = _last_selecting(selections, ids)
     return Segmentation(
         labels=labels.numpy().astype(np.uint8),
-        objects=objects,
+        objects=votes.objects,
         selections=selections.numpy(),
-        method=method,
-        mode=mode,
-        gamma_p=gamma_p,
+        method=options.method,
+        mode=options.mode,
+        gamma_p=options.gamma_p,
     )

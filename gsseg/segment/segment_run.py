@@ -2,42 +2,16 @@
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
 
 from dataset_tools.infra.errors import OptionError
 from gsseg.render import Backend
 from gsseg.render.contributions import Contributions, RegionWeights, contribution_matrix
 from gsseg.run import Run, load_run
-from gsseg.segment.reassign import METHODS, MODES, Segmentation, classifier_prior, reassign
+from gsseg.segment.label_options import LabelOptions
+from gsseg.segment.reassign import Segmentation, classifier_prior, reassign
 from gsseg.segment.regularize import fill_interiors, smooth_weak_labels, weak_evidence
-
-
-@dataclass(frozen=True)
-class LabelOptions:
-    """How labels are chosen: the reassignment (method, mode, gamma_p, slack) and the 3D
-    regularisation after it (``smooth``: neighbours that relabel weak Gaussians, 0 off;
-    ``fill``: objects take the Gaussians they enclose). Checked when made."""
-
-    method: str = "prior"
-    mode: str = "multi"
-    gamma_p: float = 0.2
-    slack: float = 0.0
-    smooth: int = 0
-    fill: bool = False
-
-    def __post_init__(self) -> None:
-        if self.method not in METHODS:
-            raise OptionError(f"{{method}}: choose one of {', '.join(METHODS)}.", method=self.method)
-        if self.mode not in MODES:
-            raise OptionError("{mode}: choose multi or binary.", mode=self.mode)
-        if not (math.isfinite(self.gamma_p) and math.isfinite(self.slack)):
-            raise OptionError("{gamma_p} / {slack}: give finite numbers.", gamma_p=self.gamma_p, slack=self.slack)
-        if self.smooth < 0:
-            raise OptionError("{smooth}: give 0 (off) or a number of neighbours.", smooth=self.smooth)
-        if (self.smooth or self.fill) and self.mode != "multi":
-            raise OptionError("{smooth} and {fill} relabel Gaussians one label each; use {mode}.", mode="multi")
 
 
 def mask_contributions(
@@ -109,15 +83,7 @@ def label_gaussians(run: Run, contributions: Contributions, options: LabelOption
     if contributions.masks and contributions.masks != run.masks and options.method == "prior":
         options = replace(options, gamma_p=0.0)
     prior_labels, prior_probs = classifier_prior(run.gaussians.obj_feat, run.classifier)
-    result = reassign(
-        contributions,
-        prior_labels,
-        prior_probs,
-        method=options.method,
-        mode=options.mode,
-        gamma_p=options.gamma_p,
-        slack=options.slack,
-    )
+    result = reassign(contributions, prior_labels, prior_probs, options)
     means = run.gaussians.means.numpy()
     if options.smooth and len(contributions.labels):
         result = smooth_weak_labels(

@@ -23,9 +23,10 @@ from gsseg.render import get_backend
 from gsseg.render.contributions import Contributions
 from gsseg.run import Run
 from gsseg.segment.clicks import ClickEvidence, ClickSelector
+from gsseg.segment.label_options import LabelOptions
 from gsseg.segment.prompts import click_weights
 from gsseg.segment.reassign import Segmentation
-from gsseg.segment.segment_run import LabelOptions, label_gaussians, mask_contributions, run_regions
+from gsseg.segment.segment_run import label_gaussians, mask_contributions, run_regions
 from gsseg.segment.served import complete_selection
 from gsseg.sh import rgb_to_sh_dc
 
