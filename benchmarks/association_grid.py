@@ -246,7 +246,7 @@ def report(r: dict) -> tuple[str, str]:
             )
             if int(key.split("/")[0]) >= 16:
                 sev = cell.split("/")[1]
-                for c in ("tracks", "flow"):
+                for c in METHODS:
                     worst[f"{sev} {c}"] = min(worst.get(f"{sev} {c}", 1.0), values[c])
                 worst["exact"] = min(worst.get("exact", 1.0), exact)
     work = sum(s["seconds"] for by_seed in r["scenes"].values() for s in by_seed.values())  # reused ones too

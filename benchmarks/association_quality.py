@@ -26,9 +26,11 @@ from benchmarks import record
 from dataset_tools.corruption import PERMUTE_ONLY, corrupt_mask
 from dataset_tools.image_files import write_png
 from dataset_tools.scene import GT_MASKS, load_scene
+from dataset_tools.synth.generator import PATHS
 from eval.metrics import segment_ceiling
 from eval.report import markdown_table
 from hqmask.build import clean_scene_masks
+from hqmask.build_options import ASSOCIATIONS
 from pipeline.experiment import SceneSpec, associate_masks, corrupt_masks, mask_scores, synthetic_scene
 
 
@@ -45,7 +47,7 @@ def run_path(root: Path, path: str, args: argparse.Namespace) -> dict:
     row = {"input": mask_scores(scene, "noisy")["consistency"]}
     clean_scene_masks(scene, "noisy", "cleaned", progress=False)
     row["ceiling_on_cleaned_segments"] = segment_ceiling(_masks(scene, "cleaned"), truth)
-    for method in ("flow", "tracks"):
+    for method in (a for a in ASSOCIATIONS if a != "auto"):
         associate_masks(scene, "noisy", f"assoc_{method}_alone", associate=method, consensus=0)
         row[f"{method}_without_consensus"] = mask_scores(scene, f"assoc_{method}_alone")["consistency"]
         start = time.perf_counter()
@@ -69,7 +71,7 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
-        results = {path: run_path(Path(tmp), path, args) for path in ("orbit", "forward")}
+        results = {path: run_path(Path(tmp), path, args) for path in PATHS}
     results["setup"] = vars(args)
     print(report(results)[1])
     record.save("association_quality", results, tag=f"seed{args.seed}" if args.seed else "", out=args.out)

@@ -16,7 +16,7 @@ from scipy import ndimage
 from skimage import measure, morphology
 
 from benchmarks import record
-from hqmask.cleanup import clean_mask
+from hqmask.cleanup import PAPER_MIN_AREA, clean_mask
 
 
 def noisy_map(seed: int = 0, labels: int = 40) -> np.ndarray:
@@ -32,7 +32,7 @@ def noisy_map(seed: int = 0, labels: int = 40) -> np.ndarray:
     return ids
 
 
-def per_label_reference(ids: np.ndarray, min_area: int = 500) -> np.ndarray:
+def per_label_reference(ids: np.ndarray, min_area: int = PAPER_MIN_AREA) -> np.ndarray:
     """Closing label by label (filling background only), then each small component of each
     label takes the most common label on its dilated ring: the obvious scikit-image loops."""
     out = ids.copy()

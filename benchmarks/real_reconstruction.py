@@ -29,9 +29,10 @@ from benchmarks.real_scenes import posed_scene
 from eval.metrics import psnr, ssim
 from eval.report import markdown_table
 from eval.training_curve import curve_summary
-from gsseg.render import get_backend
+from gsseg.render import BACKENDS, get_backend
 from gsseg.run import load_run
 from gsseg.train import TrainConfig, train
+from gsseg.train_config import SCHEDULES
 from pipeline.demo import demo_images
 
 
@@ -99,8 +100,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--real", type=Path, default=Path("../shared/data/real"))
     parser.add_argument("--scenes", default="statue,llff_fern")
-    parser.add_argument("--schedule", choices=("cpu", "gpu"), default="cpu")
-    parser.add_argument("--backend", default="auto", help="Rasterizer: auto, cpu, torch or gsplat.")
+    parser.add_argument("--schedule", choices=tuple(SCHEDULES), default="cpu")
+    parser.add_argument("--backend", choices=("auto", *BACKENDS), default="auto", help="Rasterizer.")
     parser.add_argument("--iters", type=int, default=None, help="Training iterations (default: the schedule's).")
     parser.add_argument("--max-gaussians", type=int, default=None)
     parser.add_argument("--work", type=Path, default=Path("/tmp/real_reconstruction"))

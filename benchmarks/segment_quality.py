@@ -26,6 +26,7 @@ from pathlib import Path
 
 from benchmarks import record
 from dataset_tools.scene import GT_MASKS
+from dataset_tools.synth.generator import PATHS
 from eval.report import markdown_table
 from gsseg.segment.label_options import LabelOptions
 from gsseg.train import TrainConfig
@@ -87,7 +88,7 @@ def main() -> None:
     args = parser.parse_args()
     train_seeds = [int(x) for x in args.train_seeds.split(",")]
     with tempfile.TemporaryDirectory() as tmp:
-        runs = {path: run_scene(Path(tmp), path, args, train_seeds) for path in ("orbit", "forward")}
+        runs = {path: run_scene(Path(tmp), path, args, train_seeds) for path in PATHS}
     means = {
         path: {c: sum(r[c] for r in by_seed.values()) / len(by_seed) for c in next(iter(by_seed.values()))}
         for path, by_seed in runs.items()

@@ -44,7 +44,13 @@ HELD_OUT = [
 
 
 def score(
-    photos: Path, truth: Path, work: Path, images: str, frames: int = 150, seed: int = 0, scale_thresholds: bool = True
+    photos: Path,
+    truth: Path,
+    work: Path,
+    images: str,
+    frames: int = SfmConfig.frames,
+    seed: int = 0,
+    scale_thresholds: bool = True,
 ) -> dict:
     """Run SfM on ``photos`` (a folder or a video) and score its cameras against the scene
     folder ``truth``. A video's frames are named by frame number, which is the photos' order.

@@ -26,7 +26,7 @@ import cv2
 import numpy as np
 
 from dataset_tools import colmap
-from dataset_tools.cameras import DEFAULT_NEAR, PinholeCamera, SourceCamera
+from dataset_tools.cameras import DEFAULT_NEAR, PINHOLE_MODELS, PinholeCamera, SourceCamera
 from dataset_tools.image_files import encode_image, encode_png, image_size, read_image, read_mask
 from dataset_tools.infra.atomic import atomic_directory, write_bytes_atomic
 from dataset_tools.infra.errors import InputError, OutputExists
@@ -302,7 +302,7 @@ def _pinhole_view(im: colmap.ColmapImage, image_root: Path, mask_root: Path | No
         )
     camera = replace(colmap.pinhole_camera(src), near=near)
     uv = im.uv * [width / im.camera.width, height / im.camera.height]
-    distorted = src.model not in ("PINHOLE", "SIMPLE_PINHOLE")
+    distorted = src.model not in PINHOLE_MODELS
     if distorted:
         uv = colmap.undistort_points(uv, src, camera)
     mask_path = (mask_root / f"{Path(im.name).with_suffix('')}.png") if mask_root else None

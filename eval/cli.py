@@ -3,11 +3,22 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import get_args
 
 import click
 
-from dataset_tools.infra.cli_support import engine_options, none_means_off, other_scene_option, run_cli
-from dataset_tools.scene import GT_MASKS
+from dataset_tools.infra.cli_support import (
+    Registry,
+    engine_options,
+    field_option,
+    none_means_off,
+    other_scene_option,
+    run_cli,
+)
+from dataset_tools.scene import GT_MASKS, Split
+from eval.lpips import NETS, export_lpips
+
+BACKEND = Registry("gsseg.render.backends:BACKENDS", ("auto",))
 
 
 @click.group(name="gseval", context_settings={"help_option_names": ["-h", "--help"]})
@@ -26,7 +37,9 @@ def cli() -> None:
     callback=none_means_off,
     help="Ground-truth mask folder of SCENE; none: image metrics only.",
 )
-@click.option("--split", default="test", show_default=True, help="Views to evaluate: test, train or all.")
+@click.option(
+    "--split", type=click.Choice(get_args(Split)), default="test", show_default=True, help="Views to evaluate."
+)
 @click.option("--object-id", type=int, default=None, help="Label to edit in the image rows (default: the largest).")
 @click.option(
     "--color",
@@ -36,7 +49,7 @@ def cli() -> None:
     show_default=True,
     help="Recolour target, 0..255.",
 )
-@click.option("--backend", default="auto", show_default=True, help="auto, cpu, torch or gsplat.")
+@click.option("--backend", type=BACKEND, default="auto", show_default=True)
 @click.option(
     "--lpips",
     type=click.Path(path_type=Path),
@@ -104,7 +117,7 @@ def compare(runs: tuple[Path, ...], out: Path | None) -> None:
 @cli.command("paper-tables")
 @click.option("--out", required=True, type=click.Path(path_type=Path), help="Folder for the tables and the work.")
 @click.option("--quick", is_flag=True, help="Two small scenes and a short schedule (about 10 minutes on 2 cores).")
-@click.option("--backend", default="auto", show_default=True, help="auto, cpu, torch or gsplat.")
+@click.option("--backend", type=BACKEND, default="auto", show_default=True)
 @engine_options
 def paper_tables(out: Path, quick: bool, backend: str, engine) -> None:
     """The analogs of the paper's tables on synthetic scenes (markdown and JSON); rerunning
@@ -119,7 +132,7 @@ def paper_tables(out: Path, quick: bool, backend: str, engine) -> None:
 
 @cli.command("export-lpips")
 @click.option("--out", required=True, type=click.Path(path_type=Path), help="ONNX file to write.")
-@click.option("--net", type=click.Choice(["alex", "vgg", "squeeze"]), default="alex", show_default=True)
+@field_option(export_lpips, "net", type=click.Choice(NETS))
 @click.option("--force", is_flag=True, help="Replace --out if it exists.")
 def export_lpips_cmd(out: Path, net: str, force: bool) -> None:
     """Write the lpips package's network as ONNX for `gseval report --lpips` (needs `pip install lpips`)."""

@@ -25,7 +25,7 @@ from eval.evaluate import PROTOCOLS, Evaluation, evaluate, load_inputs
 from eval.lpips import LPIPS
 from eval.renders import ViewRenders
 from eval.training_curve import psnr_levels
-from gsseg.edits import COMPLETED_OPS, Selection, apply_edit, edit_background
+from gsseg.edits import COMPLETED_OPS, OPS, Selection, apply_edit, edit_background
 from gsseg.render import Backend, get_backend
 from gsseg.run import Run
 from gsseg.run_folder import RunFolder
@@ -71,7 +71,7 @@ def edit_panels(
     recolouring the ``selected`` ones."""
     backend = get_backend(backend)
     out: dict[str, list[np.ndarray]] = {}
-    for op in ("remove", "extract", "recolor"):
+    for op in OPS:
         chosen = completed if op in COMPLETED_OPS else selected
         edited = apply_edit(run.gaussians, chosen, op, tuple(c / 255 for c in color)).to(backend.device)
         background = edit_background([op])
@@ -89,9 +89,7 @@ def image_row(r: ViewRenders, id_map: dict[int, int], edits: dict[str, list[np.n
         for label, gt in id_map.items():
             mapping[label] = gt
     truth = [colorize_labels(r.truth)] if r.truth is not None else []
-    panels = [r.image, *truth, colorize_labels(mapping[r.visible])] + [
-        edits[op][index] for op in ("remove", "extract", "recolor")
-    ]
+    panels = [r.image, *truth, colorize_labels(mapping[r.visible])] + [edits[op][index] for op in OPS]
     gap = np.full((r.image.shape[0], 4, 3), 255, np.uint8)
     return np.concatenate([x for p in panels for x in (p, gap)][:-1], axis=1)
 

@@ -13,7 +13,7 @@ from gsseg.sh import MAX_DEGREE, num_coeffs, rgb_to_sh_dc
 OBJ_FEAT_DIM = 16
 
 
-def make_classifier(num_classes: int = 256) -> torch.nn.Linear:
+def make_classifier(num_classes: int) -> torch.nn.Linear:
     """The linear layer from object features to class logits."""
     return torch.nn.Linear(OBJ_FEAT_DIM, num_classes)
 
@@ -122,7 +122,7 @@ def gaussians_from_points(
     xyz: np.ndarray,
     rgb: np.ndarray,
     *,
-    initial_opacity: float = 0.1,
+    initial_opacity: float,
     seed: int = 0,
 ) -> Gaussians:
     """Initial Gaussians at SfM points, as 3D-GS does it.

@@ -66,7 +66,7 @@ def _largest_of_each_id(area: np.ndarray, value: np.ndarray) -> np.ndarray:
 
 def remove_small_components(
     ids: np.ndarray,
-    min_area: int = 500,
+    min_area: int = PAPER_MIN_AREA,
     *,
     keep_objects: bool = True,
     keep: frozenset[int] = frozenset(),

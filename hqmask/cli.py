@@ -8,7 +8,7 @@ import click
 
 from dataset_tools.infra.cli_support import Registry, engine_options, field_option, given_fields, run_cli
 from hqmask.build_options import ASSOCIATIONS, BuildConfig
-from hqmask.sam_hq.model import DEVICES
+from hqmask.sam_hq.model import DEVICES, ModelInfo
 
 
 @click.group(name="hqmask", context_settings={"help_option_names": ["-h", "--help"]})
@@ -113,7 +113,7 @@ def clean(scene: Path, masks: str, out_masks: str, min_area: int, force: bool) -
 @click.option("--checkpoint", required=True, type=click.Path(path_type=Path), help="Official SAM-HQ .pth file.")
 @click.option("--model-type", required=True, type=Registry("hqmask.sam_hq.export:MODEL_TYPES"))
 @click.option("--out", required=True, type=click.Path(path_type=Path), help="Model folder to write.")
-@click.option("--opset", type=int, default=17, show_default=True)
+@field_option(ModelInfo, "opset", type=int, help="ONNX opset to export to.")
 @click.option("--hq-token-only", is_flag=True, help="Use the HQ mask alone instead of adding it to SAM's.")
 @click.option("--single-mask", is_flag=True, help="SAM's single-mask output instead of the best of its three.")
 @click.option("--force", is_flag=True, help="Replace --out if it exists.")

@@ -39,11 +39,11 @@ from hqmask.build import BuildConfig, build_masks
 class SceneSpec:
     """A synthetic scene of the generator (see :class:`dataset_tools.synth.SynthConfig`)."""
 
-    path: str = "orbit"
-    seed: int = 0
-    res: int = 256
-    views: int = 24
-    objects: int = 6
+    path: str = SynthConfig.path
+    seed: int = SynthConfig.seed
+    res: int = SynthConfig.res
+    views: int = SynthConfig.views
+    objects: int = SynthConfig.objects
 
     @property
     def name(self) -> str:
@@ -91,13 +91,11 @@ def shuffled_copy(scene: Path, out: Path, *, seed: int = 0) -> Path:
     return out
 
 
-def corrupt_masks(
-    scene: Path, out_masks: str, *, severity: str = "medium", model: str = "blobs", seed: int = 0, coarse: bool = False
-) -> str:
-    """``scene/out_masks``: the exact masks corrupted at ``severity`` by the error family
-    ``model``; made once."""
+def corrupt_masks(scene: Path, out_masks: str, **options) -> str:
+    """``scene/out_masks``: the exact masks corrupted by
+    :func:`dataset_tools.corruption.corrupt_scene` with ``options``; made once."""
     if not (Path(scene) / out_masks).is_dir():
-        corrupt_scene(scene, out_masks, severity, model=model, coarse=coarse, seed=seed, progress=False)
+        corrupt_scene(scene, out_masks, progress=False, **options)
     return out_masks
 
 

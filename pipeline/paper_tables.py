@@ -35,14 +35,18 @@ from pathlib import Path
 
 import numpy as np
 
+from dataset_tools.corruption import SEVERITY
 from dataset_tools.infra.atomic import require_folder_path, write_bytes_atomic
 from dataset_tools.infra.engine import Engine
 from dataset_tools.scene import GT_MASKS, IMAGES
+from dataset_tools.synth.generator import PATHS
+from eval.evaluate import PROTOCOLS
 from eval.report import markdown_table
 from gsseg.render import Backend, get_backend
 from gsseg.segment.label_options import LabelOptions
 from gsseg.train import TrainConfig
 from hqmask.build import clean_scene_masks
+from hqmask.cleanup import PAPER_MIN_AREA
 from pipeline.experiment import (
     SceneSpec,
     associate_masks,
@@ -71,8 +75,8 @@ class TableSetup:
     objects: int
     iters: int | None  # None: the CPU default schedule
     images: str = IMAGES  # trained on: ``images`` or a downsampled copy such as ``images_2``
-    severity: str = "medium"
-    min_area: int = 500  # noise removal, at the resolution the masks are made and corrupted at
+    severity: str = SEVERITY
+    min_area: int = PAPER_MIN_AREA  # noise removal, at the resolution the masks are made and corrupted at
     max_gaussians: int | None = None  # None: the schedule's cap
 
     @property
@@ -85,7 +89,7 @@ SETUPS = {
     # against the 500 px cleanup threshold); quick trains on the 128x128 copies, and stops
     # densifying at 20k Gaussians (a 128x128 view has 16k pixels).
     "quick": TableSetup(
-        paths=("orbit", "forward"),
+        paths=PATHS,
         seeds=(0,),
         res=256,
         views=16,
@@ -94,7 +98,7 @@ SETUPS = {
         images="images_2",
         max_gaussians=20_000,
     ),
-    "full": TableSetup(paths=("orbit", "forward"), seeds=(0, 1, 2), res=256, views=24, objects=6, iters=None),
+    "full": TableSetup(paths=PATHS, seeds=(0, 1, 2), res=256, views=24, objects=6, iters=None),
 }
 
 
@@ -149,7 +153,7 @@ def _training_task(task: _Task) -> dict:
     )
     # The pipeline segments with the masks it trained on; `noisy` ones cannot be voted
     # with (their IDs differ per view), so that run is segmented by its classifier alone.
-    method = LabelOptions(method="classifier", gamma_p=0.0) if task.kind == "noisy" else LabelOptions(gamma_p=0.2)
+    method = LabelOptions(method="classifier", gamma_p=0.0) if task.kind == "noisy" else LabelOptions()
     (summary,) = segmentation_scores(run, scene, MASK_FOLDERS[task.kind], [method], backend=task.backend)
     return {
         "psnr": summary["psnr"],
@@ -167,10 +171,8 @@ def _methods_task(task: _Task) -> dict:
         task.root / "run_hqmask", task.root / "scene", MASK_FOLDERS["hqmask"], settings, backend=task.backend
     )
     return {
-        "methods": {m: {p: s[p] for p in ("visible", "extracted")} for (m, _), s in zip(METHODS, summaries)},
-        "gamma_p": {
-            f"{g:g}": {p: s[p] for p in ("visible", "extracted")} for g, s in zip(GAMMAS, summaries[len(METHODS) :])
-        },
+        "methods": {m: {p: s[p] for p in PROTOCOLS} for (m, _), s in zip(METHODS, summaries)},
+        "gamma_p": {f"{g:g}": {p: s[p] for p in PROTOCOLS} for g, s in zip(GAMMAS, summaries[len(METHODS) :])},
     }
 
 
@@ -232,7 +234,7 @@ def render_tables(scenes: dict[str, dict], setup: TableSetup) -> str:
     )
 
     head = ["scene"] + [f"{m} {p}" for m, _ in METHODS for p in ("mIoU", "mAcc")]
-    for protocol in ("visible", "extracted"):
+    for protocol in PROTOCOLS:
         rows = [
             [n] + [_f(scenes[n]["methods"][m][protocol][k]) for m, _ in METHODS for k in ("miou", "macc")]
             for n in names
@@ -251,20 +253,13 @@ def render_tables(scenes: dict[str, dict], setup: TableSetup) -> str:
         )
 
     gammas = [f"{g:g}" for g in GAMMAS]
-    rows = [
-        [n] + [_f(scenes[n]["gamma_p"][g][p]["miou"]) for g in gammas for p in ("visible", "extracted")] for n in names
-    ]
+    rows = [[n] + [_f(scenes[n]["gamma_p"][g][p]["miou"]) for g in gammas for p in PROTOCOLS] for n in names]
     rows.append(
-        ["mean"]
-        + [
-            _f(_mean([scenes[n]["gamma_p"][g][p]["miou"] for n in names]))
-            for g in gammas
-            for p in ("visible", "extracted")
-        ]
+        ["mean"] + [_f(_mean([scenes[n]["gamma_p"][g][p]["miou"] for n in names])) for g in gammas for p in PROTOCOLS]
     )
     parts.append(
         "### Table 4: gamma_p ablation of `prior` (mIoU, visible / extracted)\n\n"
-        + markdown_table(["scene"] + [f"gamma_p {g} {p[:3]}" for g in gammas for p in ("visible", "extracted")], rows)
+        + markdown_table(["scene"] + [f"gamma_p {g} {p[:3]}" for g in gammas for p in PROTOCOLS], rows)
     )
     return "\n\n".join(parts) + "\n"
 

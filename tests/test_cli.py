@@ -71,37 +71,6 @@ def test_user_errors_are_one_line_and_exit_2(tmp_path, args, message):
     assert not (tmp_path / "x").exists()
 
 
-@pytest.mark.parametrize(
-    "command, name, options",
-    [
-        ("gsseg", "train", "gsseg.train.TrainConfig"),
-        ("gsseg", "segment", "gsseg.segment.segment_run.LabelOptions"),
-        ("hqmask", "build", "hqmask.build.BuildConfig"),
-        ("dataset_tools", "sfm", "dataset_tools.sfm.SfmConfig"),
-    ],
-)
-def test_every_cli_default_is_its_dataclass_default(command, name, options):
-    """Each option of a command that is a field of the stage's options dataclass has the
-    dataclass's default; ``train --schedule auto`` is the one option the command resolves
-    itself (to the backend's schedule)."""
-    import dataclasses
-    import importlib
-
-    group = importlib.import_module(f"{command}.cli").cli
-    module, cls = options.rsplit(".", 1)
-    fields = {f.name: f for f in dataclasses.fields(getattr(importlib.import_module(module), cls))}
-    received = group.commands[name].make_context(name, [], resilient_parsing=True).params  # callbacks applied
-    compared = 0
-    for option, value in received.items():
-        field = fields.get(option)
-        if field is None or (name, option) == ("train", "schedule"):
-            continue
-        default = field.default if field.default is not dataclasses.MISSING else field.default_factory()
-        assert value == default, f"{command} {name} --{option.replace('_', '-')}: {value!r}, dataclass {default!r}"
-        compared += 1
-    assert compared >= 5
-
-
 def test_failed_work_is_one_line_and_exit_1_and_bad_input_exit_2():
     """How a command ends: work that failed on good input (training that diverged) exits 1,
     bad input 2, each with one line and no traceback."""

@@ -126,7 +126,7 @@ def test_visible_and_extracted_differ_only_for_the_occluded_object():
     pose = torch.as_tensor(view.cam_from_world, dtype=torch.float32)
     truth = segment_pixels(g, seg.labels, view.camera, pose, backend="cpu")  # what the camera sees
     record = RunRecord(TrainConfig(sh_degree=0), "scene", "cpu", 1.0, None, ())
-    run = Run(RunFolder("unused"), record, g, make_classifier(), environment=None)
+    run = Run(RunFolder("unused"), record, g, make_classifier(256), environment=None)
     r = render_view(run, seg, view, backend="cpu", truth=truth)
     ev = score_views([r], run="r", scene="s", split="test")
     per = ev.per_object()

@@ -36,6 +36,7 @@ from dataset_tools.scene import GT_MASKS, load_scene, mask_folder
 FAMILIES = ("blobs", "proposer")
 RUNS_STREAM = 2**31  # the seed stream of the proposer family's runs, apart from every view's
 SEVERITY_NAMES = ("low", "medium", "high")
+SEVERITY = "medium"  # the default
 
 __all__ = ["FAMILIES", "PERMUTE_ONLY", "SEVERITY_NAMES", "BlobModel", "coarsen", "corrupt_mask", "corrupt_scene"]
 
@@ -52,7 +53,7 @@ def _check(family: str, severity: str, coarse: bool) -> None:
 def corrupt_scene(
     scene_dir: Path | str,
     out_masks: str,
-    severity: str = "medium",
+    severity: str = SEVERITY,
     *,
     model: str = "blobs",
     coarse: bool = False,

@@ -8,6 +8,7 @@ import dataclasses
 import errno
 import functools
 import importlib
+import inspect
 import signal
 import sys
 import warnings
@@ -113,22 +114,32 @@ class Registry(click.Choice):
     def __init__(self, where: str, extra: tuple[str, ...] = ()) -> None:
         self.where, self.extra, self.case_sensitive = where, extra, True
 
-    @functools.cached_property
+    @property
     def choices(self) -> tuple[str, ...]:
         module, name = self.where.split(":")
         return (*self.extra, *getattr(importlib.import_module(module), name))
 
 
-def field_default(config: type, name: str) -> object:
-    """The default of the field ``name`` of the dataclass ``config``."""
-    field = next(f for f in dataclasses.fields(config) if f.name == name)
-    if field.default_factory is not dataclasses.MISSING:
-        return field.default_factory()
-    return field.default
+def _names(owner: type | Callable) -> dict[str, object]:
+    """The fields of the dataclass ``owner``, or the parameters of the function ``owner``,
+    with their defaults."""
+    if dataclasses.is_dataclass(owner):
+        return {
+            f.name: f.default_factory() if f.default_factory is not dataclasses.MISSING else f.default
+            for f in dataclasses.fields(owner)
+        }
+    return {name: p.default for name, p in inspect.signature(owner).parameters.items()}
 
 
-def field_option(config: type, name: str, *decls: str, spell: Callable | None = None, **kwargs) -> Callable:
-    """A click option for the field ``name`` of the options dataclass ``config``, whose default
+def field_default(owner: type | Callable, name: str) -> object:
+    """The default of the field ``name`` of the dataclass ``owner`` (or of the parameter
+    ``name`` of the function ``owner``)."""
+    return _names(owner)[name]
+
+
+def field_option(config: type | Callable, name: str, *decls: str, spell: Callable | None = None, **kwargs) -> Callable:
+    """A click option for the field ``name`` of the options dataclass ``config`` (or the
+    keyword ``name`` of the library function ``config``), whose default
     (shown in the help) is the field's, written for the command line by ``spell`` where the
     option's values are words. A field that defaults to None shows no default (its help says
     what None means); a bool field without a ``--x/--no-x`` pair is a flag. ``decls``: the
@@ -149,10 +160,11 @@ def field_option(config: type, name: str, *decls: str, spell: Callable | None = 
     )
 
 
-def given_fields(ctx: click.Context, config: type) -> dict:
-    """The options of ``ctx`` that the user gave and that are fields of the dataclass ``config``,
-    by name: what the command hands to ``config``, whose defaults fill in the rest."""
-    names = {f.name for f in dataclasses.fields(config)}
+def given_fields(ctx: click.Context, config: type | Callable) -> dict:
+    """The options of ``ctx`` that the user gave and that are fields of the dataclass ``config``
+    (or keywords of the function ``config``), by name: what the command hands to ``config``,
+    whose defaults fill in the rest."""
+    names = _names(config)
     defaults = (ParameterSource.DEFAULT, ParameterSource.DEFAULT_MAP)
     return {
         name: value
@@ -212,7 +224,7 @@ def engine_options(command: Callable) -> Callable:
     return click.option(
         "--engine",
         "engine_name",
-        type=click.Choice(["local", "ray"]),
+        type=Registry("dataset_tools.infra.engine:ENGINES"),
         default="local",
         show_default=True,
         help="Run the independent tasks here one by one, or as tasks on Ray (pip install -e .[ray]).",

@@ -56,6 +56,8 @@ EXHAUSTIVE_UP_TO = 80
 MIN_REGISTERED_SHARE = 0.5
 SIFT_PEAK_THRESHOLD = 0.02 / 3  # COLMAP's default, for photos of about REFERENCE_SIDE pixels
 REFERENCE_SIDE = 1000
+MATCHERS = ("auto", "exhaustive", "sequential", "retrieval")
+MAPPERS = ("incremental", "global")
 CAMERA_MODELS = ("SIMPLE_RADIAL", "RADIAL", "OPENCV", "SIMPLE_PINHOLE", "PINHOLE", "OPENCV_FISHEYE")
 
 
@@ -64,8 +66,8 @@ class SfmConfig:
     """Options of ``python -m dataset_tools sfm`` (same names as the CLI)."""
 
     frames: int = 150  # a video's frames to keep
-    matcher: str = "auto"  # auto | exhaustive | sequential | retrieval
-    mapper: str = "incremental"  # incremental | global
+    matcher: str = "auto"  # one of MATCHERS; auto: by the number of photos, sequential for a video
+    mapper: str = "incremental"  # one of MAPPERS
     camera_model: str = "SIMPLE_RADIAL"
     single_camera: bool | None = None  # None: one camera for a video, one per folder of photos
     max_image_size: int = 3200  # SIFT runs on images at most this large
@@ -80,12 +82,12 @@ class SfmConfig:
     def check(self) -> None:
         if self.frames < 3:
             raise OptionError("{frames}: keep at least 3 frames.", frames=self.frames)
-        if self.matcher not in ("auto", "exhaustive", "sequential", "retrieval"):
-            raise OptionError("{matcher}: use auto, exhaustive, sequential or retrieval.", matcher=self.matcher)
+        if self.matcher not in MATCHERS:
+            raise OptionError(f"{{matcher}}: use {', '.join(MATCHERS)}.", matcher=self.matcher)
         if self.neighbours < 1:
             raise OptionError("{neighbours}: match each photo with at least 1 other.", neighbours=self.neighbours)
-        if self.mapper not in ("incremental", "global"):
-            raise OptionError("{mapper}: use incremental or global.", mapper=self.mapper)
+        if self.mapper not in MAPPERS:
+            raise OptionError(f"{{mapper}}: use {' or '.join(MAPPERS)}.", mapper=self.mapper)
         if self.camera_model not in CAMERA_MODELS:
             raise OptionError(
                 f"{{camera_model}}: use one of {', '.join(CAMERA_MODELS)}.", camera_model=self.camera_model

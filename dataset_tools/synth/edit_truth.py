@@ -79,7 +79,11 @@ def _alone(layout: Layout, object_id: int) -> Layout:
 
 
 def edit_truth(
-    layout: Layout, object_id: int, view: View, seers: list[tuple[View, np.ndarray]], supersample: int = 2
+    layout: Layout,
+    object_id: int,
+    view: View,
+    seers: list[tuple[View, np.ndarray]],
+    supersample: int = SynthConfig.supersample,
 ) -> EditTruth:
     """The truth of editing ``object_id`` in ``view``.
 

@@ -6,7 +6,6 @@ import colorsys
 import json
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Literal
 
 import numpy as np
 from tqdm import tqdm
@@ -25,6 +24,8 @@ from dataset_tools.synth.textures import Texture
 MAX_OBJECTS = 255
 LIGHT = np.array([0.45, -0.35, 0.82]) / np.linalg.norm([0.45, -0.35, 0.82])
 AMBIENT = 0.4
+PATHS = ("orbit", "forward")  # a camera orbit around the objects, or a forward-facing sweep
+GROUNDS = ("checker", "speckle")
 
 
 @dataclass(frozen=True)
@@ -34,10 +35,10 @@ class SynthConfig:
     views: int = 24
     res: int = 256
     objects: int = 6
-    path: Literal["orbit", "forward"] = "orbit"
+    path: str = "orbit"  # one of PATHS
     seed: int = 0
     wall: bool | None = None  # None: a back wall for ``forward`` only
-    ground: Literal["checker", "speckle"] = "checker"  # speckle: irregular, for structure from motion
+    ground: str = "checker"  # one of GROUNDS; speckle: irregular, for structure from motion
     points_per_view: int = 200
     supersample: int = 2
     fov_deg: float = 50.0
@@ -52,10 +53,10 @@ class SynthConfig:
             raise OptionError("{views}: at least 2 views are needed for SfM tracks.", views=self.views)
         if not 16 <= self.res <= 4096:
             raise OptionError("{res}: the resolution must lie in 16..4096 pixels.", res=self.res)
-        if self.path not in ("orbit", "forward"):
-            raise OptionError("{path}: use orbit or forward.", path=self.path)
-        if self.ground not in ("checker", "speckle"):
-            raise OptionError("{ground}: use checker or speckle.", ground=self.ground)
+        if self.path not in PATHS:
+            raise OptionError(f"{{path}}: use {' or '.join(PATHS)}.", path=self.path)
+        if self.ground not in GROUNDS:
+            raise OptionError(f"{{ground}}: use {' or '.join(GROUNDS)}.", ground=self.ground)
         check_seed(self.seed)
 
 
@@ -232,7 +233,7 @@ def render_view(
     layout: Layout,
     cam: PinholeCamera,
     pose: np.ndarray,
-    supersample: int = 2,
+    supersample: int = SynthConfig.supersample,
     sky: tuple[float, float, float] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Ray-cast one view (the sky a flat ``sky`` colour when given).

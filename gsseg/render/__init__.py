@@ -16,7 +16,7 @@ import torch
 from dataset_tools.cameras import PinholeCamera
 from gsseg.gaussians import Gaussians
 from gsseg.render.backends import BACKENDS, Backend, get_backend
-from gsseg.sh import eval_sh
+from gsseg.sh import MAX_DEGREE, eval_sh
 from gsseg.sh_cpu import eval_sh_cpu
 
 __all__ = ["BACKENDS", "Backend", "RenderOutput", "get_backend", "render", "surface_depth", "to_uint8"]
@@ -63,7 +63,7 @@ def render(
     camera: PinholeCamera,
     cam_from_world: torch.Tensor,
     *,
-    sh_degree: int = 3,
+    sh_degree: int = MAX_DEGREE,
     background: torch.Tensor | None = None,
     with_features: bool = True,
     feature_geometry_grad: bool = True,

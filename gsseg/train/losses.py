@@ -8,7 +8,7 @@ import torch.nn.functional as F
 from gsseg.train.ssim_cpu import SSIM_SIGMA, SSIM_WINDOW, mean_ssim_cpu
 
 
-def photometric_loss(rendered: torch.Tensor, target: torch.Tensor, lambda_dssim: float = 0.2) -> torch.Tensor:
+def photometric_loss(rendered: torch.Tensor, target: torch.Tensor, lambda_dssim: float) -> torch.Tensor:
     """(1 - lambda) L1 + lambda (1 - SSIM) of two (H, W, 3) images, ``target`` a constant: the
     mean SSIM of :func:`ssim_map`, for float32 on the CPU by the numba kernels of
     :mod:`gsseg.train.ssim_cpu` (the same value and gradient in half the time)."""

@@ -135,7 +135,7 @@ def export_checkpoint(
     model_type: str,
     out_dir: Path | str,
     *,
-    opset: int = 17,
+    opset: int = ModelInfo.opset,
     hq_token_only: bool = False,
     multimask_output: bool = True,
     overwrite: bool = False,
