@@ -34,10 +34,10 @@ from dataset_tools.synth.edit_truth import write_edit_truth
 from eval.edit_scores import edit_rows, summarize_edits
 from eval.evaluate import evaluate
 from eval.report import markdown_table
-from gsseg.run import load_run
+from gsseg.run.loaded import load_run
 from gsseg.segment.label_options import LabelOptions
 from gsseg.segment.segment_run import label_gaussians, mask_contributions
-from gsseg.train import TrainConfig
+from gsseg.train.config import TrainConfig
 from pipeline.experiment import SceneSpec, associate_masks, corrupt_masks, synthetic_scene, train_run
 
 TRAIN_IMAGES = "images_2"

@@ -20,7 +20,7 @@ from benchmarks import record
 from eval.report import markdown_table
 from eval.standard_render import read_splats, render_reference
 from gsseg.export import export_run
-from gsseg.run import load_run
+from gsseg.run.loaded import load_run
 
 
 def psnr(a: np.ndarray, b: np.ndarray) -> float:

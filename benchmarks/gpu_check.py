@@ -59,14 +59,15 @@ from dataset_tools.infra.interrupts import Interrupted
 from dataset_tools.scene import load_scene
 from eval.metrics import psnr, ssim
 from eval.report import markdown_table
-from gsseg.environment import background_image
-from gsseg.gaussians import Gaussians, gaussians_from_points
+from gsseg.model.environment import background_image
+from gsseg.model.gaussians import Gaussians, gaussians_from_points
 from gsseg.render import get_backend, render
-from gsseg.run import Run, load_run
+from gsseg.run.loaded import Run, load_run
 from gsseg.segment.clicks import ClickEvidence, ClickSelector
 from gsseg.segment.prompts import click_weights
 from gsseg.segment.segment_run import label_gaussians, mask_contributions, mask_regions, segment_run
-from gsseg.train import TrainConfig, train
+from gsseg.train.config import TrainConfig
+from gsseg.train.trainer import train
 from hqmask.build import BuildConfig, build_masks
 from pipeline.demo import DEMO_LABELS, DEPTH_MASKS, MASKS, demo_images, masks_at_depth_jumps
 

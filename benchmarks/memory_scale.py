@@ -30,7 +30,8 @@ from eval.report import markdown_table
 MODES = ("memory", "disk")
 TRAIN = """
 import json, resource, sys
-from gsseg.train import TrainConfig, train
+from gsseg.train.config import TrainConfig
+from gsseg.train.trainer import train
 scene, run, steps, mode = sys.argv[1:]
 result = train(scene, run, TrainConfig(iters=int(steps), backend="cpu"), cache_views=mode, progress=False)
 print(json.dumps({"seconds_per_step": result.seconds / result.step, "gaussians": result.num_gaussians,

@@ -30,9 +30,9 @@ from eval.metrics import psnr, ssim
 from eval.report import markdown_table
 from eval.training_curve import curve_summary
 from gsseg.render import BACKENDS, get_backend
-from gsseg.run import load_run
-from gsseg.train import TrainConfig, train
-from gsseg.train_config import SCHEDULES
+from gsseg.run.loaded import load_run
+from gsseg.train.config import SCHEDULES, TrainConfig
+from gsseg.train.trainer import train
 from pipeline.demo import demo_images
 
 

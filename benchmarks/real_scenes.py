@@ -51,11 +51,12 @@ from eval.report import markdown_table
 from gsseg.render import Backend, get_backend
 from gsseg.render.contributions import MaskedView, contribution_matrix
 from gsseg.render.pixel_labels import segment_pixels
-from gsseg.run import Run, load_run
+from gsseg.run.loaded import Run, load_run
 from gsseg.segment.clicks import ClickEvidence, ClickSelector
 from gsseg.segment.prompts import click_weights
 from gsseg.segment.segment_run import run_regions, segment_run
-from gsseg.train import TrainConfig, train
+from gsseg.train.config import TrainConfig
+from gsseg.train.trainer import train
 from hqmask.build import BuildConfig, build_masks
 from pipeline.demo import DEMO_LABELS, DEPTH_MASKS, MASKS, demo_images, masks_at_depth_jumps
 

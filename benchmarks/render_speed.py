@@ -22,7 +22,7 @@ import torch
 from benchmarks import record
 from dataset_tools.cameras import PinholeCamera
 from eval.report import markdown_table
-from gsseg.gaussians import Gaussians
+from gsseg.model.gaussians import Gaussians
 from gsseg.render import BACKENDS, get_backend, render
 from gsseg.render.backends import Backend, CpuBackend
 

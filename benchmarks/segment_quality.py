@@ -29,7 +29,7 @@ from dataset_tools.scene import GT_MASKS
 from dataset_tools.synth.generator import PATHS
 from eval.report import markdown_table
 from gsseg.segment.label_options import LabelOptions
-from gsseg.train import TrainConfig
+from gsseg.train.config import TrainConfig
 from pipeline.experiment import (
     SceneSpec,
     associate_masks,

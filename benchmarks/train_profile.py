@@ -26,7 +26,8 @@ from pathlib import Path
 from benchmarks import record
 from benchmarks.real_scenes import posed_scene
 from eval.report import markdown_table
-from gsseg.train import TrainConfig, train
+from gsseg.train.config import TrainConfig
+from gsseg.train.trainer import train
 from hqmask.build import BuildConfig, build_masks
 from pipeline.demo import MASKS, demo_images
 from pipeline.demo_options import SCENE_ITERS, DemoOptions
@@ -41,7 +42,7 @@ FUNCTIONS = {
     "projection_backward": ("gsseg/render/cpu_projection.py", "backward"),
     "blend_forward": ("gsseg/render/cpu_blend.py", "forward"),
     "blend_backward": ("gsseg/render/cpu_blend.py", "backward"),
-    "background": ("gsseg/environment.py", "background_image"),
+    "background": ("gsseg/model/environment.py", "background_image"),
     "photometric_loss": ("gsseg/train/losses.py", "photometric_loss"),
     "object_loss": ("gsseg/train/losses.py", "object_loss"),
     "psnr": ("gsseg/train/losses.py", "psnr"),

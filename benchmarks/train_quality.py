@@ -27,8 +27,8 @@ from benchmarks import record
 from dataset_tools.scene import GT_MASKS
 from eval.report import markdown_table
 from gsseg.render import BACKENDS
-from gsseg.run_folder import RunFolder
-from gsseg.train import TrainConfig
+from gsseg.run.folder import RunFolder
+from gsseg.train.config import TrainConfig
 from pipeline.experiment import SceneSpec, synthetic_scene, test_view_scores, train_run
 
 

@@ -28,8 +28,8 @@ from benchmarks import record
 from dataset_tools.infra.errors import InputError
 from eval.report import markdown_table
 from gsseg.render.pixel_labels import segment_pixels
-from gsseg.run import load_run
-from gsseg.run_folder import RunFolder, read_edit_record
+from gsseg.run.folder import RunFolder, read_edit_record
+from gsseg.run.loaded import load_run
 from gsseg.viewer.session import ViewCamera, ViewerSession, browser_camera
 
 

@@ -16,7 +16,7 @@ from dataset_tools.synth.edit_truth import EDIT_TRUTH, read_edit_truth
 from eval.metrics import extraction_scores, removal_scores
 from gsseg.edits import apply_edit
 from gsseg.render import Backend, get_backend, to_uint8
-from gsseg.run import Run
+from gsseg.run.loaded import Run
 from gsseg.segment.reassign import Segmentation
 from gsseg.segment.served import complete_selection
 

@@ -30,7 +30,7 @@ from eval.lpips import LPIPS
 from eval.metrics import binary_scores, psnr, ssim
 from eval.renders import ViewRenders, render_view
 from gsseg.render import Backend
-from gsseg.run import Run, load_run
+from gsseg.run.loaded import Run, load_run
 from gsseg.segment.reassign import Segmentation
 
 PROTOCOLS = ("visible", "extracted")
@@ -95,7 +95,7 @@ class Evaluation:
 
     def save(self, path: Path) -> None:
         """Write the scores as JSON (a report's ``metrics.json``; a run's copy is written by
-        :meth:`gsseg.run_folder.RunFolder.write_evaluation`)."""
+        :meth:`gsseg.run.folder.RunFolder.write_evaluation`)."""
         write_bytes_atomic(path, (json.dumps(self.to_json(), indent=2) + "\n").encode())
 
 

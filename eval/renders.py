@@ -10,7 +10,7 @@ import torch
 from dataset_tools.scene import View
 from gsseg.render import Backend, get_backend
 from gsseg.render.pixel_labels import segment_pixels
-from gsseg.run import Run
+from gsseg.run.loaded import Run
 from gsseg.segment.reassign import Segmentation
 
 MIN_ALPHA = 0.5

@@ -27,8 +27,8 @@ from eval.renders import ViewRenders
 from eval.training_curve import psnr_levels
 from gsseg.edits import COMPLETED_OPS, OPS, Selection, apply_edit, edit_background
 from gsseg.render import Backend, get_backend
-from gsseg.run import Run
-from gsseg.run_folder import RunFolder
+from gsseg.run.folder import RunFolder
+from gsseg.run.loaded import Run
 from gsseg.segment.reassign import Segmentation
 from gsseg.segment.served import complete_selection
 

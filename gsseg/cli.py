@@ -17,7 +17,7 @@ from dataset_tools.infra.cli_support import (
 )
 from dataset_tools.scene import Split
 from gsseg.segment.label_options import METHODS, MODES, LabelOptions
-from gsseg.train_config import SCHEDULES, TrainConfig
+from gsseg.train.config import SCHEDULES, TrainConfig
 from pipeline.demo_options import EMBEDDED_ITERS, SCENE_ITERS, DemoOptions
 
 BACKEND = Registry("gsseg.render.backends:BACKENDS", ("auto",))
@@ -109,7 +109,7 @@ def train(
     scene: Path, run: Path, resume: bool, allow_other_scene: bool, stop_after: int | None, cache_views: str, **_
 ) -> None:
     """Train 3D-GS jointly with 16-d object features on SCENE."""
-    from gsseg.train import train as run_training
+    from gsseg.train.trainer import train as run_training
 
     options = given_fields(click.get_current_context(), TrainConfig)
     result = run_training(
@@ -150,7 +150,7 @@ def train(
 @other_scene_option
 def render(run: Path, scene: Path, out: Path, what: str, force: bool, **options) -> None:
     """Render RGB, per-pixel classifier labels or Gaussian segments of RUN on SCENE's views."""
-    from gsseg.render_views import render_run
+    from gsseg.render.views import render_run
 
     products = tuple(w.strip() for w in what.split(",") if w.strip())
     click.echo(f"wrote {render_run(run, scene, out, what=products, overwrite=force, **options)}")
@@ -180,7 +180,7 @@ def render(run: Path, scene: Path, out: Path, what: str, force: bool, **options)
 @other_scene_option
 def segment(run: Path, scene: Path, masks: str, backend: str, other_scene: bool, **_) -> None:
     """Prior-guided label reassignment of every Gaussian of RUN; writes RUN/labels.npz."""
-    from gsseg.run_folder import RunFolder
+    from gsseg.run.folder import RunFolder
     from gsseg.segment.segment_run import segment_run
 
     options = LabelOptions(**given_fields(click.get_current_context(), LabelOptions))

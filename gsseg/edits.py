@@ -17,17 +17,17 @@ from dataset_tools.infra.errors import InputError, OptionError, OutputExists
 from dataset_tools.infra.names import plain_name
 from dataset_tools.infra.overlap import refuse_overlap, scene_entries
 from dataset_tools.scene import Scene
-from gsseg.gaussians import Gaussians
-from gsseg.ply import write_ply
+from gsseg.model.gaussians import Gaussians
+from gsseg.model.ply import write_ply
+from gsseg.model.sh import C0, rgb_to_sh_dc
 from gsseg.render import Backend, get_backend
-from gsseg.run import Background, Run, load_run
-from gsseg.run_folder import write_edit_record
+from gsseg.run.folder import write_edit_record
+from gsseg.run.loaded import Background, Run, load_run
 from gsseg.segment.clicks import Click, ClickEvidence, ClickSelector
 from gsseg.segment.prompts import click_weights, pick_object, point_evidence
 from gsseg.segment.reassign import Segmentation
 from gsseg.segment.segment_run import run_regions
 from gsseg.segment.served import complete_selection
-from gsseg.sh import C0, rgb_to_sh_dc
 
 OPS = ("remove", "extract", "recolor")
 COMPLETED_OPS = ("remove", "extract")  # they take the Gaussians that served the selection alone too

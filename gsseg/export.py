@@ -2,7 +2,7 @@
 
 Two formats:
 
-- ``ply``: the 3D-GS PLY of :mod:`gsseg.ply` plus a uchar ``label`` per Gaussian (its object
+- ``ply``: the 3D-GS PLY of :mod:`gsseg.model.ply` plus a uchar ``label`` per Gaussian (its object
   in ``labels.npz``; 3D-GS viewers ignore the extra properties).
 - ``splat``: the 32-byte record per Gaussian that web splat viewers load: position (3 x
   float32), scale (3 x float32, linear), colour and opacity (4 x uint8), rotation (4 x uint8,
@@ -22,13 +22,13 @@ from dataset_tools.infra.atomic import write_bytes_atomic
 from dataset_tools.infra.errors import InputError, OptionError, OutputExists
 from dataset_tools.infra.overlap import refuse_overlap, run_inputs
 from gsseg.edits import check_prompts, select
-from gsseg.environment import environment_shell, shell_radius, shell_spacing
-from gsseg.gaussians import Gaussians
-from gsseg.ply import write_ply
-from gsseg.run import Run, load_run
+from gsseg.model.environment import environment_shell, shell_radius, shell_spacing
+from gsseg.model.gaussians import Gaussians
+from gsseg.model.ply import write_ply
+from gsseg.model.sh import C0
+from gsseg.run.loaded import Run, load_run
 from gsseg.segment.clicks import Click
 from gsseg.segment.served import complete_selection
-from gsseg.sh import C0
 
 FORMATS = ("ply", "splat")
 SPLAT_RECORD = np.dtype([("position", "<f4", 3), ("scale", "<f4", 3), ("rgba", "u1", 4), ("rotation", "u1", 4)])
@@ -59,8 +59,8 @@ def read_splat(path: Path | str) -> np.ndarray:
 
 
 def shell_for(run: Run) -> Gaussians:
-    """The run's environment as a shell of Gaussians (:func:`gsseg.environment.environment_shell`)
-    about the cameras' mean centre, :func:`gsseg.environment.shell_radius` away."""
+    """The run's environment as a shell of Gaussians (:func:`gsseg.model.environment.environment_shell`)
+    about the cameras' mean centre, :func:`gsseg.model.environment.shell_radius` away."""
     recorded = run.record.scene_fingerprint
     if recorded is not None:
         cameras = [

@@ -41,13 +41,14 @@ from dataset_tools.synth import SynthConfig, generate_scene
 from eval.report import report_run
 from gsseg.edits import Selection, edit_run, select
 from gsseg.render import Backend, get_backend
-from gsseg.render_views import render_run
-from gsseg.run import Run, load_run
+from gsseg.render.views import render_run
+from gsseg.run.loaded import Run, load_run
 from gsseg.segment.clicks import Click
 from gsseg.segment.label_options import LabelOptions
 from gsseg.segment.reassign import Segmentation
 from gsseg.segment.segment_run import run_regions, segment_run
-from gsseg.train import TrainConfig, train
+from gsseg.train.config import TrainConfig
+from gsseg.train.trainer import train
 from hqmask.build import BuildConfig, build_masks
 from pipeline.demo_options import DemoOptions
 

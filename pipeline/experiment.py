@@ -27,11 +27,12 @@ from eval.evaluate import evaluate
 from eval.metrics import matched_miou, mean_iou, psnr, ssim
 from gsseg.render import Backend, to_uint8
 from gsseg.render.pixel_labels import classify_pixels
-from gsseg.run import load_run
-from gsseg.run_folder import RunFolder
+from gsseg.run.folder import RunFolder
+from gsseg.run.loaded import load_run
 from gsseg.segment.label_options import LabelOptions
 from gsseg.segment.segment_run import label_gaussians, mask_contributions
-from gsseg.train import TrainConfig, train
+from gsseg.train.config import TrainConfig
+from gsseg.train.trainer import train
 from hqmask.build import BuildConfig, build_masks
 
 

@@ -44,7 +44,7 @@ from eval.evaluate import PROTOCOLS
 from eval.report import markdown_table
 from gsseg.render import Backend, get_backend
 from gsseg.segment.label_options import LabelOptions
-from gsseg.train import TrainConfig
+from gsseg.train.config import TrainConfig
 from hqmask.build import clean_scene_masks
 from hqmask.cleanup import PAPER_MIN_AREA
 from pipeline.experiment import (

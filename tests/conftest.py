@@ -42,7 +42,8 @@ def scene_copy(small_scene, tmp_path) -> Path:
 @pytest.fixture(scope="session")
 def trained(small_scene, tmp_path_factory) -> Path:
     """The run folder of ``small_scene`` trained for 200 CPU iterations (read-only)."""
-    from gsseg.train import TrainConfig, train
+    from gsseg.train.config import TrainConfig
+    from gsseg.train.trainer import train
 
     run = tmp_path_factory.mktemp("runs") / "fit"
     train(small_scene.root, run, TrainConfig(iters=200, backend="cpu"), progress=False)

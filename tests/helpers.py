@@ -18,7 +18,7 @@ from dataset_tools.infra.atomic import write_bytes_atomic
 from dataset_tools.mask_manifest import MANIFEST, manifest_bytes
 from dataset_tools.scene import GT_MASKS, MASKS
 from dataset_tools.synth import SynthConfig, SynthResult, generate_scene
-from gsseg.gaussians import Gaussians
+from gsseg.model.gaussians import Gaussians
 
 
 def run(*args: str, **kwargs) -> subprocess.CompletedProcess:

@@ -12,7 +12,7 @@ importing ``a.b.c`` from outside ``a.b`` also runs ``a/b/__init__.py``, so it co
 import of ``a.b`` too (a package whose ``__init__`` imports back into its importer is a
 circle, however far the names lie apart).
 
-The run folder has one owner, ``gsseg/run_folder.py``: no other module reads or writes a
+The run folder has one owner, ``gsseg/run/folder.py``: no other module reads or writes a
 run's files.
 """
 
@@ -177,14 +177,14 @@ def run_file_access(source: str) -> list[int]:
 
 
 def test_only_the_run_folder_module_opens_run_files():
-    owner = ROOT / "gsseg" / "run_folder.py"
+    owner = ROOT / "gsseg" / "run" / "folder.py"
     found = [
         f"{path.relative_to(ROOT)}:{line}"
         for path in modules().values()
         if path != owner
         for line in run_file_access(path.read_text())
     ]
-    assert not found, "run files opened outside gsseg/run_folder.py:\n" + "\n".join(found)
+    assert not found, "run files opened outside gsseg/run/folder.py:\n" + "\n".join(found)
 
 
 def test_the_run_file_checker_sees_reads_writes_and_joined_names():

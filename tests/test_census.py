@@ -107,7 +107,7 @@ def _damage_runs(world: Path) -> None:
     (variant("junk_classifier") / "classifier.pt").write_bytes(b"garbage" * 10)
     ply = variant("cut_ply") / "gaussians.ply"
     ply.write_bytes(ply.read_bytes()[:300])
-    from gsseg.ply import read_ply, write_ply
+    from gsseg.model.ply import read_ply, write_ply
 
     g = read_ply(run / "gaussians.ply")
     g.means[0, 0] = float("nan")
@@ -153,7 +153,8 @@ def world(tmp_path_factory) -> Path:
     damaged copy of each for every way a file can be wrong."""
     from eval.report import report_run
     from gsseg.segment.segment_run import segment_run
-    from gsseg.train import TrainConfig, train
+    from gsseg.train.config import TrainConfig
+    from gsseg.train.trainer import train
 
     world = tmp_path_factory.mktemp("world")
     scene = scene_with_exact_masks(SynthConfig(views=6, res=64, objects=3, seed=2), world / "scene").root

@@ -78,7 +78,7 @@ def test_failed_work_is_one_line_and_exit_1_and_bad_input_exit_2():
 
     from dataset_tools.infra.cli_support import _failure
     from dataset_tools.infra.errors import InputError
-    from gsseg.train import TrainingDiverged
+    from gsseg.train.trainer import TrainingDiverged
 
     message, code = _failure(TrainingDiverged(12, float("nan"), Path("run/checkpoints/step_0000010.pt")), "gsseg")
     assert code == 1 and message.startswith("error: training diverged at step 12") and "\n" not in message

@@ -20,11 +20,11 @@ from dataset_tools.image_files import encode_png
 from dataset_tools.infra.atomic import write_bytes_atomic
 from dataset_tools.infra.errors import InputError
 from dataset_tools.scene import load_scene
-from gsseg.gaussians import gaussians_from_points
-from gsseg.ply import read_ply
+from gsseg.model.gaussians import gaussians_from_points
+from gsseg.model.ply import read_ply
 from gsseg.render.contributions import RegionWeights
 from gsseg.render.pixel_labels import segment_pixels
-from gsseg.run import load_run
+from gsseg.run.loaded import load_run
 from gsseg.segment.clicks import ClickEvidence, ClickSelector
 from gsseg.segment.segment_run import segment_run
 from gsseg.segment.served import complete_selection

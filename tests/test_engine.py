@@ -85,7 +85,7 @@ def test_one_scene_has_its_views_proposed_by_ray_workers_as_here(ray_engine, sma
     view = load_scene(small_scene.root).views[0]
     with pytest.raises(InputError, match="encoder.onnx: missing"):
         ray_engine.map_stateful(
-            functools.partial(make_proposer, "sam-hq", str(tmp_path / "no-model")),
+            functools.partial(make_proposer, BuildConfig(proposer="sam-hq", model=str(tmp_path / "no-model"))),
             propose_view,
             [(view.load_image(), view, None, None, None)],
             progress=False,

@@ -11,10 +11,10 @@ from helpers import numba_threads
 from dataset_tools.cameras import PinholeCamera
 from dataset_tools.infra.errors import InputError
 from dataset_tools.synth.camera_paths import look_at, orbit
-from gsseg.environment import Environment, background_image, mean_up, profile_bins, ray_directions
-from gsseg.gaussians import Gaussians
+from gsseg.model.environment import Environment, background_image, mean_up, profile_bins, ray_directions
+from gsseg.model.gaussians import Gaussians
+from gsseg.model.sh import C0, C1
 from gsseg.render import render
-from gsseg.sh import C0, C1
 
 CAMERA = PinholeCamera(width=8, height=6, fx=10.0, fy=10.0, cx=4.0, cy=3.0)
 
@@ -204,8 +204,8 @@ def test_runs_carry_their_environment_to_the_renderers(small_scene, trained, tmp
     from dataset_tools import load_scene
     from dataset_tools.image_files import read_image
     from gsseg.render import to_uint8
-    from gsseg.render_views import render_run
-    from gsseg.run import load_run
+    from gsseg.render.views import render_run
+    from gsseg.run.loaded import load_run
 
     run = load_run(trained)
     assert run.environment is not None and run.environment.degree == 3 and run.environment.profile is not None

@@ -14,7 +14,7 @@ from dataset_tools.infra.cli_support import WordedError, flag_spelling, word_err
 from dataset_tools.infra.errors import InputError, OptionError, OutputExists
 from dataset_tools.synth import SynthConfig
 from gsseg.segment.label_options import LabelOptions
-from gsseg.train import TrainConfig
+from gsseg.train.config import TrainConfig
 
 ROOT = Path(__file__).resolve().parents[1]
 LIBRARY = ("dataset_tools", "hqmask", "gsseg", "eval", "pipeline")

@@ -20,13 +20,14 @@ from dataset_tools.scene import load_scene
 from eval.evaluate import score_views
 from eval.metrics import binary_scores, psnr, ssim
 from eval.renders import ViewRenders, render_view
-from gsseg.gaussians import Gaussians, make_classifier
+from gsseg.model.gaussians import Gaussians, make_classifier
 from gsseg.render.pixel_labels import segment_pixels
-from gsseg.render_views import render_run
-from gsseg.run import Run
-from gsseg.run_folder import RunFolder
+from gsseg.render.views import render_run
+from gsseg.run.folder import RunFolder
+from gsseg.run.loaded import Run
+from gsseg.run.record import RunRecord
 from gsseg.segment.reassign import Segmentation
-from gsseg.train_config import RunRecord, TrainConfig
+from gsseg.train.config import TrainConfig
 
 
 def script(name: str) -> str:

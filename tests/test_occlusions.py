@@ -156,7 +156,7 @@ def test_a_depth_map_of_the_wrong_size_is_refused_naming_it(small_scene, scene_c
 def test_the_rendered_depth_of_a_run_is_the_scenes(trained, small_scene, tmp_path):
     """``gsseg render --what depth`` of the 200-iteration test run against the generator's
     exact depth: the median relative error where both see a surface."""
-    from gsseg.render_views import render_run
+    from gsseg.render.views import render_run
 
     out = render_run(
         trained, small_scene.root, tmp_path / "r", split="all", what=("depth",), backend="cpu", progress=False

@@ -233,9 +233,9 @@ def _passed(group: click.Group, argv: list[str]) -> tuple[tuple, dict]:
 def test_gsseg_train_makes_the_config_python_makes(monkeypatch, tmp_path, argv, python):
     """``schedule="auto"`` is resolved by the config itself: ``--backend gsplat`` from the
     command line and ``TrainConfig(backend="gsplat")`` both get the paper's schedule."""
-    from gsseg.train_config import TrainConfig
+    from gsseg.train.config import TrainConfig
 
-    _capture(monkeypatch, "gsseg.train.train")
+    _capture(monkeypatch, "gsseg.train.trainer.train")
     (_, _, cfg), kwargs = _passed(gsseg_cli, ["train", str(tmp_path), "--out", str(tmp_path / "run"), *argv])
     assert cfg == TrainConfig(**python)
     assert kwargs["given"] == set(python)
@@ -334,7 +334,7 @@ def test_no_command_lost_a_flag():
 
 def test_the_helps_show_the_dataclasses_defaults():
     from gsseg.segment.label_options import LabelOptions
-    from gsseg.train_config import TrainConfig
+    from gsseg.train.config import TrainConfig
     from hqmask.build_options import BuildConfig
 
     def help_of(group: click.Group, command: str) -> str:

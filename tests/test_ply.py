@@ -9,7 +9,7 @@ from helpers import random_gaussians
 from plyfile import PlyData, PlyElement
 
 from dataset_tools.infra.errors import InputError
-from gsseg.ply import read_ply, write_ply
+from gsseg.model.ply import read_ply, write_ply
 
 
 def test_round_trip_is_exact(tmp_path):
@@ -70,7 +70,7 @@ def test_a_ply_with_a_one_byte_property_loads(tmp_path):
 
 
 def test_gaussians_with_a_wrong_shape_or_dtype_are_refused_naming_the_field():
-    from gsseg.gaussians import Gaussians
+    from gsseg.model.gaussians import Gaussians
 
     g = random_gaussians(5, 0)
     with pytest.raises(ValueError, match=r"Gaussians\.quats: shape \(5, 3\), expected \('N', 4\), N = 5"):

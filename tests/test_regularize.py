@@ -7,7 +7,7 @@ import numpy as np
 import torch
 
 from gsseg.render.contributions import Contributions
-from gsseg.run_folder import RunFolder
+from gsseg.run.folder import RunFolder
 from gsseg.segment.reassign import Segmentation
 from gsseg.segment.regularize import fill_interiors, smooth_weak_labels, weak_evidence
 

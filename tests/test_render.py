@@ -11,7 +11,7 @@ import torch
 from helpers import GEOMETRY, look_down_z, output_weights, random_gaussians, weighted_sum
 
 from dataset_tools.cameras import PinholeCamera
-from gsseg.gaussians import Gaussians
+from gsseg.model.gaussians import Gaussians
 from gsseg.render import BACKENDS, cpu_kernels, get_backend, render
 from gsseg.render.cpu_projection import project_gaussians_cpu
 from gsseg.render.projection import project_gaussians

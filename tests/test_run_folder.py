@@ -1,4 +1,4 @@
-"""The run folder's files (:mod:`gsseg.run_folder`): each round-trips through its reader and
+"""The run folder's files (:mod:`gsseg.run.folder`): each round-trips through its reader and
 writer with its format version; files from before versions were recorded still read; a file
 from a newer version, or a damaged one, is refused in one sentence naming it."""
 
@@ -12,7 +12,7 @@ import torch
 
 from dataset_tools.infra.errors import InputError
 from gsseg.render.contributions import Contributions
-from gsseg.run_folder import FORMAT_VERSIONS, RunFolder, read_edit_record, write_edit_record
+from gsseg.run.folder import FORMAT_VERSIONS, RunFolder, read_edit_record, write_edit_record
 from gsseg.segment.reassign import Segmentation
 
 

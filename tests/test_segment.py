@@ -11,11 +11,11 @@ import torch
 from dataset_tools.cameras import PinholeCamera
 from dataset_tools.infra.errors import InputError
 from gsseg.edits import apply_edit
-from gsseg.gaussians import Gaussians
-from gsseg.ply import read_ply
+from gsseg.model.gaussians import Gaussians
+from gsseg.model.ply import read_ply
 from gsseg.render import BACKENDS, render
 from gsseg.render.contributions import Contributions, MaskedView, contribution_matrix
-from gsseg.run_folder import RunFolder
+from gsseg.run.folder import RunFolder
 from gsseg.segment.label_options import LabelOptions
 from gsseg.segment.prompts import object_at_point
 from gsseg.segment.reassign import reassign
@@ -235,7 +235,8 @@ def test_segment_votes_with_the_masks_the_run_was_trained_on(segmented, scene_co
 def test_a_run_trained_on_colour_alone_segments_only_with_masks_named(small_scene, tmp_path):
     """No fallback to the scene's ``object_mask`` (a synthetic scene's ground truth)."""
     from gsseg.segment.segment_run import segment_run
-    from gsseg.train import TrainConfig, train
+    from gsseg.train.config import TrainConfig
+    from gsseg.train.trainer import train
 
     run = tmp_path / "colour"
     train(small_scene.root, run, TrainConfig(iters=3, masks=None, backend="cpu"), progress=False)

@@ -10,8 +10,8 @@ import pytest
 import torch
 from scipy.special import lpmv
 
-from gsseg.sh import eval_sh, sh_basis
-from gsseg.sh_cpu import eval_sh_cpu
+from gsseg.model.sh import eval_sh, sh_basis
+from gsseg.model.sh_cpu import eval_sh_cpu
 
 
 def fibonacci_sphere(n: int) -> np.ndarray:

@@ -14,14 +14,14 @@ from helpers import GEOMETRY, random_gaussians
 from dataset_tools.image_files import read_mask
 from dataset_tools.infra.errors import InputError
 from dataset_tools.scene import load_scene
-from gsseg.ply import read_ply
-from gsseg.render_views import render_run
-from gsseg.train import TrainConfig, TrainingDiverged, train
+from gsseg.model.ply import read_ply
+from gsseg.render.views import render_run
 from gsseg.train import trainer as trainer_module
+from gsseg.train.config import SCHEDULES, LearningRates, TrainConfig
 from gsseg.train.optim import GaussianOptimizer
 from gsseg.train.strategy import DensifyOptions, DensifyStats, densify_and_prune
+from gsseg.train.trainer import TrainingDiverged, train
 from gsseg.train.views import TrainViews, view_bytes
-from gsseg.train_config import SCHEDULES, LearningRates
 
 
 def _history(run):

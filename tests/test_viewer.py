@@ -26,12 +26,12 @@ from dataset_tools.infra.errors import InputError
 from dataset_tools.scene import load_scene
 from eval.standard_render import read_splats, render_reference
 from gsseg.export import export_run, read_splat, splat_records
-from gsseg.ply import read_ply
-from gsseg.run import load_run
+from gsseg.model.ply import read_ply
+from gsseg.model.sh import C0
+from gsseg.run.loaded import load_run
 from gsseg.segment.label_options import LabelOptions
 from gsseg.segment.segment_run import segment_run
 from gsseg.segment.served import complete_selection
-from gsseg.sh import C0
 from gsseg.viewer.session import ViewCamera, ViewerSession, browser_camera
 
 CHROMIUM, CHROMEDRIVER = shutil.which("chromium"), shutil.which("chromedriver")

@@ -14,10 +14,10 @@ import numpy as np
 import torch
 
 from dataset_tools.cameras import PinholeCamera
-from gsseg.gaussians import Gaussians
+from gsseg.model.gaussians import Gaussians
+from gsseg.model.sh import MAX_DEGREE, eval_sh
+from gsseg.model.sh_cpu import eval_sh_cpu
 from gsseg.render.backends import BACKENDS, Backend, get_backend
-from gsseg.sh import MAX_DEGREE, eval_sh
-from gsseg.sh_cpu import eval_sh_cpu
 
 __all__ = ["BACKENDS", "Backend", "RenderOutput", "get_backend", "render", "surface_depth", "to_uint8"]
 
@@ -79,7 +79,7 @@ def render(
         cam_from_world: (3, 4) or (4, 4) world-to-camera transform.
         sh_degree: SH bands used for colour, 0..3.
         background: what lies behind the Gaussians, a (3,) colour or an (H, W, 3) image (e.g.
-            a learned :class:`gsseg.environment.Environment`); black when None.
+            a learned :class:`gsseg.model.environment.Environment`); black when None.
         with_features: also blend the 16-d object features.
         feature_geometry_grad: let gradients of the features reach the geometry (means,
             rotations, scales, opacities, and ``means2d``, hence densification); when False

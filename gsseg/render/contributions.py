@@ -20,7 +20,7 @@ import torch
 from tqdm import tqdm
 
 from dataset_tools.cameras import PinholeCamera
-from gsseg.gaussians import Gaussians
+from gsseg.model.gaussians import Gaussians
 from gsseg.render.backends import Backend, get_backend
 
 

@@ -7,7 +7,7 @@ import numpy as np
 import torch
 
 from dataset_tools.cameras import PinholeCamera
-from gsseg.gaussians import Gaussians
+from gsseg.model.gaussians import Gaussians
 from gsseg.render import Backend, render
 
 

@@ -46,9 +46,9 @@ from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 
 from dataset_tools.infra.errors import InputError, OptionError
-from gsseg.gaussians import Gaussians
+from gsseg.model.gaussians import Gaussians
+from gsseg.model.sh import C0
 from gsseg.render.contributions import RegionWeights
-from gsseg.sh import C0
 
 HARD = 1e9  # the capacity that pins a seed to its side of the cut
 

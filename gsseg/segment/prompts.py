@@ -8,7 +8,7 @@ from scipy.spatial import cKDTree
 
 from dataset_tools.cameras import PinholeCamera
 from dataset_tools.infra.errors import InputError
-from gsseg.gaussians import Gaussians
+from gsseg.model.gaussians import Gaussians
 from gsseg.render import Backend, get_backend, render
 from gsseg.segment.clicks import ClickEvidence
 

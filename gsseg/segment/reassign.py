@@ -30,7 +30,7 @@ class Segmentation:
         labels: (N,) uint8 label of every Gaussian.
         objects: (M,) uint8 object IDs (mask labels other than 0).
         selections: (M, N) bool, Gaussians selected for each object.
-        model: the fingerprint of the model labelled (:attr:`gsseg.run.Run.fingerprint`),
+        model: the fingerprint of the model labelled (:attr:`gsseg.run.loaded.Run.fingerprint`),
             "" when unknown.
         smooth, fill: the 3D regularisations applied after the reassignment
             (:mod:`gsseg.segment.regularize`; 0 and False: none).

@@ -8,7 +8,7 @@ from pathlib import Path
 from dataset_tools.infra.errors import OptionError
 from gsseg.render import Backend
 from gsseg.render.contributions import Contributions, RegionWeights, contribution_matrix
-from gsseg.run import Run, load_run
+from gsseg.run.loaded import Run, load_run
 from gsseg.segment.label_options import LabelOptions
 from gsseg.segment.reassign import Segmentation, classifier_prior, reassign
 from gsseg.segment.regularize import fill_interiors, smooth_weak_labels, weak_evidence

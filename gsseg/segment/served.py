@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from gsseg.gaussians import Gaussians
+from gsseg.model.gaussians import Gaussians
 from gsseg.render import Backend, get_backend
 from gsseg.render.contributions import Masked, MaskedView, contribution_matrix
 from gsseg.render.pixel_labels import segment_pixels

@@ -1,6 +1,4 @@
-"""Joint training of 3D-GS and per-Gaussian object features."""
-
-from gsseg.train.trainer import TrainingDiverged, TrainResult, train
-from gsseg.train_config import TrainConfig
-
-__all__ = ["TrainConfig", "TrainResult", "TrainingDiverged", "train"]
+"""Joint training of 3D-GS and per-Gaussian object features: the options and schedules
+(:mod:`~gsseg.train.config`), the trainer, its losses, optimiser, densification strategy and
+views. The package loads nothing itself: the command lines read the options without the
+trainer."""

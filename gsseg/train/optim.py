@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import torch
 
-from gsseg.gaussians import Gaussians
-from gsseg.train_config import LearningRates
+from gsseg.model.gaussians import Gaussians
+from gsseg.train.config import LearningRates
 
 
 class GaussianOptimizer:

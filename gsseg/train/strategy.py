@@ -9,11 +9,11 @@ from dataclasses import dataclass, field
 
 import torch
 
-from gsseg.gaussians import Gaussians
+from gsseg.model.gaussians import Gaussians
 from gsseg.render import RenderOutput
 from gsseg.render.projection import quat_to_rotmat
+from gsseg.train.config import Schedule
 from gsseg.train.optim import GaussianOptimizer
-from gsseg.train_config import Schedule
 
 
 @dataclass
@@ -42,21 +42,37 @@ class DensifyStats:
 
 @dataclass(frozen=True)
 class DensifyOptions:
-    """The thresholds of 3D-GS: positional gradient, the size (share of ``extent``) that tells
-    a clone from a split, the opacity under which a Gaussian is pruned, and the cap."""
+    """The thresholds of 3D-GS's adaptive density control.
+
+    Attributes:
+        grad_threshold: mean NDC positional gradient over which a Gaussian is densified.
+        percent_dense: the size, as a share of ``extent``, that tells a clone (smaller) from
+            a split (larger).
+        prune_opacity: opacity under which a Gaussian is pruned.
+        extent: the scene's scale (:attr:`gsseg.run.record.RunRecord.extent`).
+        max_gaussians: densification adds no Gaussian past this count.
+        split_shrink: a split's two children are the parent's size divided by this.
+        prune_screen_radius: with ``prune_large``, Gaussians seen larger than this many pixels
+            (radius) are pruned.
+        prune_world_share: with ``prune_large``, Gaussians wider than this share of ``extent``
+            are pruned.
+    """
 
     grad_threshold: float
     percent_dense: float
     prune_opacity: float
     extent: float
     max_gaussians: int
+    split_shrink: float = 1.6
+    prune_screen_radius: float = 20.0
+    prune_world_share: float = 0.1
 
 
 def densify_and_prune(
     opt: GaussianOptimizer, stats: DensifyStats, options: DensifyOptions, prune_large: bool, generator: torch.Generator
 ) -> None:
-    """One densification step; ``prune_large`` also removes Gaussians over 20 px on screen or
-    wider than 10% of the scene (3D-GS does that after the first opacity reset)."""
+    """One densification step; ``prune_large`` also removes Gaussians larger on screen or in
+    the scene than ``options`` allow (3D-GS does that after the first opacity reset)."""
     g = opt.gaussians.detach()
     grads = stats.grad_sum / stats.count.clamp_min(1)
     scales = g.scales.max(dim=1).values
@@ -77,7 +93,7 @@ def densify_and_prune(
         offsets = (quat_to_rotmat(s.quats) @ samples[..., None]).squeeze(-1)  # (2, n, 3)
         children = Gaussians(**{k: torch.cat([v, v]) for k, v in s.tensors().items()})
         children.means = (s.means + offsets).reshape(-1, 3)
-        children.log_scales = torch.log(s.scales / 1.6).repeat(2, 1)
+        children.log_scales = torch.log(s.scales / options.split_shrink).repeat(2, 1)
         grown = Gaussians(
             **{
                 k: torch.cat([a, b])
@@ -92,7 +108,9 @@ def densify_and_prune(
     prune[: len(g)] |= split  # split parents are replaced by their children
     if prune_large:
         radii = torch.cat([stats.max_radii, stats.max_radii.new_zeros(len(grown))])
-        prune |= (radii > 20) | (now.scales.max(dim=1).values > 0.1 * options.extent)
+        prune |= (radii > options.prune_screen_radius) | (
+            now.scales.max(dim=1).values > options.prune_world_share * options.extent
+        )
     opt.keep(~prune)
     fresh = DensifyStats.zeros(len(opt), stats.count.device)
     stats.grad_sum, stats.count, stats.max_radii = fresh.grad_sum, fresh.count, fresh.max_radii

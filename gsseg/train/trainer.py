@@ -32,20 +32,21 @@ from dataset_tools.infra.interrupts import Interrupted, stop_requests
 from dataset_tools.infra.locks import shared_folder
 from dataset_tools.infra.overlap import refuse_overlap, scene_entries
 from dataset_tools.scene import Scene, View, load_scene
-from gsseg.environment import Environment, background_image, mean_up, profile_bins
-from gsseg.environment_cpu import ENVIRONMENT_KERNELS
-from gsseg.gaussians import Gaussians, gaussians_from_points, make_classifier, random_points
+from gsseg.model.environment import Environment, background_image, mean_up, profile_bins
+from gsseg.model.environment_cpu import ENVIRONMENT_KERNELS
+from gsseg.model.gaussians import Gaussians, gaussians_from_points, make_classifier, random_points
+from gsseg.model.sh_cpu import SH_KERNELS
 from gsseg.render import Backend, RenderOutput, get_backend, render
 from gsseg.render.cpu_kernels import STEP_KERNELS, compiled_on_disk
 from gsseg.render.cpu_projection import PROJECTION_KERNELS
-from gsseg.run_folder import RunFolder, write_torch
-from gsseg.sh_cpu import SH_KERNELS
+from gsseg.run.folder import RunFolder, write_torch
+from gsseg.run.record import RunRecord, scene_difference
+from gsseg.train.config import TrainConfig
 from gsseg.train.losses import knn_identity_loss, object_loss, photometric_loss, psnr_from_mse, sample_pixels
 from gsseg.train.optim import GaussianOptimizer
 from gsseg.train.ssim_cpu import SSIM_KERNELS, mean_ssim_cpu
 from gsseg.train.strategy import DensifyOptions, DensifyStrategy
 from gsseg.train.views import TrainView, TrainViews, camera_extent
-from gsseg.train_config import RunRecord, TrainConfig, scene_difference
 
 LOG_EVERY = 10
 KEEP_CHECKPOINTS = 2

@@ -23,7 +23,7 @@ from scipy.spatial.transform import Rotation
 from dataset_tools.image_files import label_palette
 from dataset_tools.infra.errors import InputError, OptionError
 from dataset_tools.infra.interrupts import Interrupted, stop_requests
-from gsseg.run import load_run
+from gsseg.run.loaded import load_run
 from gsseg.segment.label_options import METHODS
 from gsseg.viewer.session import ViewCamera, ViewerSession, browser_camera
 

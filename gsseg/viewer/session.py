@@ -18,17 +18,17 @@ from dataset_tools.cameras import PinholeCamera
 from dataset_tools.image_files import label_palette
 from dataset_tools.infra.errors import InputError
 from gsseg.edits import COMPLETED_OPS, apply_edit, check_edit, edit_background, write_edit
-from gsseg.gaussians import Gaussians
+from gsseg.model.gaussians import Gaussians
+from gsseg.model.sh import rgb_to_sh_dc
 from gsseg.render import get_backend
 from gsseg.render.contributions import Contributions
-from gsseg.run import Run
+from gsseg.run.loaded import Run
 from gsseg.segment.clicks import ClickEvidence, ClickSelector
 from gsseg.segment.label_options import LabelOptions
 from gsseg.segment.prompts import click_weights
 from gsseg.segment.reassign import Segmentation
 from gsseg.segment.segment_run import label_gaussians, mask_contributions, run_regions
 from gsseg.segment.served import complete_selection
-from gsseg.sh import rgb_to_sh_dc
 
 HIGHLIGHT = (1.0, 0.85, 0.0)  # the selected object is drawn halfway towards this colour
 

@@ -19,8 +19,8 @@ from plyfile import PlyData, PlyElement
 
 from dataset_tools.infra.atomic import write_bytes_atomic
 from dataset_tools.infra.errors import InputError
-from gsseg.gaussians import OBJ_FEAT_DIM, Gaussians
-from gsseg.sh import MAX_DEGREE, num_coeffs
+from gsseg.model.gaussians import OBJ_FEAT_DIM, Gaussians
+from gsseg.model.sh import MAX_DEGREE, num_coeffs
 
 REQUIRED = (
     "x",

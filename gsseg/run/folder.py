@@ -40,12 +40,12 @@ from dataset_tools.infra.atomic import write_bytes_atomic
 from dataset_tools.infra.errors import InputError
 from dataset_tools.infra.locks import exclusive
 from dataset_tools.infra.names import plain_name
-from gsseg.environment import Environment
-from gsseg.gaussians import Gaussians, make_classifier
-from gsseg.ply import read_ply, write_ply
+from gsseg.model.environment import Environment
+from gsseg.model.gaussians import Gaussians, make_classifier
+from gsseg.model.ply import read_ply, write_ply
 from gsseg.render.contributions import Contributions, RegionWeights
+from gsseg.run.record import RunRecord
 from gsseg.segment.reassign import Segmentation
-from gsseg.train_config import RunRecord
 
 FORMAT_VERSIONS = {
     "config.json": 1,

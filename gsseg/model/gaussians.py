@@ -8,7 +8,7 @@ import numpy as np
 import torch
 from scipy.spatial import cKDTree
 
-from gsseg.sh import MAX_DEGREE, num_coeffs, rgb_to_sh_dc
+from gsseg.model.sh import MAX_DEGREE, num_coeffs, rgb_to_sh_dc
 
 OBJ_FEAT_DIM = 16
 

@@ -1,6 +1,6 @@
 """The environment's background image on the CPU: numba kernels for it and its gradient.
 
-The same image as :meth:`gsseg.environment.Environment.image_torch`, the torch reference the
+The same image as :meth:`gsseg.model.environment.Environment.image_torch`, the torch reference the
 tests compare with, computed pixel by pixel without the (H W, 16) table of SH basis values
 that the tensor version builds: each pixel's ray direction, its SH colour (offset by 0.5 and
 clamped at 0, as 3D-GS's colours are) and its elevation profile colour. The backward pass
@@ -18,7 +18,7 @@ import numpy as np
 import torch
 
 from dataset_tools.cameras import PinholeCamera
-from gsseg.sh_cpu import sh_basis_at, sh_channel
+from gsseg.model.sh_cpu import sh_basis_at, sh_channel
 
 ROW_BLOCK = 8  # rows whose gradients one block sums before the blocks are summed in order
 

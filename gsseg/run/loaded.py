@@ -15,12 +15,13 @@ from dataset_tools.cameras import PinholeCamera
 from dataset_tools.infra.errors import InputError, OptionError
 from dataset_tools.infra.overlap import Protected, run_inputs, scene_entries
 from dataset_tools.scene import Scene, load_scene
-from gsseg.environment import Environment, background_image
-from gsseg.gaussians import Gaussians
+from gsseg.model.environment import Environment, background_image
+from gsseg.model.gaussians import Gaussians
 from gsseg.render import Backend, RenderOutput, get_backend, render, to_uint8
-from gsseg.run_folder import RunFolder
+from gsseg.run.folder import RunFolder
+from gsseg.run.record import RunRecord, scene_difference
 from gsseg.segment.reassign import Segmentation
-from gsseg.train_config import RunRecord, TrainConfig, scene_difference
+from gsseg.train.config import TrainConfig
 
 Background = Literal["environment", "white", "black"]
 

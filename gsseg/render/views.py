@@ -15,7 +15,7 @@ from dataset_tools.infra.errors import OptionError, OutputExists
 from dataset_tools.infra.overlap import refuse_overlap
 from gsseg.render import Backend, get_backend, surface_depth, to_uint8
 from gsseg.render.pixel_labels import classify_pixels, segment_pixels
-from gsseg.run import load_run
+from gsseg.run.loaded import load_run
 
 PRODUCTS = ("rgb", "labels", "segments", "depth")
 

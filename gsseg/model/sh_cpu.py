@@ -1,4 +1,4 @@
-"""The Gaussians' SH colours on the CPU: numba kernels for :func:`gsseg.sh.eval_sh` with one
+"""The Gaussians' SH colours on the CPU: numba kernels for :func:`gsseg.model.sh.eval_sh` with one
 set of coefficients per direction, and its gradient with respect to the coefficients and
 the directions (through which the colour's gradient reaches the Gaussians' positions).
 
@@ -13,12 +13,12 @@ import numba
 import numpy as np
 import torch
 
-from gsseg.sh import C0, C1, C2, C3
+from gsseg.model.sh import C0, C1, C2, C3
 
 
 @numba.njit(inline="always")
 def sh_basis_at(x, y, z, out):
-    """The 16 SH basis values at (x, y, z), in the order and signs of :func:`gsseg.sh.sh_basis`."""
+    """The 16 SH basis values at (x, y, z), in the order and signs of :func:`gsseg.model.sh.sh_basis`."""
     xx, yy, zz, xy, yz, xz = x * x, y * y, z * z, x * y, y * z, x * z
     out[0] = C0
     out[1], out[2], out[3] = -C1 * y, C1 * z, -C1 * x
@@ -137,7 +137,7 @@ class _EvalSH(torch.autograd.Function):
 
 
 def eval_sh_cpu(degree: int, coeffs: torch.Tensor, dirs: torch.Tensor) -> torch.Tensor:
-    """:func:`gsseg.sh.eval_sh` for float32 CPU coefficients (N, K, 3) and unit directions
+    """:func:`gsseg.model.sh.eval_sh` for float32 CPU coefficients (N, K, 3) and unit directions
     (N, 3): (N, 3) colours, differentiable in both."""
     n_k = (degree + 1) ** 2
     if coeffs.shape[1] < n_k:

@@ -23,9 +23,9 @@ import torch
 
 from dataset_tools.cameras import PinholeCamera
 from dataset_tools.infra.errors import OptionError
-from gsseg.environment_cpu import environment_image_cpu
-from gsseg.gaussians import OBJ_FEAT_DIM, Gaussians
-from gsseg.sh import eval_sh, num_coeffs, rgb_to_sh_dc
+from gsseg.model.environment_cpu import environment_image_cpu
+from gsseg.model.gaussians import OBJ_FEAT_DIM, Gaussians
+from gsseg.model.sh import eval_sh, num_coeffs, rgb_to_sh_dc
 
 
 def ray_directions(camera: PinholeCamera, cam_from_world: torch.Tensor) -> torch.Tensor:
@@ -113,7 +113,7 @@ class Environment(torch.nn.Module):
 
     def forward(self, camera: PinholeCamera, cam_from_world: torch.Tensor) -> torch.Tensor:
         """The background image of one camera, (H, W, 3): for float32 on the CPU by the numba
-        kernels of :mod:`gsseg.environment_cpu` (the same image and gradients without the
+        kernels of :mod:`gsseg.model.environment_cpu` (the same image and gradients without the
         per-pixel tables), else by :meth:`image_torch`."""
         if self.coeffs.device.type == "cpu" and self.coeffs.dtype == torch.float32:
             up = self.up if self.profile is not None else None
