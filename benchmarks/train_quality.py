@@ -69,6 +69,12 @@ def main() -> None:
         help="Train without the environment's elevation profile (SH only).",
     )
     parser.add_argument(
+        "--environment-smoothing",
+        type=float,
+        default=TrainConfig.environment_smoothing,
+        help="Weight of the elevation profile's total variation.",
+    )
+    parser.add_argument(
         "--coupled", action="store_true", help="Also train each orbit run with the object loss shaping the geometry."
     )
     parser.add_argument("--tag", default="", help="Suffix of the default JSON file name.")
@@ -87,7 +93,12 @@ def main() -> None:
             for seed in train_seeds:
                 name = f"orbit_{backend}" + (f"_seed{seed}" if seed else "")
                 cfg = TrainConfig(
-                    iters=args.iters, masks=GT_MASKS, backend=backend, seed=seed, environment_profile=args.profile
+                    iters=args.iters,
+                    masks=GT_MASKS,
+                    backend=backend,
+                    seed=seed,
+                    environment_profile=args.profile,
+                    environment_smoothing=args.environment_smoothing,
                 )
                 runs.append(results.setdefault(name, train_and_score(synth, work / name, cfg)))
                 if args.coupled:
@@ -100,12 +111,23 @@ def main() -> None:
                     for stat, fn in (("mean", lambda xs: sum(xs) / len(xs)), ("min", min), ("max", max))
                 }
         if args.gpu_schedule:
-            cfg = TrainConfig(schedule="gpu", masks=GT_MASKS, backend="gsplat", environment_profile=args.profile)
+            cfg = TrainConfig(
+                schedule="gpu",
+                masks=GT_MASKS,
+                backend="gsplat",
+                environment_profile=args.profile,
+                environment_smoothing=args.environment_smoothing,
+            )
             results["orbit_gsplat_gpu_schedule"] = train_and_score(synth, work / "orbit_gpu", cfg)
         if args.beer:
             for backend in backends:
                 cfg = TrainConfig(
-                    iters=args.iters, backend=backend, images="images_4", masks=None, environment_profile=args.profile
+                    iters=args.iters,
+                    backend=backend,
+                    images="images_4",
+                    masks=None,
+                    environment_profile=args.profile,
+                    environment_smoothing=args.environment_smoothing,
                 )
                 results[f"beer_{backend}"] = train_and_score(args.beer, work / f"beer_{backend}", cfg)
     results = {"runs": results, "setup": {k: str(v) if isinstance(v, Path) else v for k, v in vars(args).items()}}

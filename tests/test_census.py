@@ -606,15 +606,17 @@ def test_an_error_after_a_progress_bar_starts_on_its_own_line(world, tmp_path):
 def test_a_first_run_on_an_empty_kernel_cache_gives_the_bits_of_every_later_run(world, tmp_path):
     """numba's kernels compiled in a process round unlike the same kernels loaded from its
     cache; the trainer fills an empty cache from a child process and loads from it, so a
-    machine's first run equals the runs after it, a stop and resume included."""
+    machine's first run equals the runs after it: a run stopped on an empty cache and resumed
+    equals an uninterrupted run on the cache it filled."""
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache"), "TQDM_DISABLE": "1"}
-    first = subprocess.run(_train_command(world / "scene", tmp_path / "first"), env=env, capture_output=True, text=True)
-    assert first.returncode == 0, first.stderr
-    later = _train_command(world / "scene", tmp_path / "later")
-    stopped = subprocess.run([*later, "--stop-after", "20"], env=env, capture_output=True, text=True)
-    assert stopped.returncode == 0, stopped.stderr
-    resumed = subprocess.run([*later, "--resume"], env=env, capture_output=True, text=True)
-    assert resumed.returncode == 0, resumed.stderr
+    first = _train_command(world / "scene", tmp_path / "first")
+    for command in (
+        [*first, "--stop-after", "20"],
+        [*first, "--resume"],
+        _train_command(world / "scene", tmp_path / "later"),
+    ):
+        done = subprocess.run(command, env=env, capture_output=True, text=True)
+        assert done.returncode == 0, done.stderr
     assert (tmp_path / "first" / "gaussians.ply").read_bytes() == (tmp_path / "later" / "gaussians.ply").read_bytes()
 
 

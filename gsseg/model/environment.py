@@ -111,6 +111,14 @@ class Environment(torch.nn.Module):
         lo = lo.long()
         return _ProfileLerp.apply(self.profile, lo, (lo + 1).clamp_max(bins - 1), w)
 
+    def profile_variation(self) -> torch.Tensor:
+        """The profile's total variation: the summed absolute step between neighbouring bins
+        over the three channels, a scalar (0 without a profile). A horizon is one step; bands
+        copied from the scene's near ground are many."""
+        if self.profile is None:
+            return self.coeffs.new_zeros(())
+        return (self.profile[1:] - self.profile[:-1]).abs().sum()
+
     def forward(self, camera: PinholeCamera, cam_from_world: torch.Tensor) -> torch.Tensor:
         """The background image of one camera, (H, W, 3): for float32 on the CPU by the numba
         kernels of :mod:`gsseg.model.environment_cpu` (the same image and gradients without the

@@ -103,6 +103,7 @@ class TrainConfig:
     sh_degree: int = 3
     environment_degree: int | None = 3  # SH degree of the learned background; None: black
     environment_profile: bool = True  # the background also has a colour per elevation angle
+    environment_smoothing: float = 0.0  # weight of the profile's total variation in the loss
     num_classes: int = 256
     densify_grad_threshold: float = 2e-4
     percent_dense: float = 0.01
@@ -177,4 +178,5 @@ class TrainConfig:
         data["lr"] = LearningRates(**data.get("lr", {}))
         data.setdefault("environment_profile", False)  # runs from before the profile existed
         data.setdefault("geometry_from_masks", True)  # runs from before the option: the loss shaped geometry
+        data.setdefault("environment_smoothing", 0.0)  # runs from before the option
         return cls(**data)
