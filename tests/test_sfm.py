@@ -210,7 +210,7 @@ def test_demo_takes_a_synthetic_video_whose_frames_register_with_the_true_camera
     """The renders of the orbit as an MP4 (9 degrees a frame: an MP4's compression leaves too
     little of the ground's texture for wider steps) through ``gsseg demo --scene walk.mp4``:
     the frames register with the true cameras (frame k is view k), and every later stage runs
-    (200 iterations at 160 px: plumbing, the scores mean nothing)."""
+    (60 iterations at 160 px: plumbing, the scores mean nothing)."""
     views = load_scene(speckled).views
     video = _video_of(views, tmp_path / "walk.mp4")
     r = subprocess.run(
@@ -224,7 +224,7 @@ def test_demo_takes_a_synthetic_video_whose_frames_register_with_the_true_camera
             "--images",
             "images_2",
             "--iters",
-            "200",
+            "60",
             "--backend",
             "cpu",
         ],
