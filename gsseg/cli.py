@@ -84,13 +84,6 @@ def cli() -> None:
 )
 @field_option(
     TrainConfig,
-    "environment_smoothing",
-    type=float,
-    help="Weight of the elevation profile's total variation: 0.01 keeps it from streaks where the capture "
-    "has no distant horizon, and blurs a true horizon.",
-)
-@field_option(
-    TrainConfig,
     "max_gaussians",
     type=int,
     help=f"Densification stops at this many Gaussians (default: the schedule's, {SCHEDULE_CAPS}).",

@@ -11,15 +11,7 @@ from helpers import numba_threads
 from dataset_tools.cameras import PinholeCamera
 from dataset_tools.infra.errors import InputError
 from dataset_tools.synth.camera_paths import look_at, orbit
-from gsseg.model.environment import (
-    PROFILE_CLOSED_DEG,
-    PROFILE_OPEN_DEG,
-    Environment,
-    background_image,
-    mean_up,
-    profile_bins,
-    ray_directions,
-)
+from gsseg.model.environment import Environment, background_image, mean_up, profile_bins, ray_directions
 from gsseg.model.gaussians import Gaussians
 from gsseg.model.sh import C0, C1
 from gsseg.render import render
@@ -70,7 +62,6 @@ def test_elevation_profile_is_linear_between_bin_centres():
     env = Environment(degree=0, up=np.array([0.0, 0.0, 1.0]), bins=4)
     with torch.no_grad():
         env.profile.copy_(torch.tensor([[0.0] * 3, [0.2] * 3, [0.6] * 3, [1.0] * 3]))
-        env.window.fill_(1.0)  # the lookup alone (the window: test_the_profile_holds_nothing_far_below_the_horizon)
     elevations = torch.deg2rad(torch.tensor([0.0, 22.5, 45.0, -45.0, 80.0, -89.0]))
     dirs = torch.stack([torch.cos(elevations), torch.zeros_like(elevations), torch.sin(elevations)], -1)
     expected = torch.tensor([0.4, 0.6, 0.8, 0.1, 1.0, 0.0])
@@ -83,7 +74,6 @@ def test_profile_gradient_is_the_in_order_sum_of_its_pixels():
     ``np.add.at`` takes them), the same bits however the threads are scheduled."""
     bins = 16
     env = Environment(degree=0, up=np.array([0.0, 0.0, 1.0]), bins=bins)
-    env.window.fill_(1.0)  # the lookup's gradient alone
     gen = torch.Generator().manual_seed(0)
     dirs = torch.nn.functional.normalize(torch.randn(20_000, 3, generator=gen), dim=-1)
     grad = torch.randn(20_000, 3, generator=gen)
@@ -96,28 +86,6 @@ def test_profile_gradient_is_the_in_order_sum_of_its_pixels():
     np.add.at(lower, lo, ((1 - w) * grad).numpy())
     np.add.at(upper, np.minimum(lo + 1, bins - 1), (w * grad).numpy())
     assert np.array_equal(env.profile.grad.numpy(), lower + upper)
-
-
-def test_the_profile_holds_nothing_far_below_the_horizon():
-    """The profile is weighted 1 above PROFILE_OPEN_DEG, 0 below PROFILE_CLOSED_DEG and
-    linearly between, so no gradient reaches the bins of near ground; an environment saved
-    before the window renders with a window of ones, as it was trained."""
-    bins = 180  # one-degree bins centred at -89.5 .. 89.5
-    env = Environment(degree=0, up=np.array([0.0, 0.0, 1.0]), bins=bins)
-    centres = np.arange(bins) + 0.5 - 90.0
-    window = env.window[:, 0].numpy()
-    assert np.all(window[centres >= PROFILE_OPEN_DEG] == 1) and np.all(window[centres <= PROFILE_CLOSED_DEG] == 0)
-    between = (centres > PROFILE_CLOSED_DEG) & (centres < PROFILE_OPEN_DEG)
-    expected = (centres[between] - PROFILE_CLOSED_DEG) / (PROFILE_OPEN_DEG - PROFILE_CLOSED_DEG)
-    assert np.allclose(window[between], expected)
-    elevations = torch.deg2rad(torch.linspace(-89.0, 89.0, 500))
-    dirs = torch.stack([torch.cos(elevations), torch.zeros_like(elevations), torch.sin(elevations)], -1)
-    env.elevation_colour(dirs).sum().backward()
-    assert torch.all(env.profile.grad[centres < PROFILE_CLOSED_DEG - 1] == 0)
-    assert torch.all(env.profile.grad[centres > PROFILE_OPEN_DEG + 1] > 0)
-    old = {k: v for k, v in env.state_dict().items() if k != "window"}
-    assert torch.all(Environment.from_state(old).window == 1)
-    assert torch.equal(Environment.from_state(env.state_dict()).window, env.window)
 
 
 @pytest.mark.parametrize("degree, bins", [(3, 40), (1, 0), (3, 0)])

@@ -84,25 +84,10 @@ def profile_bins(focal: float) -> int:
     return math.ceil(math.pi / pixel_angle)
 
 
-# The profile holds what lies at infinity: the sky and the horizon, where distant ground meets
-# it. Ground nearer than about 10 camera heights lies more than ~5 degrees below the horizon;
-# there the profile fades out (to nothing at 10 degrees), so that it cannot copy near ground
-# seen from one height and pitch (a lawn's stripes, a table's edge) into rings.
-PROFILE_OPEN_DEG = -5.0
-PROFILE_CLOSED_DEG = -10.0
-
-
-def profile_window(bins: int) -> torch.Tensor:
-    """(bins, 1) the weight of each elevation bin: 1 above ``PROFILE_OPEN_DEG``, 0 below
-    ``PROFILE_CLOSED_DEG``, linear between."""
-    centres = (torch.arange(bins, dtype=torch.float64) + 0.5) / bins * 180.0 - 90.0
-    return ((centres - PROFILE_CLOSED_DEG) / (PROFILE_OPEN_DEG - PROFILE_CLOSED_DEG)).clamp(0, 1).float()[:, None]
-
-
 class Environment(torch.nn.Module):
     """Colour as a function of the ray direction: SH coefficients (1, (degree + 1)^2, 3),
     initialised to a uniform grey, plus an elevation profile (bins, 3) about ``up``,
-    initialised to zero and weighted by :func:`profile_window` (``bins`` = 0: SH only)."""
+    initialised to zero (``bins`` = 0: SH only)."""
 
     def __init__(self, degree: int = 3, up: np.ndarray | torch.Tensor | None = None, bins: int = 0):
         super().__init__()
@@ -113,24 +98,18 @@ class Environment(torch.nn.Module):
         if bins:
             self.profile = torch.nn.Parameter(torch.zeros(bins, 3))
             self.register_buffer("up", torch.as_tensor(np.asarray(up, dtype=np.float32)))
-            self.register_buffer("window", profile_window(bins))
         else:
             self.profile = None
-
-    def weighted_profile(self) -> torch.Tensor | None:
-        """(bins, 3) the profile as rendered: weighted by its window; None without one."""
-        return None if self.profile is None else self.profile * self.window
 
     def elevation_colour(self, dirs: torch.Tensor) -> torch.Tensor:
         """The profile at unit directions (N, 3): (N, 3), linear between bin centres."""
         bins = self.profile.shape[0]
-        profile = self.weighted_profile()
         elevation = torch.asin((dirs @ self.up).clamp(-1.0, 1.0))
         x = (elevation / math.pi + 0.5) * bins - 0.5  # bin k's centre at x = k
         lo = x.floor().clamp(0, bins - 1)
         w = (x - lo).clamp(0.0, 1.0)[:, None]
         lo = lo.long()
-        return _ProfileLerp.apply(profile, lo, (lo + 1).clamp_max(bins - 1), w)
+        return _ProfileLerp.apply(self.profile, lo, (lo + 1).clamp_max(bins - 1), w)
 
     def profile_variation(self) -> torch.Tensor:
         """The profile's total variation: the summed absolute step between neighbouring bins
@@ -146,7 +125,7 @@ class Environment(torch.nn.Module):
         per-pixel tables), else by :meth:`image_torch`."""
         if self.coeffs.device.type == "cpu" and self.coeffs.dtype == torch.float32:
             up = self.up if self.profile is not None else None
-            return environment_image_cpu(self.coeffs[0], self.weighted_profile(), up, camera, cam_from_world)
+            return environment_image_cpu(self.coeffs[0], self.profile, up, camera, cam_from_world)
         return self.image_torch(camera, cam_from_world)
 
     def image_torch(self, camera: PinholeCamera, cam_from_world: torch.Tensor) -> torch.Tensor:
@@ -166,17 +145,8 @@ class Environment(torch.nn.Module):
             up=state.get("up"),
             bins=0 if profile is None else profile.shape[0],
         )
-        env.load_state_dict(windowed_state(state))
+        env.load_state_dict(state)
         return env
-
-
-def windowed_state(state: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
-    """An environment's saved state with the profile's window: runs from before the window
-    have none (a window of ones renders them as they were trained)."""
-    profile = state.get("profile")
-    if profile is None or "window" in state:
-        return state
-    return {**state, "window": torch.ones(profile.shape[0], 1)}
 
 
 def num_coeffs_to_degree(k: int) -> int:

@@ -32,7 +32,7 @@ from dataset_tools.infra.interrupts import Interrupted, stop_requests
 from dataset_tools.infra.locks import shared_folder
 from dataset_tools.infra.overlap import refuse_overlap, scene_entries
 from dataset_tools.scene import Scene, View, load_scene
-from gsseg.model.environment import Environment, background_image, mean_up, profile_bins, windowed_state
+from gsseg.model.environment import Environment, background_image, mean_up, profile_bins
 from gsseg.model.environment_cpu import ENVIRONMENT_KERNELS
 from gsseg.model.gaussians import Gaussians, gaussians_from_points, make_classifier, random_points
 from gsseg.model.sh_cpu import SH_KERNELS
@@ -103,7 +103,7 @@ class _State:
         self.gaussians.load_state_dict(ckpt["gaussians"])
         self.classifier.load_state_dict(ckpt["classifier"])
         if self.environment is not None:
-            self.environment.load_state_dict(windowed_state(ckpt["environment"]))
+            self.environment.load_state_dict(ckpt["environment"])
         self.small_adam.load_state_dict(ckpt["classifier_adam"])
         self.strategy.load_state_dict(ckpt["densify"])
         self.history, self.step = ckpt["history"], ckpt["step"]
