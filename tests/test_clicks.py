@@ -156,7 +156,7 @@ def test_clicks_carve_objects_the_labels_joined(segmented, small_scene, tmp_path
     """The test run's two largest objects a and b given one label (as the weight-free masks
     join an object to what it stands on): a click on a selects a (the views hold it apart);
     where the masks join them as well, one click selects both and an excluding click on b
-    takes b out (more than half of it on this rough 200-step model: 800 of 1556 Gaussians), keeping a. ``gsseg export``
+    takes b out (most of it on this rough 200-step model), keeping a. ``gsseg export``
     selects what ``gsseg edit`` selects."""
     run_dir, run, seg, a, b = _joined_labels(segmented, tmp_path)
     clicks = _clickable(run, seg.labels, [a, b])
@@ -177,7 +177,7 @@ def test_clicks_carve_objects_the_labels_joined(segmented, small_scene, tmp_path
     joined = _edit(run_dir, *at_a, *scene_args, "--name", "joined")
     assert _iou(joined, own_a | own_b) > 0.9
     split = _edit(run_dir, *at_a, "--exclude-click", *map(str, clicks[b]), *scene_args, "--name", "split")
-    assert (split & own_a).sum() >= 0.98 * (joined & own_a).sum() and (split & own_b).sum() < (joined & own_b).sum() / 2
+    assert (split & own_a).sum() >= 0.98 * (joined & own_a).sum() and (split & own_b).sum() < (joined & own_b).sum() / 3
     record = json.loads((run_dir / "edits" / "split" / "edit.json").read_text())
     assert [c["positive"] for c in record["clicks"]] == [True, False] and record["object_id"] is None
     exported = tmp_path / "split.ply"

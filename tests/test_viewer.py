@@ -113,7 +113,7 @@ def test_an_export_in_a_standard_renderer_looks_like_gsseg_render(trained, small
     """The exported PLY rendered by an independent implementation of the 3D-GS conventions
     (eval/standard_render.py), on black, against the project's render over its learned
     environment, on every view: the shell that carries the environment brings it within 30
-    dB; without the shell the background is missing (10 dB further and more)."""
+    dB; without the shell the background is missing."""
     run = load_run(trained)
     psnr = {}
     for environment in (True, False):
@@ -128,7 +128,7 @@ def test_an_export_in_a_standard_renderer_looks_like_gsseg_render(trained, small
             )
             errors.append(((ours - theirs) ** 2).mean())
         psnr[environment] = float(np.mean([-10 * np.log10(e) for e in errors]))
-    assert psnr[True] >= 30 and psnr[True] - psnr[False] >= 10, psnr
+    assert psnr[True] >= 30 and psnr[False] < 20, psnr
 
 
 @pytest.mark.slow
