@@ -538,18 +538,21 @@ def test_ctrl_c_then_resume_gives_the_bytes_of_an_uninterrupted_run(world, tmp_p
     assert (tmp_path / "cut" / "gaussians.ply").read_bytes() == (tmp_path / "whole" / "gaussians.ply").read_bytes()
 
 
+def _training_started(command: list[str], run: Path, env: dict) -> subprocess.Popen:
+    """``command`` (a training into ``run``) started in the background, once it has written
+    ``run/config.json`` (or two minutes have passed)."""
+    training = subprocess.Popen(command, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.time() + 120
+    while not (run / "config.json").exists() and time.time() < deadline:
+        time.sleep(0.05)
+    return training
+
+
 def test_a_second_writer_is_refused_while_the_first_trains(world, tmp_path):
     env = {**os.environ, "TQDM_DISABLE": "1"}
-    first = subprocess.Popen(
-        _train_command(world / "scene", tmp_path / "run", "--iters", "400"),
-        env=env,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
+    first = _training_started(
+        _train_command(world / "scene", tmp_path / "run", "--iters", "400"), tmp_path / "run", env
     )
-    deadline = time.time() + 120
-    while not (tmp_path / "run" / "config.json").exists() and time.time() < deadline:
-        time.sleep(0.05)
     second = subprocess.run(
         _train_command(world / "scene", tmp_path / "run", "--resume"), env=env, capture_output=True, text=True
     )
@@ -565,16 +568,9 @@ def test_the_masks_a_training_reads_are_not_rewritten_under_it(world, tmp_path):
     --force``) is refused in one line while it runs, and the masks stay as they were."""
     scene = _copy(world / "scene", tmp_path / "scene")
     env = {**os.environ, "TQDM_DISABLE": "1"}
-    training = subprocess.Popen(
-        [*_train_command(scene, tmp_path / "run", "--iters", "400"), "--cache-views", "disk"],
-        env=env,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
+    training = _training_started(
+        [*_train_command(scene, tmp_path / "run", "--iters", "400"), "--cache-views", "disk"], tmp_path / "run", env
     )
-    deadline = time.time() + 120
-    while not (tmp_path / "run" / "config.json").exists() and time.time() < deadline:
-        time.sleep(0.05)
     before = _snapshot(scene)
     writers = [
         [sys.executable, "-m", "dataset_tools", "corrupt", "--scene", str(scene), "--masks", "gt_mask"]

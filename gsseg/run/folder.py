@@ -29,8 +29,10 @@ import hashlib
 import io
 import json
 import zipfile
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TypeVar
 
 import numpy as np
 import scipy.sparse as sp
@@ -57,6 +59,7 @@ FORMAT_VERSIONS = {
     "edit.json": 1,
 }
 HISTORY_KEYS = ("step", "psnr")  # what every logged step of the training curve holds, at least
+T = TypeVar("T")
 DAMAGED = (OSError, ValueError, KeyError, TypeError, AttributeError, EOFError, zipfile.BadZipFile)
 
 
@@ -213,22 +216,22 @@ class RunFolder:
         """The labels of ``gsseg segment``; missing or damaged files are refused."""
         if not self.labels.is_file():
             raise InputError(f"{self.labels} does not exist; run `gsseg segment` on the run first.")
-        try:
-            with np.load(self.labels, allow_pickle=False) as f:
-                _check_version(self.labels, f)
-                return Segmentation(
-                    labels=f["labels"],
-                    objects=f["objects"],
-                    selections=f["selections"],
-                    method=str(f["method"]),
-                    mode=str(f["mode"]),
-                    gamma_p=float(f["gamma_p"]),
-                    model=str(f["model"]) if "model" in f else "",
-                    smooth=int(f["smooth"]) if "smooth" in f else 0,
-                    fill=bool(f["fill"]) if "fill" in f else False,
-                )
-        except DAMAGED as e:
-            raise InputError(f"{self.labels}: damaged labels ({e}); run `gsseg segment` on the run again.") from None
+        return _read_npz(
+            self.labels,
+            "labels",
+            "run `gsseg segment` on the run again",
+            lambda f: Segmentation(
+                labels=f["labels"],
+                objects=f["objects"],
+                selections=f["selections"],
+                method=str(f["method"]),
+                mode=str(f["mode"]),
+                gamma_p=float(f["gamma_p"]),
+                model=str(f["model"]) if "model" in f else "",
+                smooth=int(f["smooth"]) if "smooth" in f else 0,
+                fill=bool(f["fill"]) if "fill" in f else False,
+            ),
+        )
 
     def write_labels(self, segmentation: Segmentation) -> None:
         s = segmentation
@@ -251,19 +254,17 @@ class RunFolder:
         """The contribution matrix ``gsseg segment`` wrote, None when there is none."""
         if not self.contributions.is_file():
             return None
-        try:
-            with np.load(self.contributions, allow_pickle=False) as f:
-                _check_version(self.contributions, f)
-                return Contributions(
-                    labels=f["labels"],
-                    weights=torch.from_numpy(f["weights"]),
-                    model=str(f["model"]),
-                    masks=str(f["masks"]) if "masks" in f else "",
-                )
-        except DAMAGED as e:
-            raise InputError(
-                f"{self.contributions}: damaged contribution cache ({e}); delete it and run `gsseg segment` again."
-            ) from None
+        return _read_npz(
+            self.contributions,
+            "contribution cache",
+            "delete it and run `gsseg segment` again",
+            lambda f: Contributions(
+                labels=f["labels"],
+                weights=torch.from_numpy(f["weights"]),
+                model=str(f["model"]),
+                masks=str(f["masks"]) if "masks" in f else "",
+            ),
+        )
 
     def write_contributions(self, contributions: Contributions) -> None:
         c = contributions
@@ -273,22 +274,19 @@ class RunFolder:
         """The region weights ``gsseg segment`` wrote, None when there are none."""
         if not self.regions.is_file():
             return None
-        try:
-            with np.load(self.regions, allow_pickle=False) as f:
-                _check_version(self.regions, f)
-                shape = tuple(int(n) for n in f["shape"])
-                return RegionWeights(
-                    sp.csr_matrix((f["data"], f["indices"], f["indptr"]), shape=shape),
-                    f["view"],
-                    f["label"],
-                    f["layer"],
-                    tuple(str(name) for name in f["layers"]),
-                    str(f["model"]),
-                )
-        except DAMAGED as e:
-            raise InputError(
-                f"{self.regions}: damaged region weights ({e}); delete the file and run `gsseg segment` again."
-            ) from None
+        return _read_npz(
+            self.regions,
+            "region weights",
+            "delete the file and run `gsseg segment` again",
+            lambda f: RegionWeights(
+                sp.csr_matrix((f["data"], f["indices"], f["indptr"]), shape=tuple(int(n) for n in f["shape"])),
+                f["view"],
+                f["label"],
+                f["layer"],
+                tuple(str(name) for name in f["layers"]),
+                str(f["model"]),
+            ),
+        )
 
     def write_regions(self, regions: RegionWeights) -> None:
         m = regions.matrix.tocsr()
@@ -341,6 +339,17 @@ def damaged(path: Path, e: Exception) -> InputError:
     first = str(e).splitlines()[0] if str(e) else ""
     what = type(e).__name__ + (f": {first}" if first and "weights_only" not in first else "")
     return InputError(f"{path}: damaged run file ({what}); restore it or train the run again.")
+
+
+def _read_npz(path: Path, what: str, fix: str, build: Callable[[np.lib.npyio.NpzFile], T]) -> T:
+    """``build`` of the arrays of the run file ``path`` once its format version is checked; a
+    damaged file is one error naming ``what`` it holds and the ``fix``."""
+    try:
+        with np.load(path, allow_pickle=False) as f:
+            _check_version(path, f)
+            return build(f)
+    except DAMAGED as e:
+        raise InputError(f"{path}: damaged {what} ({e}); {fix}.") from None
 
 
 def _check_version(path: Path, data) -> None:
