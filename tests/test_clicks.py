@@ -84,6 +84,58 @@ def test_a_negative_click_takes_out_a_part_the_views_and_labels_joined():
     assert alone[a].all() and not alone[b].any()
 
 
+def _spill():
+    """A long object A of 400 Gaussians (x from 0 to 4) and a spill F of 60 of its colour beside
+    its far end (x = 4.6), which three of six views' masks give to A, all under one label:
+    (selector, A, F, A's 5 Gaussians nearest x = 0, A's 80 nearest F)."""
+    rng = np.random.default_rng(1)
+    xyz = np.concatenate(
+        [rng.uniform([0, -0.2, -0.2], [4, 0.2, 0.2], (400, 3)), rng.normal([4.6, 0, 0], 0.15, (60, 3))]
+    )
+    g = gaussians_from_points(xyz, np.tile([200, 30, 30], (460, 1)).astype(np.uint8), initial_opacity=0.9)
+    a, f = np.arange(400), np.arange(400, 460)
+    order = np.argsort(xyz[a, 0])
+    n = len(g)
+    halves = _regions(n, [np.concatenate([a, f])], views=3), _regions(n, [a], views=3)
+    regions = RegionWeights(
+        sp.vstack([halves[0].matrix, halves[1].matrix]).tocsr(),
+        np.concatenate([halves[0].view, halves[1].view + 3]),
+        np.concatenate([halves[0].label, halves[1].label]),
+        np.zeros(2 * len(halves[0].view), np.uint8),
+        ("m",),
+    )
+    return ClickSelector(g, np.full(n, 7, np.uint8), regions), a, f, a[order[:5]], a[order[-80:]]
+
+
+def test_a_negative_click_on_a_spill_takes_the_spill_and_not_the_objects_far_end():
+    """F is selected with A; a negative click on F takes F, while A's far end, nearer F than
+    the positive click along the graph but held in A's regions by every view, stays."""
+    selector, a, f, near_end, far_end = _spill()
+    n = len(a) + len(f)
+    first = selector.select([_click(n, near_end)])
+    assert first[a].all() and first[f].all()
+    after = selector.select([_click(n, near_end), _click(n, f, positive=False)])
+    assert after[far_end].all() and after[a].mean() > 0.99
+    assert after[f].mean() < 0.1
+
+
+def test_a_positive_click_never_takes_out_and_a_negative_click_never_adds():
+    """Ten clicks at random Gaussians of the spill's scene, each for or against at random:
+    every selection holds the one before it after a positive click and lies inside it after a
+    negative one."""
+    selector, a, f, near_end, _ = _spill()
+    n = len(a) + len(f)
+    rng = np.random.default_rng(2)
+    clicks = [_click(n, near_end)]
+    before = selector.select(clicks)
+    for _ in range(10):
+        click = _click(n, rng.choice(n, 5, replace=False), positive=bool(rng.random() < 0.5))
+        clicks.append(click)
+        after = selector.cut(clicks, before)
+        assert (after >= before).all() if click.positive else (after <= before).all()
+        before = after
+
+
 def test_a_positive_click_adds_a_part_no_label_holds_and_keeps_what_was_selected():
     g, a, b = _two_blobs()
     n = len(g)

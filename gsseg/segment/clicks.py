@@ -19,13 +19,16 @@ max-flow solver (PyMaxflow), with a cost per Gaussian from four kinds of evidenc
 - **the labels**: the label under the first click's seeds, in proportion to how far it agrees
   with the views' vote (a label that swallowed the table under the object disagrees with it);
 - **the selection before the click** (from the second click on): a click changes the
-  selection only where its evidence outweighs :attr:`ClickOptions.stickiness`, so that a click
-  never undoes what the earlier clicks fixed;
+  selection only where its evidence outweighs :attr:`ClickOptions.stickiness`, and only its
+  way: a positive click adds to the selection and takes nothing out, a negative click takes
+  out and adds nothing, so that a click never undoes what the earlier clicks fixed;
 - **a negative click**: over the Gaussians nearer, along the graph (edge lengths from
   position, colour and feature), to its seeds than to any positive seed, in proportion to how
   much nearer, the click's word replaces the rest (:meth:`GaussianGraph.split`): a part the
   views and labels joined to the object goes, while the object's own Gaussians beside the
-  click, nearly as near to a positive seed, keep their evidence.
+  click, nearly as near to a positive seed, keep their evidence, and so do those the views
+  hold to the object more firmly than the clicked part (:meth:`ClickSelector._yielding`: a
+  spill beside a head goes, the top of the head next to it stays).
 
 The seeds are hard constraints; the source's side of the cut is the selection (parts apart
 in space, several objects under one mask, stay together where the views join them). A later
@@ -85,6 +88,9 @@ class ClickOptions:
         split_weight: weight of a negative click over the Gaussians on its side.
         split_full: how far on a negative click's side (:meth:`GaussianGraph.split`) its word
             replaces all else (0.5: three times as near to it as to a positive click).
+        against_margin: on a negative click's side, a Gaussian the views hold to the object
+            by twice this share more firmly than the clicked part keeps its evidence
+            (:meth:`ClickSelector._yielding`).
         stickiness: weight of the selection before the click.
         smoothness: weight of the graph's edges.
     """
@@ -100,13 +106,14 @@ class ClickOptions:
     part_share: float = 0.5
     split_weight: float = 4.0
     split_full: float = 0.5
+    against_margin: float = 0.2
     stickiness: float = 3.0
     smoothness: float = 1.0
 
     def __post_init__(self) -> None:
         if self.neighbours < 1 or self.iterations < 1:
             raise OptionError("{neighbours} and {iterations}: give 1 or more.", neighbours=self.neighbours)
-        for name in ("region_share", "seen_share", "seed_share", "overlap", "part_share"):
+        for name in ("region_share", "seen_share", "seed_share", "overlap", "part_share", "against_margin"):
             if not 0 < getattr(self, name) <= 1:
                 raise OptionError(f"{{{name}}}: give a share in (0, 1].", **{name: getattr(self, name)})
 
@@ -198,20 +205,22 @@ class RegionVote:
             (np.ones(len(self.unit)), (np.arange(len(self.unit)), self.unit)), shape=(len(self.unit), self.n_units)
         )
 
-    def clicked_regions(self, click: ClickEvidence, seen_share: float, hold: float = 0.0) -> np.ndarray:
+    def clicked_regions(
+        self, click: ClickEvidence, seen_share: float, hold: float = 0.0, objects: bool = True
+    ) -> np.ndarray:
         """(R,) bool: in each vote unit where the click is seen (its Gaussians' weight there is
         at least ``seen_share`` of their weight in the unit where it is largest), the object
-        region (not the background, label 0) holding most of that weight, where it holds at
-        least ``hold`` of it."""
+        region (not the background, label 0; any region where ``objects`` is False) holding
+        most of that weight, where it holds at least ``hold`` of it."""
         weight = self.matrix @ click.weights
         per_unit = self.units.T @ weight
-        objects = np.where(self.label != 0, weight, -1.0)
-        order = np.lexsort((-objects, self.unit))
+        ranked = np.where(self.label != 0, weight, -1.0) if objects else weight
+        order = np.lexsort((-ranked, self.unit))
         best = order[np.unique(self.unit[order], return_index=True)[1]]
         seen = per_unit[self.unit[best]] >= seen_share * max(float(per_unit.max(initial=0)), 1e-12)
         out = np.zeros(len(weight), bool)
         held = weight[best] >= hold * per_unit[self.unit[best]]
-        out[best[seen & held & (self.label[best] != 0) & (weight[best] > 0)]] = True
+        out[best[seen & held & ((self.label[best] != 0) | (not objects)) & (weight[best] > 0)]] = True
         return out
 
     def shares(self, inside: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -231,16 +240,18 @@ class RegionVote:
         per_unit = self.units.T @ held
         return regions & (held < overlap * per_unit[self.unit])
 
-    def vote(self, clicked: np.ndarray, options: ClickOptions) -> tuple[np.ndarray, np.ndarray]:
+    def vote(self, clicked: np.ndarray, options: ClickOptions) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(N,) each Gaussian's share of weight in the object's regions, starting from the
-        ``clicked`` (R,) ones, and whether it is seen where the object is, after
-        :attr:`ClickOptions.iterations` rounds."""
+        ``clicked`` (R,) ones, and (N,) whether it is seen where the object is, after
+        :attr:`ClickOptions.iterations` rounds; and (R,) the object's regions the last round
+        counted."""
         inside = clicked
         for _ in range(options.iterations):
             share, seen = self.shares(inside)
             covered = (self.matrix @ (share > 0.5)) / np.maximum(self.row_sums, 1e-12)
+            counted = inside
             inside = (clicked | (covered > options.region_share)) & (self.label != 0)
-        return share, seen
+        return share, seen, counted
 
 
 def log_odds(p: np.ndarray) -> np.ndarray:
@@ -293,7 +304,7 @@ class ClickSelector:
             if later.positive and before is not None:  # a part beside the selection joins the vote
                 under = self.vote.clicked_regions(later, o.seen_share, o.part_share)
                 clicked |= self.vote.apart_from(under, before, o.overlap)
-        share, seen = self.vote.vote(clicked, o)
+        share, seen, voted_regions = self.vote.vote(clicked, o)
         cost = o.evidence * np.where(seen, log_odds(share), -1.0)  # > 0: the object's
         picked = np.setdiff1d(np.unique(self.labels[clicks[0].seeds(o.seed_share)]), [0])
         labelled = np.isin(self.labels, picked)
@@ -309,6 +320,7 @@ class ClickSelector:
             cost += o.stickiness * np.where(before, 1.0, -1.0)
         if len(negative):  # deep on a negative click's side its word outweighs all else
             side = np.clip(self.graph.split(negative, positive) / o.split_full, 0, 1)
+            side *= self._yielding(clicks, negative, voted_regions, share, seen)
             cost = (1 - side) * cost - o.split_weight * side
         graph = maxflow.Graph[float]()
         graph.add_nodes(n)
@@ -319,4 +331,34 @@ class ClickSelector:
         nodes = np.arange(n)
         graph.add_grid_tedges(nodes, source, sink)
         graph.maxflow()
-        return ~graph.get_grid_segments(nodes)  # the source's side: selected
+        cut = ~graph.get_grid_segments(nodes)  # the source's side: selected
+        if before is None:
+            return cut
+        return before | cut if clicks[-1].positive else before & cut
+
+    def _yielding(
+        self,
+        clicks: Sequence[ClickEvidence],
+        negative: np.ndarray,
+        objects: np.ndarray,
+        share: np.ndarray,
+        seen: np.ndarray,
+    ) -> np.ndarray:
+        """(N,) in [0, 1]: how far each Gaussian on a negative click's side gives way to it.
+        In each view where a negative click is seen, the region under it (the background too)
+        unless it is one of the object's ``objects`` (R,) regions; a Gaussian's hold on the
+        object is its ``share`` (N,) of weight in the object's regions less its share in the
+        click's. A Gaussian whose hold exceeds the mean hold of the click's ``negative`` (S,)
+        seeds by twice :attr:`ClickOptions.against_margin` keeps its evidence, one within a
+        margin of it gives way fully, linearly between: the object's own parts beside a spill
+        or floater, which the views give to the object more firmly than the spill, stay. Where
+        the views hold the clicked part as firmly as the rest (masks that join it to the
+        object), the graph alone decides."""
+        o = self.options
+        under = np.zeros(len(self.vote.label), bool)
+        for click in clicks:
+            if not click.positive:
+                under |= self.vote.clicked_regions(click, o.seen_share, objects=False)
+        against, told = self.vote.shares(under & ~objects)
+        hold = share - np.where(told, against, 0.0)
+        return np.where(seen, np.clip(2 - (hold - hold[negative].mean()) / o.against_margin, 0, 1), 1.0)
