@@ -206,21 +206,21 @@ class RegionVote:
         )
 
     def clicked_regions(
-        self, click: ClickEvidence, seen_share: float, hold: float = 0.0, objects: bool = True
+        self, click: ClickEvidence, seen_share: float, hold: float = 0.0, any_label: bool = False
     ) -> np.ndarray:
         """(R,) bool: in each vote unit where the click is seen (its Gaussians' weight there is
         at least ``seen_share`` of their weight in the unit where it is largest), the object
-        region (not the background, label 0; any region where ``objects`` is False) holding
+        region (not the background, label 0, unless ``any_label``) holding
         most of that weight, where it holds at least ``hold`` of it."""
         weight = self.matrix @ click.weights
         per_unit = self.units.T @ weight
-        ranked = np.where(self.label != 0, weight, -1.0) if objects else weight
+        ranked = weight if any_label else np.where(self.label != 0, weight, -1.0)
         order = np.lexsort((-ranked, self.unit))
         best = order[np.unique(self.unit[order], return_index=True)[1]]
         seen = per_unit[self.unit[best]] >= seen_share * max(float(per_unit.max(initial=0)), 1e-12)
         out = np.zeros(len(weight), bool)
         held = weight[best] >= hold * per_unit[self.unit[best]]
-        out[best[seen & held & ((self.label[best] != 0) | (not objects)) & (weight[best] > 0)]] = True
+        out[best[seen & held & ((self.label[best] != 0) | any_label) & (weight[best] > 0)]] = True
         return out
 
     def shares(self, inside: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -358,7 +358,7 @@ class ClickSelector:
         under = np.zeros(len(self.vote.label), bool)
         for click in clicks:
             if not click.positive:
-                under |= self.vote.clicked_regions(click, o.seen_share, objects=False)
+                under |= self.vote.clicked_regions(click, o.seen_share, any_label=True)
         against, told = self.vote.shares(under & ~objects)
         hold = share - np.where(told, against, 0.0)
         return np.where(seen, np.clip(2 - (hold - hold[negative].mean()) / o.against_margin, 0, 1), 1.0)
