@@ -210,8 +210,8 @@ class RegionVote:
     ) -> np.ndarray:
         """(R,) bool: in each vote unit where the click is seen (its Gaussians' weight there is
         at least ``seen_share`` of their weight in the unit where it is largest), the object
-        region (not the background, label 0, unless ``any_label``) holding
-        most of that weight, where it holds at least ``hold`` of it."""
+        region (not the background, label 0, unless ``any_label``) holding most of that
+        weight, where it holds at least ``hold`` of it."""
         weight = self.matrix @ click.weights
         per_unit = self.units.T @ weight
         ranked = weight if any_label else np.where(self.label != 0, weight, -1.0)
