@@ -7,11 +7,14 @@ scored by PSNR and SSIM, and the training curve by how much of its best it keeps
 PSNR of every tenth of the run with each view's own level taken out (:mod:`eval.training_curve`), at
 its peak and at the end (a fit that collapses and never wins its loss back ends far under its
 peak). Every stage's wall time is recorded; finished stages
-in ``--work`` are reused. Prints and writes JSON.
+in ``--work`` are reused. ``--demo`` trains what ``gsseg demo`` chooses for each capture
+(:func:`pipeline.demo.demo_training`); ``--against FILE`` adds each capture's test PSNR in an
+earlier result (the default schedule's) and the gap to it, the worst gap in the headline.
+Prints and writes JSON.
 
     python -m benchmarks.real_reconstruction [--real ../shared/data/real] [--scenes statue,llff_fern]
-        [--schedule cpu|gpu] [--backend auto|cpu|gsplat] [--iters N] [--max-gaussians N]
-        [--work /tmp/real_reconstruction] [--out FILE]
+        [--schedule cpu|gpu] [--backend auto|cpu|gsplat] [--iters N] [--max-gaussians N] [--demo]
+        [--against FILE]... [--work /tmp/real_reconstruction] [--out FILE]
 """
 
 from __future__ import annotations
@@ -19,7 +22,7 @@ from __future__ import annotations
 import argparse
 import json
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -33,7 +36,8 @@ from gsseg.render import BACKENDS, get_backend
 from gsseg.run.loaded import load_run
 from gsseg.train.config import SCHEDULES, TrainConfig
 from gsseg.train.trainer import train
-from pipeline.demo import demo_images
+from pipeline.demo import demo_images, demo_training
+from pipeline.demo_options import DemoOptions
 
 
 @dataclass(frozen=True)
@@ -44,6 +48,7 @@ class Training:
     backend: str = "auto"
     iters: int | None = None
     max_gaussians: int | None = None
+    demo: bool = False  # the iterations and cap gsseg demo chooses for the capture
 
     @property
     def run_name(self) -> str:
@@ -58,6 +63,9 @@ def run_scene(name: str, real: Path, work: Path, training: Training) -> dict:
     scene_dir = posed_scene(real / name / "photos", out / "scene")
     sfm_s = time.perf_counter() - start
     images = demo_images(scene_dir)
+    if training.demo:
+        iters, _ = demo_training(scene_dir, images, DemoOptions(scene=scene_dir))
+        training = replace(training, iters=iters, max_gaussians=DemoOptions.max_gaussians)
     start = time.perf_counter()
     run_dir = out / training.run_name
     if not (run_dir / "gaussians.ply").is_file():
@@ -96,6 +104,16 @@ def run_scene(name: str, real: Path, work: Path, training: Training) -> dict:
     }
 
 
+def earlier_psnr(files: list[Path]) -> dict[str, dict]:
+    """Each capture's test PSNR, iterations, training seconds and source file in earlier
+    results of this benchmark (a later file's capture replaces an earlier one's)."""
+    found = {}
+    for path in files:
+        for x in json.loads(path.read_text())["results"]["scenes"]:
+            found[x["scene"]] = {k: x[k] for k in ("test_psnr", "iters", "train_s")} | {"file": path.name}
+    return found
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--real", type=Path, default=Path("../shared/data/real"))
@@ -104,14 +122,25 @@ def main() -> None:
     parser.add_argument("--backend", choices=("auto", *BACKENDS), default="auto", help="Rasterizer.")
     parser.add_argument("--iters", type=int, default=None, help="Training iterations (default: the schedule's).")
     parser.add_argument("--max-gaussians", type=int, default=None)
+    parser.add_argument("--demo", action="store_true", help="Train what gsseg demo chooses for each capture.")
+    parser.add_argument(
+        "--against",
+        type=Path,
+        action="append",
+        default=[],
+        help="An earlier result of this benchmark (the default schedule's) to compare each capture's test PSNR with.",
+    )
     parser.add_argument("--work", type=Path, default=Path("/tmp/real_reconstruction"))
     parser.add_argument("--tag", default="", help="Suffix of the JSON file's name.")
     parser.add_argument("--out", default=None, help="JSON file (default: benchmarks/results/real_reconstruction.json).")
     args = parser.parse_args()
-    training = Training(args.schedule, args.backend, args.iters, args.max_gaussians)
+    training = Training(args.schedule, args.backend, args.iters, args.max_gaussians, args.demo)
+    against = earlier_psnr(args.against)
     results = {"scenes": []}
     for name in args.scenes.split(","):
         results["scenes"].append(run_scene(name, args.real, args.work, training))
+        if name in against:
+            results["scenes"][-1]["against"] = against[name]
         print(json.dumps(results["scenes"][-1], indent=2))
     record.save("real_reconstruction", results, tag=args.tag, out=args.out)
 
@@ -120,6 +149,11 @@ def report(r: dict) -> tuple[str, str]:
     headline = "; ".join(
         f"{x['scene']}: test {x['test_psnr']:.2f} dB, curve ends {x['kept']:+.2f} dB from its peak" for x in r["scenes"]
     )
+    compared = [x for x in r["scenes"] if "against" in x]
+    if compared:
+        worst = max(compared, key=lambda x: x["against"]["test_psnr"] - x["test_psnr"])
+        gap = worst["against"]["test_psnr"] - worst["test_psnr"]
+        headline = f"worst gap to the earlier result: {worst['scene']} {gap:.2f} dB; {headline}"
     rows = [
         [
             x["scene"],
@@ -131,6 +165,7 @@ def report(r: dict) -> tuple[str, str]:
             f"{x['test_ssim']:.3f}",
             f"{x['peak_psnr']:.2f} at {x['peak_step']} / {x['final_psnr']:.2f}",
             f"{x['sfm_s']:.0f} / {x['train_s']:.0f}",
+            *(_against_cells(x) if compared else []),
         ]
         for x in r["scenes"]
     ]
@@ -145,6 +180,7 @@ def report(r: dict) -> tuple[str, str]:
             "test SSIM",
             "training PSNR: peak / end",
             "seconds: sfm / train",
+            *(["earlier: iterations, test PSNR, train s", "gap"] if compared else []),
         ],
         rows,
     )
@@ -158,6 +194,16 @@ def report(r: dict) -> tuple[str, str]:
         f"Colour alone, held-out views every 8th; {curve}. A stage reused from an earlier run shows "
         f"about 0 s.{note}\n\n" + table
     )
+
+
+def _against_cells(x: dict) -> list[str]:
+    """The earlier result's cells of a capture's row (its iterations, PSNR and training time;
+    the gap to it), blank where it has none."""
+    if "against" not in x:
+        return ["", ""]
+    a = x["against"]
+    earlier = f"{a['iters']}, {a['test_psnr']:.2f}, {a['train_s']:.0f} ({a['file']})"
+    return [earlier, f"{a['test_psnr'] - x['test_psnr']:.2f}"]
 
 
 if __name__ == "__main__":

@@ -25,7 +25,9 @@ through the camera that SfM estimated for the photo. Every stage's wall time is 
 finished stages in ``--work`` are reused. Prints and writes JSON.
 
     python -m benchmarks.real_scenes [--real ../shared/data/real] [--scenes statue,dtu_scan24]
-        [--work /tmp/real_scenes] [--iters N] [--max-gaussians N] [--seed 0] [--tag T] [--out FILE]
+        [--work /tmp/real_scenes] [--iters N] [--max-gaussians N] [--demo] [--seed 0] [--tag T] [--out FILE]
+
+``--demo`` trains what ``gsseg demo`` chooses for each capture (:func:`pipeline.demo.demo_training`).
 """
 
 from __future__ import annotations
@@ -58,7 +60,8 @@ from gsseg.segment.segment_run import run_regions, segment_run
 from gsseg.train.config import TrainConfig
 from gsseg.train.trainer import train
 from hqmask.build import BuildConfig, build_masks
-from pipeline.demo import DEMO_LABELS, DEPTH_MASKS, MASKS, demo_images, masks_at_depth_jumps
+from pipeline.demo import DEMO_LABELS, DEPTH_MASKS, MASKS, demo_images, demo_training, masks_at_depth_jumps
+from pipeline.demo_options import DemoOptions
 
 TARGET = 0.90
 MAX_CLICKS = 10
@@ -219,8 +222,17 @@ def mask_scores(scene_dir: Path, images: str, masks: str, truth: dict[str, np.nd
     }
 
 
-def run_scene(name: str, real: Path, work: Path, iters: int | None, max_gaussians: int | None, seed: int = 0) -> dict:
-    """Every stage of one scene, with its wall time; finished stages in ``work`` are reused."""
+def run_scene(
+    name: str,
+    real: Path,
+    work: Path,
+    iters: int | None,
+    max_gaussians: int | None,
+    seed: int = 0,
+    demo: bool = False,
+) -> dict:
+    """Every stage of one scene, with its wall time; finished stages in ``work`` are reused.
+    ``demo``: train the iterations and cap ``gsseg demo`` chooses for the capture."""
     times, out = {}, work / name
     start = time.perf_counter()
     try:
@@ -229,6 +241,9 @@ def run_scene(name: str, real: Path, work: Path, iters: int | None, max_gaussian
         return {"scene": name, "refused": str(refused), "sfm_s": time.perf_counter() - start}
     times["sfm_s"] = time.perf_counter() - start
     images = demo_images(scene_dir)
+    if demo:
+        iters, _ = demo_training(scene_dir, images, DemoOptions(scene=scene_dir))
+        max_gaussians = DemoOptions.max_gaussians
     start = time.perf_counter()
     if not (scene_dir / MASKS).is_dir():
         build_masks(scene_dir, BuildConfig(proposer="graph", associate="tracks", out_masks=MASKS, images=images))
@@ -279,13 +294,15 @@ def main() -> None:
     parser.add_argument("--work", type=Path, default=Path("/tmp/real_scenes"))
     parser.add_argument("--iters", type=int, default=None, help="Training iterations (default: the CPU schedule's).")
     parser.add_argument("--max-gaussians", type=int, default=None)
+    parser.add_argument("--demo", action="store_true", help="Train what gsseg demo chooses for each capture.")
     parser.add_argument("--seed", type=int, default=0, help="Training seed (the run-to-run spread).")
     parser.add_argument("--tag", default="", help="Suffix of the JSON file's name.")
     parser.add_argument("--out", default=None, help="JSON file (default: benchmarks/results/real_scenes.json).")
     args = parser.parse_args()
     results = {"scenes": []}
     for name in args.scenes.split(","):
-        results["scenes"].append(run_scene(name, args.real, args.work, args.iters, args.max_gaussians, args.seed))
+        scene = run_scene(name, args.real, args.work, args.iters, args.max_gaussians, args.seed, args.demo)
+        results["scenes"].append(scene)
         print(json.dumps(results["scenes"][-1], indent=2))
     record.save("real_scenes", results, tag=args.tag, out=args.out)
 

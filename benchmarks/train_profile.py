@@ -1,13 +1,13 @@
 """Benchmark: where the time of ``gsseg demo``'s training goes on a real capture. The capture's
 photos (``../shared/data/real/<name>/photos``) go through ``sfm`` and the demo's first mask
-pass; then the demo's training (1000 steps, at most 30k Gaussians, object features on the
-masks) runs under cProfile, and the time of the training loop is split into the phases of a
+pass; then the demo's training (its steps for the capture, at most 30k Gaussians, object
+features on the masks) runs under cProfile, and the time of the training loop is split into the phases of a
 step: the rasterizer (the projection's and the blend's forward and backward passes), the rest of
 the forward pass and of the backward pass, the losses, the optimiser, densification and the
 loop around the steps. Prints and writes JSON.
 
     python -m benchmarks.train_profile [--real ../shared/data/real] [--scene statue]
-        [--iters 1000] [--max-gaussians 30000] [--work /tmp/train_profile] [--out FILE]
+        [--iters N] [--max-gaussians 30000] [--work /tmp/train_profile] [--out FILE]
 
 cProfile counts wall time per Python function; the numba kernels and torch's operators run
 inside the functions that call them, so the phases hold them. Its own cost is a few
@@ -29,8 +29,8 @@ from eval.report import markdown_table
 from gsseg.train.config import TrainConfig
 from gsseg.train.trainer import train
 from hqmask.build import BuildConfig, build_masks
-from pipeline.demo import MASKS, demo_images
-from pipeline.demo_options import SCENE_ITERS, DemoOptions
+from pipeline.demo import MASKS, demo_images, demo_training
+from pipeline.demo_options import DemoOptions
 
 # (file path suffix, function name) of the functions whose cumulative time the phases are made of
 FUNCTIONS = {
@@ -89,7 +89,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--real", type=Path, default=Path("../shared/data/real"))
     parser.add_argument("--scene", default="statue")
-    parser.add_argument("--iters", type=int, default=SCENE_ITERS)
+    parser.add_argument("--iters", type=int, default=None, help="Steps (default: the demo's for the capture).")
     parser.add_argument("--max-gaussians", type=int, default=DemoOptions.max_gaussians)
     parser.add_argument("--work", type=Path, default=Path("/tmp/train_profile"))
     parser.add_argument("--tag", default="", help="Suffix of the JSON file's name.")
@@ -102,7 +102,9 @@ def main() -> None:
         build_masks(scene_dir, BuildConfig(proposer="graph", associate="tracks", out_masks=MASKS, images=images))
     run_dir = args.work / args.scene / "run"
     shutil.rmtree(run_dir, ignore_errors=True)
-    cfg = TrainConfig(iters=args.iters, masks=MASKS, images=images, max_gaussians=args.max_gaussians)
+    options = DemoOptions(scene=scene_dir, iters=args.iters, max_gaussians=args.max_gaussians)
+    iters, _ = demo_training(scene_dir, images, options)
+    cfg = TrainConfig(iters=iters, masks=MASKS, images=images, max_gaussians=args.max_gaussians)
     profiler = cProfile.Profile()
     profiler.enable()
     result = train(scene_dir, run_dir, cfg, progress=False)

@@ -18,7 +18,7 @@ from dataset_tools.infra.cli_support import (
 from dataset_tools.scene import Split
 from gsseg.segment.label_options import METHODS, MODES, LabelOptions
 from gsseg.train.config import SCHEDULES, TrainConfig
-from pipeline.demo_options import EMBEDDED_ITERS, SCENE_ITERS, DemoOptions
+from pipeline.demo_options import EMBEDDED_ITERS, MAX_SCENE_ITERS, MIN_SCENE_ITERS, DemoOptions
 
 BACKEND = Registry("gsseg.render.backends:BACKENDS", ("auto",))
 SPLITS = get_args(Split)
@@ -347,7 +347,8 @@ def export(
     DemoOptions,
     "iters",
     type=int,
-    help=f"Training iterations [default: {EMBEDDED_ITERS} on the embedded scene, {SCENE_ITERS} on --scene].",
+    help=f"Training iterations [default: {EMBEDDED_ITERS} on the embedded scene; on --scene "
+    f"{MIN_SCENE_ITERS}-{MAX_SCENE_ITERS}, fewer for larger views].",
 )
 @field_option(DemoOptions, "max_gaussians", type=int, help="Densification stops at this many Gaussians.")
 @field_option(DemoOptions, "backend", type=BACKEND)
@@ -364,6 +365,7 @@ def demo(out: Path, force: bool, **_) -> None:
         f"{result.edited}{match} ({result.gaussians:,} Gaussians) removed, extracted and "
         f"recoloured in {result.out / 'run' / 'edits'}; {score}{result.seconds / 60:.1f} min"
     )
+    click.echo("stages: " + ", ".join(f"{stage} {seconds / 60:.1f} min" for stage, seconds in result.stages.items()))
     click.echo(f"report: {result.report}")
     click.echo(f"in the browser: gsseg view {result.out / 'run'}")
     if result.warning:

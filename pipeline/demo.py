@@ -23,12 +23,14 @@
 from __future__ import annotations
 
 import shutil
+import sys
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 import torch
+from tqdm import tqdm
 
 from dataset_tools.image_files import IMAGE_SUFFIXES, image_size, write_downsampled
 from dataset_tools.infra.atomic import first_missing, require_folder_path
@@ -50,7 +52,7 @@ from gsseg.segment.segment_run import run_regions, segment_run
 from gsseg.train.config import TrainConfig
 from gsseg.train.trainer import train
 from hqmask.build import BuildConfig, build_masks
-from pipeline.demo_options import DemoOptions
+from pipeline.demo_options import MAX_SCENE_ITERS, MIN_SCENE_ITERS, RUN_PIXELS, DemoOptions
 
 # Masks are proposed at 256x256, where the graph proposer separates these objects well;
 # training, segmentation and the report use the 128x128 copies (images_2).
@@ -73,6 +75,19 @@ class DemoResult:
     seconds: float
     warning: str | None = None  # structure from motion's, on cameras posed on the far side
     match: int | None = None  # the ground-truth object the edited one was matched to, where there is truth
+    stages: dict[str, float] = field(default_factory=dict)  # seconds of each stage, in the order run
+
+
+class _StageClock:
+    """The wall time of each stage of a run, measured from the end of the one before."""
+
+    def __init__(self) -> None:
+        self.seconds: dict[str, float] = {}
+        self._last = time.perf_counter()
+
+    def done(self, stage: str) -> None:
+        now = time.perf_counter()
+        self.seconds[stage], self._last = now - self._last, now
 
 
 def _demo_selection(
@@ -110,10 +125,32 @@ def demo_images(scene: Path, max_side: int = DemoOptions.max_side) -> str:
     if not present:
         raise InputError(f"{scene}: no images/ folder; pass a scene folder, a folder of photos or a video.")
     for folder in present:
-        first = next((p for p in sorted((scene / folder).rglob("*")) if p.suffix in IMAGE_SUFFIXES), None)
+        first = _first_image(scene / folder)
         if first is not None and max(image_size(first)) <= max_side:
             return folder
     return present[-1]
+
+
+def _first_image(folder: Path) -> Path | None:
+    """The first image file of ``folder`` (sub-folders too) in name order, None if it has none."""
+    return next((p for p in sorted(folder.rglob("*")) if p.suffix in IMAGE_SUFFIXES), None)
+
+
+def demo_training(scene_dir: Path, images: str, options: DemoOptions) -> tuple[int, str]:
+    """The demo's training steps on the views of ``scene_dir/images``, and why, in a sentence."""
+    first = _first_image(scene_dir / images)
+    width, height = image_size(first) if first is not None else (0, 0)
+    iters = options.train_iters(width * height)
+    if options.iters is not None:
+        why = "as asked"
+    elif options.scene is None:
+        why = "the embedded scene's"
+    else:
+        why = (
+            f"{RUN_PIXELS / 1e6:.0f} million pixels in all at {width}x{height} a view, "
+            f"{MIN_SCENE_ITERS}-{MAX_SCENE_ITERS} steps"
+        )
+    return iters, f"training {iters} steps, at most {options.max_gaussians:,} Gaussians ({why})"
 
 
 def masks_at_depth_jumps(
@@ -156,7 +193,7 @@ def run_demo(
     out, scene = Path(out), options.scene
     backend = get_backend(options.backend)
     cfg = TrainConfig(
-        iters=options.train_iters,
+        iters=options.iters,
         masks=MASKS,
         images=options.images or TrainConfig.images,
         backend=backend.name,
@@ -193,45 +230,57 @@ def _run_demo(
     out: Path, options: DemoOptions, cfg: TrainConfig, backend: Backend, start: float, progress: bool
 ) -> DemoResult:
     synth_point, warning, scene = None, None, options.scene
+    stages = _StageClock()
     if scene is None:
         result = generate_scene(DEMO_SCENE, out / "scene", progress=progress)
         write_downsampled(result.root / "images", result.root / DEMO_IMAGES, 2)
         scene_dir, gt_masks, mask_images = result.root, GT_MASKS, "images"
         synth_point = result.layout.objects[0].bounding_sphere[0]
         images = DEMO_IMAGES
+        stages.done("synthetic scene")
     else:
         if scene.is_dir() and (scene / "sparse").is_dir():
             scene_dir = linked_scene(scene, out / "scene")
         else:  # photos or a video: structure from motion first
             posed = run_sfm(scene, out / "scene", progress=progress)
             scene_dir, warning = posed.scene, posed.warning()
+            stages.done("structure from motion")
         gt_masks = None
         images = options.images or demo_images(scene_dir, options.max_side)
         mask_images = images
-    cfg = replace(cfg, images=images)
+    iters, plan = demo_training(scene_dir, images, options)
+    if progress:
+        tqdm.write(plan, file=sys.stderr)
+    cfg = replace(cfg, images=images, iters=iters)
     build_masks(
         scene_dir,
         BuildConfig(proposer="graph", associate="tracks", out_masks=MASKS, images=mask_images),
         progress=progress,
     )
+    stages.done("masks")
     run_dir = out / "run"
     train(scene_dir, run_dir, cfg, progress=progress)
+    stages.done("training")
     masks_at_depth_jumps(
         run_dir, scene_dir, mask_images, DEPTH_MASKS, out / "depth", backend=backend, progress=progress
     )
+    stages.done("masks at depth jumps")
     segmentation = segment_run(
         run_dir, scene_dir, options=DEMO_LABELS, masks=DEPTH_MASKS, backend=backend, progress=progress
     )
+    stages.done("segmentation")
     run = load_run(run_dir)
     selection, prompt = _demo_selection(scene_dir, run, segmentation, synth_point, backend)
     for op, color in (("remove", None), ("extract", None), ("recolor", (255, 40, 200))):
         edit_run(run_dir, op, color=color, scene_dir=scene_dir, backend=backend, progress=progress, **prompt)
+    stages.done("edits")
     report = out / "report"
     with torch.no_grad():
         ev = report_run(
             run_dir, scene_dir, report, gt_masks=gt_masks, selection=selection, backend=backend, progress=progress
         )
     miou = ev.summary()["visible"]["miou"]
+    stages.done("report")
     return DemoResult(
         out,
         report / "report.html",
@@ -241,4 +290,5 @@ def _run_demo(
         time.perf_counter() - start,
         warning,
         ev.id_map.get(selection.object_id or selection.main_label(segmentation.labels)),
+        stages.seconds,
     )

@@ -6,12 +6,17 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-# The demo trains the cpu schedule shortened, with at most 30k Gaussians (about two per pixel
-# of a 128x128 view): 1500 steps on the embedded 128x128 scene; 1000 on the user's, whose
-# views of up to 640 px cost several times more a step (497x372: 5 steps a second on 2
-# cores), so that photos to edits take about 5 minutes.
+# The demo trains the cpu schedule shortened, with at most 30k Gaussians. 1500 steps on the
+# embedded 128x128 scene. On the user's capture the run renders about RUN_PIXELS pixels in
+# all, since a step's time grows with its view's pixels: 2000 steps of 424x424 views, about
+# 6 minutes with the object features on 2 cores; fewer steps for larger views, never under MIN_SCENE_ITERS, never over
+# MAX_SCENE_ITERS. On nerd_ethiopian_head 2000 steps reached 21.6 dB where 1000 reached 19.8
+# and the cpu schedule's 3000 steps with twice the Gaussians 22.7; 60k Gaussians instead of
+# 30k gained 0.04 dB (docs/training.md).
 EMBEDDED_ITERS = 1_500
-SCENE_ITERS = 1_000
+RUN_PIXELS = 2_000 * 424 * 424
+MIN_SCENE_ITERS = 1_000
+MAX_SCENE_ITERS = 2_000
 
 
 @dataclass(frozen=True)
@@ -23,8 +28,8 @@ class DemoOptions:
             synthetic scene.
         images: the image folder of ``scene``; None: its largest copy at most ``max_side``
             pixels.
-        iters: training iterations; None: :data:`EMBEDDED_ITERS` on the embedded scene,
-            :data:`SCENE_ITERS` on the user's.
+        iters: training iterations; None: :data:`EMBEDDED_ITERS` on the embedded scene, the
+            capture's (:func:`capture_iters`) on the user's.
         max_gaussians: densification stops at this many Gaussians.
         max_side: the longest image side the default ``images`` may have.
         backend: the renderer (``auto``: gsplat where it can run, else cpu).
@@ -37,9 +42,17 @@ class DemoOptions:
     max_side: int = 640
     backend: str = "auto"
 
-    @property
-    def train_iters(self) -> int:
-        """The iterations trained: ``iters``, or the default of the scene's kind."""
+    def train_iters(self, view_pixels: int) -> int:
+        """The iterations trained on views of ``view_pixels`` pixels each: ``iters``, or the
+        default of the scene's kind."""
         if self.iters is not None:
             return self.iters
-        return EMBEDDED_ITERS if self.scene is None else SCENE_ITERS
+        return EMBEDDED_ITERS if self.scene is None else capture_iters(view_pixels)
+
+
+def capture_iters(view_pixels: int) -> int:
+    """The demo's training steps on a capture whose views have ``view_pixels`` pixels each:
+    :data:`RUN_PIXELS` pixels in all, in hundreds of steps, between :data:`MIN_SCENE_ITERS` and
+    :data:`MAX_SCENE_ITERS`."""
+    steps = round(RUN_PIXELS / max(view_pixels, 1), -2)
+    return int(min(max(steps, MIN_SCENE_ITERS), MAX_SCENE_ITERS))
