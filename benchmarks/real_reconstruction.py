@@ -29,6 +29,7 @@ import numpy as np
 
 from benchmarks import record
 from benchmarks.real_scenes import posed_scene
+from dataset_tools.infra.errors import InputError
 from eval.metrics import psnr, ssim
 from eval.report import markdown_table
 from eval.training_curve import curve_summary
@@ -60,7 +61,10 @@ class Training:
 def run_scene(name: str, real: Path, work: Path, training: Training) -> dict:
     out = work / name
     start = time.perf_counter()
-    scene_dir = posed_scene(real / name / "photos", out / "scene")
+    try:
+        scene_dir = posed_scene(real / name / "photos", out / "scene")
+    except InputError as refused:  # the capture cannot be posed: a row that says so
+        return {"scene": name, "refused": str(refused), "sfm_s": time.perf_counter() - start}
     sfm_s = time.perf_counter() - start
     images = demo_images(scene_dir)
     if training.demo:
@@ -139,17 +143,20 @@ def main() -> None:
     results = {"scenes": []}
     for name in args.scenes.split(","):
         results["scenes"].append(run_scene(name, args.real, args.work, training))
-        if name in against:
+        if name in against and "refused" not in results["scenes"][-1]:
             results["scenes"][-1]["against"] = against[name]
         print(json.dumps(results["scenes"][-1], indent=2))
     record.save("real_reconstruction", results, tag=args.tag, out=args.out)
 
 
 def report(r: dict) -> tuple[str, str]:
+    refused = [x for x in r["scenes"] if "refused" in x]
+    posed = [x for x in r["scenes"] if "refused" not in x]
     headline = "; ".join(
-        f"{x['scene']}: test {x['test_psnr']:.2f} dB, curve ends {x['kept']:+.2f} dB from its peak" for x in r["scenes"]
+        [f"{x['scene']}: test {x['test_psnr']:.2f} dB, curve ends {x['kept']:+.2f} dB from its peak" for x in posed]
+        + [f"{x['scene']}: not posed by sfm" for x in refused]
     )
-    compared = [x for x in r["scenes"] if "against" in x]
+    compared = [x for x in posed if "against" in x]
     if compared:
         worst = max(compared, key=lambda x: x["against"]["test_psnr"] - x["test_psnr"])
         gap = worst["against"]["test_psnr"] - worst["test_psnr"]
@@ -167,7 +174,7 @@ def report(r: dict) -> tuple[str, str]:
             f"{x['sfm_s']:.0f} / {x['train_s']:.0f}",
             *(_against_cells(x) if compared else []),
         ]
-        for x in r["scenes"]
+        for x in posed
     ]
     table = markdown_table(
         [
@@ -186,13 +193,14 @@ def report(r: dict) -> tuple[str, str]:
     )
     curve = (
         "the training PSNR of every tenth of the run with each view's own level taken out (eval/training_curve.py)"
-        if all(x.get("curve") == "view levels" for x in r["scenes"])
+        if all(x.get("curve") == "view levels" for x in posed)
         else "the training PSNR averaged over 100 steps"
     )
     note = f" {r['note']}" if "note" in r else ""
+    not_posed = "".join(f"\n\n{x['scene']}: not posed: {x['refused']}" for x in refused)
     return headline, (
         f"Colour alone, held-out views every 8th; {curve}. A stage reused from an earlier run shows "
-        f"about 0 s.{note}\n\n" + table
+        f"about 0 s.{note}\n\n" + table + not_posed
     )
 
 
