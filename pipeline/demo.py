@@ -52,7 +52,14 @@ from gsseg.segment.segment_run import run_regions, segment_run
 from gsseg.train.config import TrainConfig
 from gsseg.train.trainer import train
 from hqmask.build import BuildConfig, build_masks
-from pipeline.demo_options import MAX_SCENE_ITERS, MIN_SCENE_ITERS, RUN_PIXELS, DemoOptions
+from pipeline.demo_options import (
+    EMBEDDED_ITERS,
+    MAX_SCENE_ITERS,
+    MIN_SCENE_ITERS,
+    RUN_PIXELS,
+    DemoOptions,
+    capture_iters,
+)
 
 # Masks are proposed at 256x256, where the graph proposer separates these objects well;
 # training, segmentation and the report use the 128x128 copies (images_2).
@@ -137,15 +144,17 @@ def _first_image(folder: Path) -> Path | None:
 
 
 def demo_training(scene_dir: Path, images: str, options: DemoOptions) -> tuple[int, str]:
-    """The demo's training steps on the views of ``scene_dir/images``, and why, in a sentence."""
-    first = _first_image(scene_dir / images)
-    width, height = image_size(first) if first is not None else (0, 0)
-    iters = options.train_iters(width * height)
+    """The demo's training steps on the views of ``scene_dir/images``, and why, in a sentence:
+    ``options.iters`` where given, :data:`EMBEDDED_ITERS` on the embedded scene, else the
+    capture's (:func:`pipeline.demo_options.capture_iters` of the first view's size)."""
     if options.iters is not None:
-        why = "as asked"
+        iters, why = options.iters, "as asked"
     elif options.scene is None:
-        why = "the embedded scene's"
+        iters, why = EMBEDDED_ITERS, "the embedded scene's"
     else:
+        first = _first_image(scene_dir / images)
+        width, height = image_size(first) if first is not None else (0, 0)
+        iters = capture_iters(width * height)
         why = (
             f"{RUN_PIXELS / 1e6:.0f} million pixels in all at {width}x{height} a view, "
             f"{MIN_SCENE_ITERS}-{MAX_SCENE_ITERS} steps"

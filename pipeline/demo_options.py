@@ -29,7 +29,8 @@ class DemoOptions:
         images: the image folder of ``scene``; None: its largest copy at most ``max_side``
             pixels.
         iters: training iterations; None: :data:`EMBEDDED_ITERS` on the embedded scene, the
-            capture's (:func:`capture_iters`) on the user's.
+            capture's (:func:`capture_iters`) on the user's
+            (:func:`pipeline.demo.demo_training`).
         max_gaussians: densification stops at this many Gaussians.
         max_side: the longest image side the default ``images`` may have.
         backend: the renderer (``auto``: gsplat where it can run, else cpu).
@@ -41,13 +42,6 @@ class DemoOptions:
     max_gaussians: int = 30_000
     max_side: int = 640
     backend: str = "auto"
-
-    def train_iters(self, view_pixels: int) -> int:
-        """The iterations trained on views of ``view_pixels`` pixels each: ``iters``, or the
-        default of the scene's kind."""
-        if self.iters is not None:
-            return self.iters
-        return EMBEDDED_ITERS if self.scene is None else capture_iters(view_pixels)
 
 
 def capture_iters(view_pixels: int) -> int:

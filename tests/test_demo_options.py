@@ -30,10 +30,18 @@ def test_capture_iters_spends_the_pixel_budget_in_hundreds_of_steps_within_bound
     assert RUN_PIXELS == 2000 * 424 * 424
 
 
-def test_the_asked_iterations_and_the_embedded_scene_keep_their_own(tmp_path):
-    assert DemoOptions(iters=77, scene=tmp_path).train_iters(424 * 424) == 77
-    assert DemoOptions().train_iters(128 * 128) == EMBEDDED_ITERS
-    assert DemoOptions(scene=tmp_path).train_iters(509 * 509) == 1400
+@pytest.mark.parametrize(
+    "size, options, steps",
+    [
+        (424, lambda scene: DemoOptions(iters=77, scene=scene), 77),
+        (128, lambda scene: DemoOptions(), EMBEDDED_ITERS),
+        (509, lambda scene: DemoOptions(scene=scene), 1400),
+    ],
+)
+def test_the_asked_iterations_and_the_embedded_scene_keep_their_own(tmp_path, size, options, steps):
+    (tmp_path / "images").mkdir()
+    cv2.imwrite(str(tmp_path / "images" / "a.png"), np.zeros((size, size, 3), np.uint8))
+    assert demo_training(tmp_path, "images", options(tmp_path))[0] == steps
 
 
 def test_demo_training_reads_the_view_size_and_says_why(tmp_path):
