@@ -8,7 +8,10 @@ each setting (``prior`` or ``flashsplat``; without and with the 3D regularisatio
 compared with the generator's views without the object and of the object alone:
 
 - removal: PSNR over the view, over the region the object covered (where a ghost shows),
-  and over the part of it whose background a training view saw;
+  over the part of it whose background a training view saw, over the rest (unseen), and
+  outside the region; for the ``prior`` labels and the demo's (``+ smooth + fill``) also with
+  the removal filled (``gsseg edit``'s default, :mod:`gsseg.fill`), with the fill's time per
+  object;
 - extraction: IoU of its alpha >= 0.5 silhouette with the whole true silhouette, PSNR inside
   it (on white), and the leak, the share of its opacity outside the silhouette dilated by 2 px.
 
@@ -49,6 +52,7 @@ SETTINGS = {
     "flashsplat": LabelOptions(method="flashsplat", gamma_p=0.0),
     "flashsplat + smooth + fill": LabelOptions(method="flashsplat", gamma_p=0.0, smooth=16, fill=True),
 }
+FILLED = ("prior", "prior + smooth + fill")  # also scored filled: the default labels, the demo's
 
 
 def masks_for(scene: Path, kind: str, seed: int) -> str:
@@ -69,7 +73,7 @@ def score_run(run_dir: Path, scene: Path, masks: str) -> dict:
         evaluation, _ = evaluate(
             run, segmentation, views, with_truth=True, scene=str(scene), split="test", backend="cpu", progress=False
         )
-        rows = edit_rows(run, segmentation, views, scene, evaluation.id_map)
+        rows = edit_rows(run, segmentation, views, scene, evaluation.id_map, fill=name in FILLED)
         out[name] = {
             **summarize_edits(rows),
             "miou": evaluation.summary()["visible"]["miou"],
@@ -194,11 +198,53 @@ def report(r: dict) -> tuple[str, str]:
         ],
         rows,
     )
-    return headline, (
+    filled = [
+        [
+            path,
+            kind,
+            setting,
+            *(
+                f"{_spread([c[plain] for c in cells])} -> {_spread([c[fill] for c in cells])}"
+                for plain, fill in (
+                    ("removal_psnr_region", "filled_psnr_region"),
+                    ("removal_psnr_unseen", "filled_psnr_unseen"),
+                    ("removal_psnr_seen", "filled_psnr_seen"),
+                    ("removal_psnr_outside", "filled_psnr_outside"),
+                )
+            ),
+            _spread([c["fill_seconds"] for c in cells]),
+        ]
+        for (path, kind), runs in groups.items()
+        for setting in FILLED
+        if setting in runs[0] and "filled_psnr_region" in runs[0][setting]
+        for cells in [[run[setting] for run in runs]]
+    ]
+    fill_headline = "; ".join(f"{row[0]}, {row[1]} masks, removal over the region {row[3]} dB filled" for row in filled)
+    fill_table = markdown_table(
+        [
+            "path",
+            "masks",
+            "labels",
+            "region (dB)",
+            "unseen part (dB)",
+            "seen part (dB)",
+            "outside the region (dB)",
+            "fill time per object (s)",
+        ],
+        filled,
+    )
+    return "; ".join(x for x in (headline, fill_headline) if x), (
         "Means over the ground-truth objects and test views; the mean over training seeds with their "
         "range in brackets. The seen part of a silhouette is what some training view saw of the object "
         "(a forward capture never sees what other objects hide from every view); the IoU over it leaves "
         f"the rest out.\n\n{table}"
+        + (
+            "\n\nThe removal without and with the fill (PSNR, plain -> filled): the region the object "
+            "covered, its parts whose background no training view saw and some did, and the rest of the "
+            f"view.\n\n{fill_table}"
+            if filled
+            else ""
+        )
     )
 
 

@@ -15,6 +15,7 @@ from dataset_tools.scene import View
 from dataset_tools.synth.edit_truth import EDIT_TRUTH, read_edit_truth
 from eval.metrics import extraction_scores, removal_scores
 from gsseg.edits import apply_edit
+from gsseg.fill import fill_run_removal
 from gsseg.render import Backend, get_backend, to_uint8
 from gsseg.run.loaded import Run
 from gsseg.segment.reassign import Segmentation
@@ -29,11 +30,13 @@ def edit_rows(
     id_map: dict[int, int],
     *,
     objects: list[int] | None = None,
+    fill: bool = False,
     backend: str | Backend = "cpu",
 ) -> list[dict]:
     """One row per (view, ground-truth object) that has edit truth and a predicted label:
-    {view, object, label, removal: {...}, extraction: {...}}. ``id_map`` maps predicted
-    labels to ground-truth IDs; ``objects`` limits the ground-truth objects scored."""
+    {view, object, label, removal: {...}, extraction: {...}}, and with ``fill`` the removal
+    filled (:mod:`gsseg.fill`) too: removal_filled {...}, fill_seconds. ``id_map`` maps
+    predicted labels to ground-truth IDs; ``objects`` limits the ground-truth objects scored."""
     backend = get_backend(backend)
     label_of = {gt: p for p, gt in id_map.items()}
     rows = []
@@ -49,6 +52,11 @@ def edit_rows(
             ).mask  # as gsseg edit removes and extracts
             removed = apply_edit(run.gaussians, selected, "remove")
             alone = apply_edit(run.gaussians, selected, "extract")
+            filled = (
+                fill_run_removal(run, selected, run.scene(scene_dir).split("train"), backend=backend, progress=False)
+                if fill
+                else None
+            )
             for view in views:
                 truth = read_edit_truth(scene_dir, obj, view.stem)
                 if truth is None:
@@ -61,6 +69,19 @@ def edit_rows(
                     )
                 region = view.load_mask() == obj if view.mask_path is not None else truth.silhouette
                 extracted = run.render(view, gaussians=alone, background="white", backend=backend)
+                with_fill = (
+                    {}
+                    if filled is None
+                    else {
+                        "removal_filled": removal_scores(
+                            run.render_rgb(view, gaussians=filled.gaussians, backend=backend),
+                            truth.without,
+                            region,
+                            truth.seen,
+                        ),
+                        "fill_seconds": filled.seconds,
+                    }
+                )
                 rows.append(
                     {
                         "view": view.stem,
@@ -76,6 +97,7 @@ def edit_rows(
                             truth.silhouette,
                             truth.silhouette_seen,
                         ),
+                        **with_fill,
                     }
                 )
     return rows
@@ -88,11 +110,26 @@ def summarize_edits(rows: list[dict]) -> dict:
         kept = [v for v in values if v is not None and np.isfinite(v)]
         return float(np.mean(kept)) if kept else None
 
+    filled = [r for r in rows if "removal_filled" in r]
     return {
+        **(
+            {
+                "filled_psnr": mean([r["removal_filled"]["psnr"] for r in filled]),
+                "filled_psnr_region": mean([r["removal_filled"]["psnr_region"] for r in filled]),
+                "filled_psnr_seen": mean([r["removal_filled"]["psnr_seen"] for r in filled]),
+                "filled_psnr_unseen": mean([r["removal_filled"]["psnr_unseen"] for r in filled]),
+                "filled_psnr_outside": mean([r["removal_filled"]["psnr_outside"] for r in filled]),
+                "fill_seconds": mean(list({r["object"]: r["fill_seconds"] for r in filled}.values())),  # per object
+            }
+            if filled
+            else {}
+        ),
         "pairs": len(rows),
         "removal_psnr": mean([r["removal"]["psnr"] for r in rows]),
         "removal_psnr_region": mean([r["removal"]["psnr_region"] for r in rows]),
         "removal_psnr_seen": mean([r["removal"]["psnr_seen"] for r in rows]),
+        "removal_psnr_unseen": mean([r["removal"]["psnr_unseen"] for r in rows]),
+        "removal_psnr_outside": mean([r["removal"]["psnr_outside"] for r in rows]),
         "extraction_iou": mean([r["extraction"]["iou"] for r in rows]),
         "extraction_iou_seen": mean([r["extraction"]["iou_seen"] for r in rows]),
         "extraction_psnr_inside": mean([r["extraction"]["psnr_inside"] for r in rows]),

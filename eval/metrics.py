@@ -123,8 +123,9 @@ def camera_errors(
 
 def removal_scores(removed: np.ndarray, truth: np.ndarray, region: np.ndarray, seen: np.ndarray) -> dict[str, float]:
     """A removal against the view rendered without the object: PSNR and SSIM of the whole view,
-    PSNR over the ``region`` (H, W) bool the object covered (where a ghost of it would show)
-    and over its ``seen`` part (whose background some training view saw).
+    PSNR over the ``region`` (H, W) bool the object covered (where a ghost of it would show),
+    over its ``seen`` part (whose background some training view saw), its unseen part (what
+    a fill must invent) and outside it (what a removal must leave as it was).
 
     Args:
         removed, truth: (H, W, 3) uint8.
@@ -138,6 +139,8 @@ def removal_scores(removed: np.ndarray, truth: np.ndarray, region: np.ndarray, s
         "ssim": ssim(removed, truth),
         "psnr_region": masked_psnr(region),
         "psnr_seen": masked_psnr(region & seen),
+        "psnr_unseen": masked_psnr(region & ~seen),
+        "psnr_outside": masked_psnr(~region),
     }
 
 

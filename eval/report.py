@@ -26,6 +26,8 @@ from eval.lpips import LPIPS
 from eval.renders import ViewRenders
 from eval.training_curve import psnr_levels
 from gsseg.edits import COMPLETED_OPS, OPS, Selection, apply_edit, edit_background
+from gsseg.fill import fill_run_removal
+from gsseg.model.gaussians import Gaussians
 from gsseg.render import Backend, get_backend
 from gsseg.run.folder import RunFolder
 from gsseg.run.loaded import Run
@@ -65,15 +67,27 @@ def edit_panels(
     views: list[View],
     color: tuple[int, int, int],
     backend: str | Backend,
+    *,
+    train_views: list[View],
+    removal: Gaussians | None = None,
+    progress: bool = True,
 ) -> dict[str, list[np.ndarray]]:
     """Renders of ``views`` after removing and extracting (on white) the (N,) bool ``completed``
     Gaussians (the selection with what served it alone, as ``gsseg edit`` takes them) and
-    recolouring the ``selected`` ones."""
+    recolouring the ``selected`` ones; the removal filled from the ``train_views`` as ``gsseg
+    edit`` fills it (:mod:`gsseg.fill`), or the model ``removal`` where it is given (an edit
+    made already)."""
     backend = get_backend(backend)
     out: dict[str, list[np.ndarray]] = {}
     for op in OPS:
         chosen = completed if op in COMPLETED_OPS else selected
-        edited = apply_edit(run.gaussians, chosen, op, tuple(c / 255 for c in color)).to(backend.device)
+        if op == "remove":
+            edited = removal
+            if edited is None:
+                edited = fill_run_removal(run, chosen, train_views, backend=backend, progress=progress).gaussians
+        else:
+            edited = apply_edit(run.gaussians, chosen, op, tuple(c / 255 for c in color))
+        edited = edited.to(backend.device)
         background = edit_background([op])
         out[op] = [run.render_rgb(v, gaussians=edited, background=background, backend=backend) for v in views]
     return out
@@ -307,6 +321,7 @@ def report_run(
     object_id: int | None = None,
     selection: Selection | None = None,
     color: tuple[int, int, int] = (255, 40, 200),
+    removal: Gaussians | None = None,
     backend: str = "auto",
     lpips: Path | str | None = None,
     overwrite: bool = False,
@@ -316,7 +331,8 @@ def report_run(
     """Evaluate a segmented run and write its report to ``out_dir`` and ``RUN/evaluation.json``
     (LPIPS with the network file ``lpips``, else reported as not available). The edits shown
     are of ``object_id``, or of a ``selection`` made by clicks (:func:`gsseg.edits.select`), or
-    of the largest object."""
+    of the largest object; ``removal``: the model after that object's removal where it was
+    made already (``gsseg edit``'s, filled), else it is made here."""
     run_dir, scene_dir, out_dir = Path(run_dir), Path(scene_dir), Path(out_dir)
     refuse_overlap(
         out_dir,
@@ -345,8 +361,19 @@ def report_run(
     label = selection.object_id if selection.object_id is not None else selection.main_label(segmentation.labels)
     if gt_masks is not None:
         ev.edits = edit_rows(run, segmentation, views, scene_dir, ev.id_map, backend=backend)
-    completed = complete_selection(run.gaussians, selection.mask, run.scene(scene_dir).split("train"), backend=backend)
-    edits = edit_panels(run, selection.mask, completed.mask, views, color, backend)
+    train_views = run.scene(scene_dir).split("train")
+    completed = complete_selection(run.gaussians, selection.mask, train_views, backend=backend)
+    edits = edit_panels(
+        run,
+        selection.mask,
+        completed.mask,
+        views,
+        color,
+        backend,
+        train_views=train_views,
+        removal=removal,
+        progress=progress,
+    )
     truth = truth_rows(scene_dir, views, ev.id_map.get(label), edits) if ev.edits else None
     history = run.folder.read_history()
     trained = len(run.record.train_views)

@@ -223,6 +223,11 @@ def _clicks(click_: tuple, exclude_click: tuple) -> list:
     "--scene", default=None, type=click.Path(path_type=Path), help="Scene whose views to render (default: the run's)."
 )
 @click.option("--split", type=click.Choice(SPLITS), default="test", show_default=True)
+@click.option(
+    "--fill/--no-fill",
+    default=None,
+    help="Whether a removal fills what no training view saw behind the object (by default it does).",
+)
 @click.option("--backend", type=BACKEND, default="auto", show_default=True)
 @click.option("--force", is_flag=True, help="Replace the edit folder if it exists.")
 @other_scene_option
@@ -231,7 +236,8 @@ def edit(run: Path, point, click_, exclude_click, scene, force: bool, **options)
     from gsseg.edits import edit_run
 
     clicks = _clicks(click_, exclude_click)
-    out = edit_run(run, point=point or None, clicks=clicks, scene_dir=scene, overwrite=force, **options)
+    given = {k: v for k, v in options.items() if v is not None or k != "fill"}  # edit_run's default decides
+    out = edit_run(run, point=point or None, clicks=clicks, scene_dir=scene, overwrite=force, **given)
     click.echo(f"wrote {out}")
 
 
@@ -284,6 +290,7 @@ def _object_option(ctx: click.Context, param: click.Parameter, value: str | None
     "VIEW U V: export the object clicked alone; repeat to join objects (as gsseg edit).",
     "VIEW U V: split the clicked selection there (as gsseg edit).",
 )
+@click.option("--edit", default=None, help="Export the model of the edit RUN/edits/EDIT (a removal with its fill).")
 @click.option("--scene", default=None, type=click.Path(path_type=Path), help="The run's scene, where it moved.")
 @click.option(
     "--format",
@@ -306,12 +313,13 @@ def export(
     point,
     click_,
     exclude_click,
+    edit: str | None,
     scene: Path | None,
     fmt: str | None,
     environment: bool | None,
     force: bool,
 ) -> None:
-    """Write RUN's model, or one object or clicked selection of it, for other 3D-GS viewers."""
+    """Write RUN's model, one object or clicked selection of it, or one of its edits, for other 3D-GS viewers."""
     from gsseg.export import export_run
 
     clicks = _clicks(click_, exclude_click)
@@ -321,6 +329,7 @@ def export(
         object_id=object_id,
         point=point or None,
         clicks=clicks,
+        edit=edit,
         scene_dir=scene,
         fmt=fmt,
         environment=environment,

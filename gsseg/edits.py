@@ -17,6 +17,7 @@ from dataset_tools.infra.errors import InputError, OptionError, OutputExists
 from dataset_tools.infra.names import plain_name
 from dataset_tools.infra.overlap import refuse_overlap, scene_entries
 from dataset_tools.scene import Scene
+from gsseg.fill import fill_run_removal
 from gsseg.model.gaussians import Gaussians
 from gsseg.model.ply import write_ply
 from gsseg.model.sh import C0, rgb_to_sh_dc
@@ -158,6 +159,7 @@ def edit_run(
     split: str = "test",
     k: int = 20,
     fps: int = 8,
+    fill: bool = True,
     backend: str | Backend = "auto",
     overwrite: bool = False,
     other_scene: bool = False,
@@ -166,7 +168,8 @@ def edit_run(
     """Select Gaussians (:func:`select`), with those that served the selection alone for a
     removal or an extraction (:mod:`gsseg.segment.served`), apply ``op`` and write ``RUN/edits/NAME/``:
     ``gaussians.ply``, ``renders/<view>.png`` of the scene's ``split`` views, ``video.mp4`` of
-    those renders, and ``edit.json``."""
+    those renders, and ``edit.json``. ``fill``: a removal fills what no training view saw
+    behind the object (:mod:`gsseg.fill`)."""
     check_prompts(point, clicks, object_id)
     if name is not None:
         plain_name(name, "name")
@@ -183,7 +186,12 @@ def edit_run(
     if op in COMPLETED_OPS:
         served = complete_selection(run.gaussians, mask, scene.split("train"), backend=backend)
         mask = served.mask
-    edited = apply_edit(run.gaussians, mask, op, rgb)
+    filled = None
+    if op == "remove" and fill:
+        filled = fill_run_removal(run, mask, scene.split("train"), backend=backend, progress=progress)
+        edited = filled.gaussians
+    else:
+        edited = apply_edit(run.gaussians, mask, op, rgb)
     record = {
         "op": op,
         "object_id": chosen.object_id,
@@ -197,6 +205,7 @@ def edit_run(
             if served is None
             else {"served_alone": served.added, "ghost_share": [served.ghost_before, served.ghost_after]}
         ),
+        **({} if op != "remove" else {"removal_fill": None if filled is None else filled.record()}),
     }
     return write_edit(
         run,

@@ -21,11 +21,12 @@ from dataset_tools.cameras import CameraPose, PinholeCamera
 from dataset_tools.infra.atomic import write_bytes_atomic
 from dataset_tools.infra.errors import InputError, OptionError, OutputExists
 from dataset_tools.infra.overlap import refuse_overlap, run_inputs
-from gsseg.edits import check_prompts, select
+from gsseg.edits import check_prompts, edit_background, select
 from gsseg.model.environment import environment_shell, shell_radius, shell_spacing
 from gsseg.model.gaussians import Gaussians
-from gsseg.model.ply import write_ply
+from gsseg.model.ply import read_ply, write_ply
 from gsseg.model.sh import C0
+from gsseg.run.folder import read_edit_record
 from gsseg.run.loaded import Run, load_run
 from gsseg.segment.clicks import Click
 from gsseg.segment.served import complete_selection
@@ -81,20 +82,22 @@ def export_run(
     object_id: int | None = None,
     point=None,
     clicks: list[Click] | tuple[Click, ...] = (),
+    edit: str | None = None,
     scene_dir: Path | str | None = None,
     fmt: str | None = None,
     environment: bool | None = None,
     overwrite: bool = False,
 ) -> Path:
     """Write a run's model (or the Gaussians of ``object_id`` alone, or of the selection of a
-    ``point`` and ``clicks`` in views of the run's scene or ``scene_dir``: :func:`gsseg.edits.select`)
-    to ``out`` as ``fmt`` (default: from the suffix of ``out``, ``.ply`` or ``.splat``),
-    atomically; an existing ``out`` is replaced only with ``overwrite``, and never one inside
-    the run folder.
+    ``point`` and ``clicks`` in views of the run's scene or ``scene_dir``: :func:`gsseg.edits.select`;
+    or the model of the edit ``RUN/edits/EDIT``, a removal with its fill) to ``out`` as
+    ``fmt`` (default: from the suffix of ``out``, ``.ply`` or ``.splat``), atomically; an
+    existing ``out`` is replaced only with ``overwrite``, and never one inside the run folder.
 
     ``environment``: add the run's learned background as a shell of Gaussians (label 0), so
     that a renderer that knows nothing of it shows what ``gsseg render`` shows; None: for the
-    whole model of a run that has one, not for an object or a selection."""
+    whole model of a run that has one and for its edits but extractions, not for an object or
+    a selection."""
     out = Path(out)
     refuse_overlap(out, run_inputs(run_dir))
     if out.is_dir():
@@ -112,6 +115,10 @@ def export_run(
         )
     g = run.gaussians
     prompted = point is not None or bool(clicks)
+    if edit is not None:
+        if prompted or object_id is not None:
+            raise OptionError("{edit} exports an edit's whole model; give it without {object} or clicks.")
+        return _export_edit(run, run.folder.edit(edit), out, fmt, environment)
     if prompted:
         check_prompts(point, clicks, object_id)
     segmentation = run.labels() if object_id is not None or prompted or run.folder.labels.is_file() else None
@@ -132,8 +139,28 @@ def export_run(
     whole = object_id is None and not prompted
     if environment or (environment is None and whole and run.environment is not None):
         shell = shell_for(run)
-        g = Gaussians(**{k: torch.cat([v, getattr(shell, k)]) for k, v in g.tensors().items()})
+        g = Gaussians.concat(g, shell)
         labels = None if labels is None else np.concatenate([labels, np.zeros(len(shell), labels.dtype)])
+    return _write(g, labels, out, fmt)
+
+
+def _export_edit(run: Run, edit_dir: Path, out: Path, fmt: str, environment: bool | None) -> Path:
+    """The model of ``edit_dir`` (``gsseg edit``'s or the viewer's ``gaussians.ply``), with the
+    run's environment unless told otherwise or an extraction took the object out of it."""
+    if not (edit_dir / "gaussians.ply").is_file():
+        raise InputError(f"{edit_dir} holds no edit; make it with `gsseg edit` or the viewer's Save first.")
+    record = read_edit_record(edit_dir)
+    ops = [s["op"] for s in record.get("steps", [record])]
+    g = read_ply(edit_dir / "gaussians.ply")
+    if environment is None:
+        environment = run.environment is not None and edit_background(ops) == "environment"
+    if environment:
+        g = Gaussians.concat(g, shell_for(run))
+    return _write(g, None, out, fmt)
+
+
+def _write(g: Gaussians, labels: np.ndarray | None, out: Path, fmt: str) -> Path:
+    """``g`` (with ``labels``, (N,) uint8, in a PLY) to ``out`` as ``fmt``."""
     if fmt == "ply":
         return write_ply(g, out, labels=labels)
     write_bytes_atomic(out, splat_records(g).tobytes())

@@ -15,8 +15,8 @@
    --fill-interiors``): the rims and interiors that the masks leave to the background go
    with their object, so that a removal leaves no outline of it;
 6. the object under a 3D point (the first object's centre) in the synthetic scene, or in
-   the user's what a click at the centre of the first test view selects, removed, extracted
-   and recoloured (``gsseg edit``);
+   the user's what a click at the centre of the first test view selects, removed (what no
+   photo saw behind it filled), extracted and recoloured (``gsseg edit``);
 7. the report (``gseval report``) against the exact masks where the scene has them.
 """
 
@@ -42,6 +42,7 @@ from dataset_tools.sfm import run_sfm
 from dataset_tools.synth import SynthConfig, generate_scene
 from eval.report import report_run
 from gsseg.edits import Selection, edit_run, select
+from gsseg.model.ply import read_ply
 from gsseg.render import Backend, get_backend
 from gsseg.render.views import render_run
 from gsseg.run.loaded import Run, load_run
@@ -280,13 +281,22 @@ def _run_demo(
     stages.done("segmentation")
     run = load_run(run_dir)
     selection, prompt = _demo_selection(scene_dir, run, segmentation, synth_point, backend)
-    for op, color in (("remove", None), ("extract", None), ("recolor", (255, 40, 200))):
-        edit_run(run_dir, op, color=color, scene_dir=scene_dir, backend=backend, progress=progress, **prompt)
+    edits = {
+        op: edit_run(run_dir, op, color=color, scene_dir=scene_dir, backend=backend, progress=progress, **prompt)
+        for op, color in (("remove", None), ("extract", None), ("recolor", (255, 40, 200)))
+    }
     stages.done("edits")
     report = out / "report"
     with torch.no_grad():
         ev = report_run(
-            run_dir, scene_dir, report, gt_masks=gt_masks, selection=selection, backend=backend, progress=progress
+            run_dir,
+            scene_dir,
+            report,
+            gt_masks=gt_masks,
+            selection=selection,
+            removal=read_ply(edits["remove"] / "gaussians.ply"),  # filled once, in gsseg edit
+            backend=backend,
+            progress=progress,
         )
     miou = ev.summary()["visible"]["miou"]
     stages.done("report")

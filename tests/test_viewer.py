@@ -208,9 +208,11 @@ def test_edits_undo_and_save_write_what_gsseg_edit_writes(segmented, small_scene
         p.name for p in (run / "edits" / "cli" / "renders").iterdir()
     )
     removed = len(base) - len(session.current()[0])  # the object and what served it alone
-    assert json.loads((saved / "edit.json").read_text())["steps"] == [
-        {"op": "remove", "object_id": obj, "color": None, "selected_gaussians": removed}
-    ]
+    record = json.loads((saved / "edit.json").read_text())
+    assert record["steps"] == [{"op": "remove", "object_id": obj, "color": None, "selected_gaussians": removed}]
+    filled = session.fill(wait=False)  # saving filled the removal, as gsseg edit does
+    assert record["removal_fill"] == filled.record()
+    assert len(read_ply(saved / "gaussians.ply")) == len(session.current()[0]) + filled.added
     assert session.undo().op == "remove" and session.current()[0] is base and session.undo() is None
     with pytest.raises(InputError, match="select an object first"):
         session.edit("extract")
@@ -233,7 +235,9 @@ def test_an_extracted_object_shows_on_white_a_removal_over_the_environment(segme
     behind = run.render_rgb(view, gaussians=kept, backend="cpu")
     assert empty.mean() > 0.3 and (behind[empty] < 250).any()  # the environment is no white
     for op in ("extract", "remove"):
-        out = edit_run(run_dir, op, object_id=obj, scene_dir=small_scene.root, backend="cpu", progress=False)
+        out = edit_run(
+            run_dir, op, object_id=obj, scene_dir=small_scene.root, fill=False, backend="cpu", progress=False
+        )
         frame = read_image(out / "renders" / f"{view.stem}.png")
         expected = np.full_like(behind[empty], 255) if op == "extract" else behind[empty]
         np.testing.assert_array_equal(frame[empty], expected)

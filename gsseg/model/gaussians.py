@@ -104,6 +104,11 @@ class Gaussians:
     def to(self, device: torch.device | str) -> Gaussians:
         return Gaussians(**{k: v.to(device) for k, v in self.tensors().items()})
 
+    @classmethod
+    def concat(cls, *parts: Gaussians) -> Gaussians:
+        """The Gaussians of ``parts``, in order."""
+        return cls(**{name: torch.cat([getattr(p, name) for p in parts]) for name in cls.field_names()})
+
     def select(self, keep: torch.Tensor) -> Gaussians:
         """The Gaussians where the boolean (N,) mask ``keep`` is true (or at integer indices)."""
         return Gaussians(**{k: v[keep] for k, v in self.tensors().items()})

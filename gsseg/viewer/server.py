@@ -300,8 +300,22 @@ class Viewer:
             return
         done = {"remove": "Removed", "extract": "Extracted", "recolor": "Recoloured"}[op]
         what = "the selection" if step.object_id is None else f"object {step.object_id}"
-        self._say(f"{done} {what}; Undo takes it back, Save writes it.")
+        filling = op == "remove" and self.session.fill(wait=False) is None
+        self._say(
+            f"{done} {what}{'; filling what no photo saw' if filling else ''}; Undo takes it back, Save writes it."
+        )
         self._changed()
+        if filling:
+            threading.Thread(target=self._fill, args=(what,), daemon=True).start()
+
+    def _fill(self, what: str) -> None:
+        """Compute the removal's fill, then show it (unless the edits changed meanwhile)."""
+        filled = self.session.fill()
+        if filled is not None and self.session.fill(wait=False) is filled:
+            self._say(
+                f"Removed {what} and filled what no photo saw ({filled.added:,} Gaussians, {filled.seconds:.0f} s)."
+            )
+            self.refresh()
 
     def _header_text(self) -> str:
         """The run, the Gaussians shown now (after the edits) and the backend."""

@@ -18,6 +18,7 @@ from dataset_tools.cameras import PinholeCamera
 from dataset_tools.image_files import label_palette
 from dataset_tools.infra.errors import InputError
 from gsseg.edits import COMPLETED_OPS, apply_edit, check_edit, edit_background, write_edit
+from gsseg.fill import Filled, fill_run_removal
 from gsseg.model.gaussians import Gaussians
 from gsseg.model.sh import rgb_to_sh_dc
 from gsseg.render import get_backend
@@ -106,6 +107,7 @@ class ViewerSession:
         self._contributions: Contributions | None = None
         self._current: tuple[Gaussians, Segmentation | None, np.ndarray] | None = None
         self._selector: ClickSelector | None = None
+        self._fill: tuple[list[EditStep], Filled] | None = None  # the fill of these steps' removals
         self._lock = threading.RLock()
 
     @property
@@ -140,6 +142,29 @@ class ViewerSession:
                 self._current = g, seg, kept
                 self._selector = None
             return self._current
+
+    def fill(self, wait: bool = True) -> Filled | None:
+        """The fill of what the removals took (:mod:`gsseg.fill`, as ``gsseg edit`` fills a
+        removal), for the current steps: None where they remove nothing or extract (an
+        extracted object shows alone). ``wait``: compute it when it is not there yet (the
+        viewer does it in a thread); else None until it is ready. :meth:`frame` shows it then."""
+        with self._lock:
+            steps = list(self.steps)
+            if self._fill is not None and self._fill[0] == steps:
+                return self._fill[1]
+            if not wait or not any(s.op == "remove" for s in steps) or any(s.op == "extract" for s in steps):
+                return None
+            g, _, kept = self._edited()
+        whole = Gaussians(**{n: t.clone() for n, t in self.run.gaussians.tensors().items()})
+        for name, t in whole.tensors().items():
+            t[torch.from_numpy(kept)] = getattr(g, name)  # recolours kept
+        filled = fill_run_removal(
+            self.run, ~kept, self.scene.split("train"), gaussians=whole, backend=self.backend, progress=False
+        )
+        with self._lock:
+            if self.steps == steps:
+                self._fill = steps, filled
+        return filled
 
     def _click_selector(self) -> ClickSelector:
         """The click rule of ``gsseg edit`` for the current model (built at the first click)."""
@@ -277,6 +302,9 @@ class ViewerSession:
         selection = self.selection()
         if seg is not None and (self.show_segments or selection is not None):
             g = _painted(g, seg, self.show_segments, selection)
+        filled = self.fill(wait=False)
+        if filled is not None:
+            g = Gaussians.concat(g, filled.gaussians.select(slice(len(g), None)))
         with self._lock:
             background = edit_background(s.op for s in self.steps)
         return self.run.render_rgb(view, gaussians=g, background=background, backend=self.backend)
@@ -288,6 +316,7 @@ class ViewerSession:
         if not steps:
             raise InputError("nothing to save: remove, extract or recolour an object first.")
         g, _ = self.current()
+        filled = self.fill()
         seg = self.segmentation
         record = {
             "steps": [
@@ -301,10 +330,11 @@ class ViewerSession:
             ],
             "labels": seg.settings(),
             "gaussians": len(g),
+            **({} if filled is None else {"removal_fill": filled.record()}),
         }
         return write_edit(
             self.run,
-            g,
+            g if filled is None else filled.gaussians,
             self.run.folder.edit(name),
             record,
             scene=self.scene,

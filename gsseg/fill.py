@@ -1,0 +1,432 @@
+"""Fill what a removal uncovers and no photo saw.
+
+Removing an object's Gaussians uncovers what stood behind it. Where some training view saw
+that surface, the model already holds it; where none did, the removal shows whatever the
+training left there (a smear, the environment). :func:`fill_removal` finds those pixels and
+fits new Gaussians to a 2D inpainting of them, with the rest of the model frozen:
+
+1. **Unseen pixels.** In each training view the object's silhouette is where the removed
+   Gaussians held most of the blended weight (widened by its rim). Each of its pixels shows,
+   after the removal, a surface point (its rendered depth) or the environment (a direction);
+   the point is seen when another training view's render of the *whole* model shows it there
+   (the depths agree within :attr:`FillOptions.depth_tolerance`), the direction when another
+   view shows the environment there. The rest is unseen.
+2. **Inpainting.** In every view the removal's render is inpainted over its unseen pixels
+   by frequency-selective reconstruction (OpenCV's ``xphoto``), which carries textures on
+   where a diffusion (Telea) leaves a flat smudge.
+3. **Gaussians on the surface around the hole.** In up to :attr:`FillOptions.views` views
+   spread over those with unseen pixels, new Gaussians are seeded on a pixel grid of the
+   unseen pixels, at the inpainted colour and at the depth inpainted from the surface around
+   the hole, each the size of its grid cell; a seed in space some view saw through (in front
+   of the surface it shows, or where it shows the environment) is dropped, there is nothing
+   there.
+4. **A fit across the views.** The new Gaussians alone (positions, colours, opacities) are
+   optimised, a few hundred steps, to every view's inpainted render around the object (a
+   crop: its silhouette and a margin, where the target is the removal's render as it is, so
+   the fill must not show there): the views disagree where their inpaintings do, and the fit
+   keeps what they share. Those left nearly transparent, or moved into space a view saw
+   through, are dropped.
+
+It cannot invent what the surroundings do not suggest: a hole larger than the textures around
+it comes back as a smooth continuation of them, not as the scenery a photo would have shown.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+import torch
+from tqdm import tqdm
+
+from dataset_tools.cameras import PinholeCamera
+from gsseg.model.environment import Environment, background_image
+from gsseg.model.gaussians import Gaussians, gaussians_from_points
+from gsseg.render import Backend, get_backend, render, surface_depth, to_uint8
+from gsseg.render.contributions import Masked
+from gsseg.render.pixel_labels import segment_pixels
+from gsseg.run.loaded import Run
+from gsseg.train.config import LearningRates
+from gsseg.train.losses import photometric_loss
+from gsseg.train.optim import GaussianOptimizer
+
+FITTED = ("means", "opacity_logits", "sh_dc")  # what the fit moves; sizes stay those of the seeding grid
+
+
+@dataclass(frozen=True)
+class FillOptions:
+    """How a removal is filled.
+
+    Attributes:
+        steps: optimisation steps of the fill, one view each.
+        views: at most this many training views are inpainted and fitted to.
+        stride: pixels between the new Gaussians seeded in each fitted view.
+        rim: pixels the object's silhouettes are widened by (its blurred edge).
+        margin: pixels of the removal's render kept as they are around each hole in the fit.
+        depth_tolerance: relative depth difference under which another view sees a point.
+        depth_radius: neighbourhood of the depth's inpainting (OpenCV's Telea), in pixels.
+        initial_opacity: opacity of a new Gaussian.
+        lambda_dssim: weight of the SSIM term in the fit's loss, as in training.
+        seed: seeds the choice of view at each step.
+    """
+
+    steps: int = 800
+    views: int = 12
+    stride: int = 3
+    rim: int = 2
+    margin: int = 12
+    depth_tolerance: float = 0.02
+    depth_radius: int = 5
+    initial_opacity: float = 0.9
+    lambda_dssim: float = 0.2
+    seed: int = 0
+
+
+@dataclass(frozen=True)
+class Filled:
+    """A removal with its fill.
+
+    Attributes:
+        gaussians: the model without the removed Gaussians, with the fill (new ones last).
+        added: new Gaussians.
+        unseen_share: share of the silhouettes' pixels, over the training views, that no other
+            view saw behind the object.
+        seconds: wall time of the fill.
+    """
+
+    gaussians: Gaussians
+    added: int
+    unseen_share: float
+    seconds: float
+
+    def record(self) -> dict:
+        """What ``edit.json`` says of the fill."""
+        return {
+            "added": self.added,
+            "unseen_share": round(self.unseen_share, 4),
+            "seconds": round(self.seconds, 1),
+        }
+
+
+@dataclass
+class _Shown:
+    """One view in which the removed object showed, after the removal."""
+
+    index: int  # into the views
+    silhouette: np.ndarray  # (H, W) bool, the object's, widened by its rim
+    unseen: np.ndarray  # (H, W) bool, the silhouette's pixels no other view saw behind the object
+    rgb: np.ndarray  # (H, W, 3) uint8 render of the removal
+    depth: np.ndarray  # (H, W) its surface depth, 0 where it shows the environment
+
+
+@dataclass
+class _Crop:
+    """What one view's step of the fit renders and compares."""
+
+    camera: PinholeCamera  # of the crop around the object
+    pose: torch.Tensor  # (3, 4)
+    target: torch.Tensor  # (h, w, 3) in [0, 1]: the removal's render, inpainted where unseen
+    background: torch.Tensor | None  # (h, w, 3) the environment in the crop
+    drawn: torch.Tensor  # (N_kept,) bool: the kept Gaussians drawn in the crop
+
+
+def crop_camera(camera: PinholeCamera, x0: int, y0: int, x1: int, y1: int) -> PinholeCamera:
+    """The camera of the pixels [y0, y1) x [x0, x1) of ``camera``'s image. It renders the
+    crop of the whole image, but for Gaussians far outside the crop, whose projection 3D-GS
+    clamps at 1.3 half-widths of the image it is rendered to."""
+    return PinholeCamera(x1 - x0, y1 - y0, camera.fx, camera.fy, camera.cx - x0, camera.cy - y0, camera.near)
+
+
+def unseen_pixels(
+    hole: np.ndarray,
+    depth: np.ndarray,
+    camera: PinholeCamera,
+    cam_from_world: np.ndarray,
+    others: Sequence[tuple[PinholeCamera, np.ndarray, np.ndarray]],
+    tolerance: float,
+) -> np.ndarray:
+    """(H, W) bool: the pixels of ``hole`` (H, W) bool whose surface no other view sees.
+
+    Args:
+        depth: (H, W) camera depth of the surface each pixel shows after the removal, 0 where
+            it shows the environment (then its direction is what another view must see).
+        others: (camera, (3, 4) cam_from_world, (H', W') surface depth of the whole model, 0
+            where it shows the environment) of every other view.
+        tolerance: relative depth difference under which a view sees a point.
+    """
+    ys, xs = np.nonzero(hole)
+    z = depth[ys, xs].astype(np.float64)
+    far = z <= 0
+    rays = np.stack([(xs + 0.5 - camera.cx) / camera.fx, (ys + 0.5 - camera.cy) / camera.fy, np.ones(len(xs))], 1)
+    R, t = cam_from_world[:3, :3], cam_from_world[:3, 3]
+    points = (rays * np.where(far, 1.0, z)[:, None] - t) @ R  # world points; directions where far
+    directions = rays @ R
+    seen = np.zeros(len(xs), bool)
+    for cam, pose, other_depth in others:
+        Ro, to = pose[:3, :3], pose[:3, 3]
+        pc = np.where(far[:, None], directions @ Ro.T, points @ Ro.T + to)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            u = pc[:, 0] / pc[:, 2] * cam.fx + cam.cx
+            v = pc[:, 1] / pc[:, 2] * cam.fy + cam.cy
+        inside = (pc[:, 2] > 1e-9) & (u >= 0) & (u < cam.width) & (v >= 0) & (v < cam.height) & ~seen
+        rows = np.flatnonzero(inside)
+        shown = other_depth[v[rows].astype(int), u[rows].astype(int)]
+        agree = np.where(far[rows], shown <= 0, np.abs(shown - pc[rows, 2]) <= tolerance * pc[rows, 2])
+        seen[rows[agree]] = True
+    out = np.zeros_like(hole)
+    out[ys[~seen], xs[~seen]] = True
+    return out
+
+
+def seen_through(
+    points: np.ndarray, views: Sequence[tuple[PinholeCamera, np.ndarray, np.ndarray]], tolerance: float
+) -> np.ndarray:
+    """(P,) bool: which world ``points`` (P, 3) lie in space some view saw through: in its
+    image, in front of the surface it shows there by more than ``tolerance`` (relative), or
+    where it shows the environment. ``views``: (camera, (3, 4) cam_from_world, (H, W) surface
+    depth of the whole model, 0 where it shows the environment)."""
+    out = np.zeros(len(points), bool)
+    for cam, pose, depth in views:
+        pc = points @ pose[:3, :3].T + pose[:3, 3]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            u = pc[:, 0] / pc[:, 2] * cam.fx + cam.cx
+            v = pc[:, 1] / pc[:, 2] * cam.fy + cam.cy
+        rows = np.flatnonzero((pc[:, 2] > cam.near) & (u >= 0) & (u < cam.width) & (v >= 0) & (v < cam.height))
+        shown = depth[v[rows].astype(int), u[rows].astype(int)]
+        out[rows[(shown <= 0) | (pc[rows, 2] < (1 - tolerance) * shown)]] = True
+    return out
+
+
+def inpaint(rgb: np.ndarray, missing: np.ndarray) -> np.ndarray:
+    """(H, W, 3) uint8 ``rgb`` with its ``missing`` (H, W) bool pixels, widened by one pixel,
+    filled from the rest by
+    frequency-selective reconstruction (OpenCV's ``xphoto``), which carries textures on."""
+    missing = cv2.dilate(missing.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
+    out = np.empty_like(rgb)
+    cv2.xphoto.inpaint(rgb, (~missing).astype(np.uint8), out, cv2.xphoto.INPAINT_FSR_FAST)
+    return out
+
+
+def _spread(items: list, count: int) -> list:
+    """At most ``count`` of ``items``, evenly spread over them."""
+    if len(items) <= count:
+        return items
+    return [items[int(i)] for i in np.linspace(0, len(items) - 1, count).round()]
+
+
+def _grid_points(
+    unseen: np.ndarray, depth: np.ndarray, rgb: np.ndarray, camera: PinholeCamera, pose: np.ndarray, stride: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """World points (P, 3), uint8 colours (P, 3) and sizes (P,) on a ``stride`` grid of the
+    ``unseen`` pixels, at their (inpainted) ``depth``; a size is half the grid's spacing there."""
+    grid = np.zeros_like(unseen)
+    grid[stride // 2 :: stride, stride // 2 :: stride] = True
+    ys, xs = np.nonzero(unseen & grid & (depth > 0))
+    z = depth[ys, xs].astype(np.float64)
+    rays = np.stack([(xs + 0.5 - camera.cx) / camera.fx, (ys + 0.5 - camera.cy) / camera.fy, np.ones(len(xs))], 1)
+    points = (rays * z[:, None] - pose[:3, 3]) @ pose[:3, :3]
+    return points, rgb[ys, xs], 0.5 * stride * z / camera.fx
+
+
+def fill_removal(
+    gaussians: Gaussians,
+    removed: np.ndarray,
+    views: Sequence[Masked],
+    *,
+    environment: Environment | None,
+    sh_degree: int,
+    extent: float,
+    options: FillOptions = FillOptions(),
+    backend: str | Backend = "cpu",
+    progress: bool = True,
+) -> Filled:
+    """Remove the ``removed`` (N,) bool Gaussians of ``gaussians`` and fill what no view of
+    ``views`` (the training views, posed; their masks are not read) saw behind them.
+
+    Args:
+        environment: the run's learned background (None: black).
+        sh_degree: the SH degree the run renders at.
+        extent: the scene's extent, which scales the positions' learning rate as in training.
+    """
+    start = time.perf_counter()
+    backend = get_backend(backend)
+    kept = gaussians.detach().to(backend.device).select(torch.as_tensor(~removed, device=backend.device))
+    shown, depths = _removal_views(gaussians, removed, kept, views, environment, sh_degree, options, backend, progress)
+    share = sum(int(s.unseen.sum()) for s in shown) / max(sum(int(s.silhouette.sum()) for s in shown), 1)
+    holes = [s for s in shown if s.unseen.any()]
+    if not holes:
+        return Filled(kept.to(gaussians.means.device), 0, share, time.perf_counter() - start)
+    targets = {s.index: inpaint(s.rgb, s.unseen) for s in holes}
+    seen_by = [(v.camera, np.asarray(v.cam_from_world, np.float64), d) for v, d in zip(views, depths)]
+    seeds = _seed(_spread(holes, options.views), targets, views, seen_by, kept.obj_feat.shape[1], options)
+    crops = [_crop(s, targets.get(s.index, s.rgb), views[s.index], kept, environment, options, backend) for s in shown]
+    fill = _fit(seeds.to(backend.device), kept, crops, sh_degree, extent, options, backend, progress)
+    with torch.no_grad():
+        visible = (fill.opacities > 0.02).cpu().numpy() & ~seen_through(
+            fill.means.cpu().numpy().astype(np.float64), seen_by, options.depth_tolerance
+        )
+        fill = fill.select(torch.as_tensor(visible, device=fill.means.device))
+    out = Gaussians.concat(kept, fill)
+    return Filled(out.to(gaussians.means.device), len(fill), share, time.perf_counter() - start)
+
+
+def fill_run_removal(
+    run: Run,
+    removed: np.ndarray,
+    views: Sequence[Masked],
+    *,
+    gaussians: Gaussians | None = None,
+    options: FillOptions = FillOptions(),
+    backend: str | Backend = "cpu",
+    progress: bool = True,
+) -> Filled:
+    """:func:`fill_removal` of the ``removed`` (N,) bool Gaussians of a trained ``run`` (or of
+    its edited ``gaussians``, N of them too: recoloured), seen by its training ``views``."""
+    return fill_removal(
+        run.gaussians if gaussians is None else gaussians,
+        removed,
+        views,
+        environment=run.environment,
+        sh_degree=run.config.sh_degree,
+        extent=run.record.extent,
+        options=options,
+        backend=backend,
+        progress=progress,
+    )
+
+
+def _removal_views(
+    gaussians: Gaussians,
+    removed: np.ndarray,
+    kept: Gaussians,
+    views: Sequence[Masked],
+    environment: Environment | None,
+    sh_degree: int,
+    options: FillOptions,
+    backend: Backend,
+    progress: bool,
+) -> tuple[list[_Shown], list[np.ndarray]]:
+    """The views in which the removed Gaussians showed (:class:`_Shown`), and every view's
+    surface depth of the whole model."""
+    whole = gaussians.detach().to(backend.device)
+    poses = [torch.as_tensor(v.cam_from_world, dtype=torch.float32, device=backend.device) for v in views]
+    rim = np.ones((2 * options.rim + 1,) * 2, np.uint8)
+    silhouettes, depths = [], []
+    with torch.no_grad():
+        for view, pose in zip(tqdm(views, desc="fill: silhouettes", unit="view", disable=not progress), poses):
+            depths.append(
+                surface_depth(render(whole, view.camera, pose, sh_degree=0, with_features=False, backend=backend))
+            )
+            drawn = segment_pixels(whole, removed.astype(np.uint8), view.camera, pose, backend=backend) == 1
+            silhouettes.append(cv2.dilate(drawn.astype(np.uint8), rim) > 0)
+        shown = []
+        for i, (view, pose) in enumerate(zip(views, poses)):
+            if not silhouettes[i].any():
+                continue
+            bg = background_image(environment, view.camera, pose)
+            out = render(
+                kept, view.camera, pose, sh_degree=sh_degree, background=bg, with_features=False, backend=backend
+            )
+            depth = surface_depth(out)
+            others = [
+                (v.camera, np.asarray(v.cam_from_world, np.float64), d)
+                for j, (v, d) in enumerate(zip(views, depths))
+                if j != i
+            ]
+            pose64 = np.asarray(view.cam_from_world, np.float64)
+            unseen = unseen_pixels(silhouettes[i], depth, view.camera, pose64, others, options.depth_tolerance)
+            unseen = cv2.morphologyEx(unseen.astype(np.uint8), cv2.MORPH_OPEN, np.ones((3, 3), np.uint8)) > 0
+            shown.append(_Shown(i, silhouettes[i], unseen, to_uint8(out.rgb), depth))
+    return shown, depths
+
+
+def _seed(
+    holes: list[_Shown],
+    targets: dict[int, np.ndarray],
+    views: Sequence[Masked],
+    seen_by: list[tuple[PinholeCamera, np.ndarray, np.ndarray]],
+    features: int,
+    options: FillOptions,
+) -> Gaussians:
+    """New Gaussians on the unseen pixels of ``holes``, at their inpainted colour and depth,
+    none in space a view saw through."""
+    points, colours, sizes = [], [], []
+    for s in holes:
+        unknown = (cv2.dilate(s.unseen.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0) | (s.depth <= 0)
+        depth = cv2.inpaint(
+            s.depth.astype(np.float32), unknown.astype(np.uint8), options.depth_radius, cv2.INPAINT_TELEA
+        )
+        view = views[s.index]
+        p, c, r = _grid_points(
+            s.unseen, depth, targets[s.index], view.camera, np.asarray(view.cam_from_world), options.stride
+        )
+        points.append(p)
+        colours.append(c)
+        sizes.append(r)
+    points, colours, sizes = np.concatenate(points), np.concatenate(colours), np.concatenate(sizes)
+    hidden = ~seen_through(points, seen_by, options.depth_tolerance)
+    seeds = gaussians_from_points(points[hidden], colours[hidden], initial_opacity=options.initial_opacity)
+    seeds.log_scales = torch.log(torch.as_tensor(sizes[hidden], dtype=torch.float32))[:, None].repeat(1, 3)
+    seeds.obj_feat = torch.zeros(len(seeds), features)
+    return seeds
+
+
+def _crop(
+    shown: _Shown,
+    target: np.ndarray,
+    view: Masked,
+    kept: Gaussians,
+    environment: Environment | None,
+    options: FillOptions,
+    backend: Backend,
+) -> _Crop:
+    """The fit's step in one view: its silhouette's box widened by the margin."""
+    ys, xs = np.nonzero(shown.silhouette)
+    H, W = shown.silhouette.shape
+    x0, x1 = max(int(xs.min()) - options.margin, 0), min(int(xs.max()) + options.margin + 1, W)
+    y0, y1 = max(int(ys.min()) - options.margin, 0), min(int(ys.max()) + options.margin + 1, H)
+    camera = crop_camera(view.camera, x0, y0, x1, y1)
+    pose = torch.as_tensor(view.cam_from_world, dtype=torch.float32, device=backend.device)
+    with torch.no_grad():
+        drawn = render(kept, camera, pose, sh_degree=0, with_features=False, backend=backend).radii > 0
+    pixels = torch.as_tensor(target[y0:y1, x0:x1], dtype=torch.float32, device=backend.device) / 255
+    return _Crop(camera, pose, pixels, background_image(environment, camera, pose), drawn)
+
+
+def _fit(
+    seeds: Gaussians,
+    kept: Gaussians,
+    crops: list[_Crop],
+    sh_degree: int,
+    extent: float,
+    options: FillOptions,
+    backend: Backend,
+    progress: bool,
+) -> Gaussians:
+    """``seeds`` optimised (:data:`FITTED` alone) in front of the frozen ``kept`` to the crops'
+    targets, one crop a step."""
+    if not len(seeds):
+        return seeds
+    optimizer = GaussianOptimizer(seeds, LearningRates(), extent)
+    for name in set(Gaussians.field_names()) - set(FITTED):
+        optimizer.params[name].requires_grad_(False)
+    order = np.random.default_rng(options.seed).integers(0, len(crops), options.steps)
+    with torch.enable_grad():  # also where the caller renders without gradients
+        for k in tqdm(order, desc="fill: fitting", unit="step", disable=not progress):
+            crop, fill = crops[k], optimizer.gaussians
+            scene = Gaussians.concat(kept.select(crop.drawn), fill)
+            out = render(
+                scene,
+                crop.camera,
+                crop.pose,
+                sh_degree=sh_degree,
+                background=crop.background,
+                with_features=False,
+                backend=backend,
+            )
+            photometric_loss(out.rgb, crop.target, options.lambda_dssim).backward()
+            optimizer.step()
+    return optimizer.gaussians.detach()
