@@ -49,7 +49,7 @@ from gsseg.render import Backend, get_backend, render, surface_depth, to_uint8
 from gsseg.render.contributions import Masked
 from gsseg.render.pixel_labels import segment_pixels
 from gsseg.run.loaded import Run
-from gsseg.train.config import LearningRates
+from gsseg.train.config import LearningRates, TrainConfig
 from gsseg.train.losses import photometric_loss
 from gsseg.train.optim import GaussianOptimizer
 
@@ -69,7 +69,7 @@ class FillOptions:
         depth_tolerance: relative depth difference under which another view sees a point.
         depth_radius: neighbourhood of the depth's inpainting (OpenCV's Telea), in pixels.
         initial_opacity: opacity of a new Gaussian.
-        lambda_dssim: weight of the SSIM term in the fit's loss, as in training.
+        lambda_dssim: weight of the SSIM term in the fit's loss, training's.
         seed: seeds the choice of view at each step.
     """
 
@@ -81,7 +81,7 @@ class FillOptions:
     depth_tolerance: float = 0.02
     depth_radius: int = 5
     initial_opacity: float = 0.9
-    lambda_dssim: float = 0.2
+    lambda_dssim: float = TrainConfig.lambda_dssim
     seed: int = 0
 
 

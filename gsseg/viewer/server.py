@@ -103,6 +103,7 @@ class Viewer:
         self._dirty: dict[int, threading.Event] = {}
         self._render_lock = threading.Lock()
         self._stopped = threading.Event()
+        self._filling: threading.Thread | None = None  # the thread filling the last removal
         self.server.scene.world_axes.visible = False
         self.server.gui.configure_theme(show_logo=False, show_share_button=False, control_width="medium")
         self.server.gui.main_panel.dock_right()
@@ -119,9 +120,13 @@ class Viewer:
         return f"http://{self.host}:{self.server.get_port()}"
 
     def stop(self) -> None:
+        """Stop serving, once a fill in progress has finished (a thread stopped within its
+        rendering would abort the process)."""
         self._stopped.set()
         for event in list(self._dirty.values()):
             event.set()
+        if self._filling is not None:
+            self._filling.join()
         self.server.stop()
 
     def go_to(self, name: str, clients: list | None = None) -> None:
@@ -306,7 +311,8 @@ class Viewer:
         )
         self._changed()
         if filling:
-            threading.Thread(target=self._fill, args=(what,), daemon=True).start()
+            self._filling = threading.Thread(target=self._fill, args=(what,), name="fill")
+            self._filling.start()
 
     def _fill(self, what: str) -> None:
         """Compute the removal's fill, then show it (unless the edits changed meanwhile)."""
