@@ -39,6 +39,7 @@ def edit_rows(
     predicted labels to ground-truth IDs; ``objects`` limits the ground-truth objects scored."""
     backend = get_backend(backend)
     label_of = {gt: p for p, gt in id_map.items()}
+    train = run.scene(scene_dir).split("train")
     rows = []
     with torch.no_grad():
         for obj in sorted(label_of if objects is None else objects):
@@ -47,16 +48,12 @@ def edit_rows(
             selected = complete_selection(
                 run.gaussians,
                 segmentation.selection(label_of[obj]),
-                run.scene(scene_dir).split("train"),
+                train,
                 backend=backend,
             ).mask  # as gsseg edit removes and extracts
             removed = apply_edit(run.gaussians, selected, "remove")
             alone = apply_edit(run.gaussians, selected, "extract")
-            filled = (
-                fill_run_removal(run, selected, run.scene(scene_dir).split("train"), backend=backend, progress=False)
-                if fill
-                else None
-            )
+            filled = fill_run_removal(run, selected, train, backend=backend, progress=False) if fill else None
             for view in views:
                 truth = read_edit_truth(scene_dir, obj, view.stem)
                 if truth is None:

@@ -140,12 +140,27 @@ def crop_camera(camera: PinholeCamera, x0: int, y0: int, x1: int, y1: int) -> Pi
     return PinholeCamera(x1 - x0, y1 - y0, camera.fx, camera.fy, camera.cx - x0, camera.cy - y0, camera.near)
 
 
+SurfaceView = tuple[PinholeCamera, np.ndarray, np.ndarray]  # camera, (3, 4) cam_from_world, (H, W) surface depth
+
+
+def _shown_depth(
+    pc: np.ndarray, camera: PinholeCamera, depth: np.ndarray, min_z: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """The rows of the camera-space points ``pc`` (P, 3) deeper than ``min_z`` that fall in
+    ``camera``'s image, and the ``depth`` (H, W) it shows at each of them."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = pc[:, 0] / pc[:, 2] * camera.fx + camera.cx
+        v = pc[:, 1] / pc[:, 2] * camera.fy + camera.cy
+    rows = np.flatnonzero((pc[:, 2] > min_z) & (u >= 0) & (u < camera.width) & (v >= 0) & (v < camera.height))
+    return rows, depth[v[rows].astype(int), u[rows].astype(int)]
+
+
 def unseen_pixels(
     hole: np.ndarray,
     depth: np.ndarray,
     camera: PinholeCamera,
     cam_from_world: np.ndarray,
-    others: Sequence[tuple[PinholeCamera, np.ndarray, np.ndarray]],
+    others: Sequence[SurfaceView],
     tolerance: float,
 ) -> np.ndarray:
     """(H, W) bool: the pixels of ``hole`` (H, W) bool whose surface no other view sees.
@@ -168,12 +183,7 @@ def unseen_pixels(
     for cam, pose, other_depth in others:
         Ro, to = pose[:3, :3], pose[:3, 3]
         pc = np.where(far[:, None], directions @ Ro.T, points @ Ro.T + to)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            u = pc[:, 0] / pc[:, 2] * cam.fx + cam.cx
-            v = pc[:, 1] / pc[:, 2] * cam.fy + cam.cy
-        inside = (pc[:, 2] > 1e-9) & (u >= 0) & (u < cam.width) & (v >= 0) & (v < cam.height) & ~seen
-        rows = np.flatnonzero(inside)
-        shown = other_depth[v[rows].astype(int), u[rows].astype(int)]
+        rows, shown = _shown_depth(pc, cam, other_depth, 1e-9)
         agree = np.where(far[rows], shown <= 0, np.abs(shown - pc[rows, 2]) <= tolerance * pc[rows, 2])
         seen[rows[agree]] = True
     out = np.zeros_like(hole)
@@ -181,9 +191,7 @@ def unseen_pixels(
     return out
 
 
-def seen_through(
-    points: np.ndarray, views: Sequence[tuple[PinholeCamera, np.ndarray, np.ndarray]], tolerance: float
-) -> np.ndarray:
+def seen_through(points: np.ndarray, views: Sequence[SurfaceView], tolerance: float) -> np.ndarray:
     """(P,) bool: which world ``points`` (P, 3) lie in space some view saw through: in its
     image, in front of the surface it shows there by more than ``tolerance`` (relative), or
     where it shows the environment. ``views``: (camera, (3, 4) cam_from_world, (H, W) surface
@@ -191,11 +199,7 @@ def seen_through(
     out = np.zeros(len(points), bool)
     for cam, pose, depth in views:
         pc = points @ pose[:3, :3].T + pose[:3, 3]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            u = pc[:, 0] / pc[:, 2] * cam.fx + cam.cx
-            v = pc[:, 1] / pc[:, 2] * cam.fy + cam.cy
-        rows = np.flatnonzero((pc[:, 2] > cam.near) & (u >= 0) & (u < cam.width) & (v >= 0) & (v < cam.height))
-        shown = depth[v[rows].astype(int), u[rows].astype(int)]
+        rows, shown = _shown_depth(pc, cam, depth, cam.near)
         out[rows[(shown <= 0) | (pc[rows, 2] < (1 - tolerance) * shown)]] = True
     return out
 
@@ -254,13 +258,12 @@ def fill_removal(
     start = time.perf_counter()
     backend = get_backend(backend)
     kept = gaussians.detach().to(backend.device).select(torch.as_tensor(~removed, device=backend.device))
-    shown, depths = _removal_views(gaussians, removed, kept, views, environment, sh_degree, options, backend, progress)
+    shown, seen_by = _removal_views(gaussians, removed, kept, views, environment, sh_degree, options, backend, progress)
     share = sum(int(s.unseen.sum()) for s in shown) / max(sum(int(s.silhouette.sum()) for s in shown), 1)
     holes = [s for s in shown if s.unseen.any()]
     if not holes:
         return Filled(kept.to(gaussians.means.device), 0, share, time.perf_counter() - start)
     targets = {s.index: inpaint(s.rgb, s.unseen) for s in holes}
-    seen_by = [(v.camera, np.asarray(v.cam_from_world, np.float64), d) for v, d in zip(views, depths)]
     seeds = _seed(_spread(holes, options.views), targets, views, seen_by, kept.obj_feat.shape[1], options)
     crops = [_crop(s, targets.get(s.index, s.rgb), views[s.index], kept, environment, options, backend) for s in shown]
     fill = _fit(seeds.to(backend.device), kept, crops, sh_degree, extent, options, backend, progress)
@@ -308,9 +311,9 @@ def _removal_views(
     options: FillOptions,
     backend: Backend,
     progress: bool,
-) -> tuple[list[_Shown], list[np.ndarray]]:
-    """The views in which the removed Gaussians showed (:class:`_Shown`), and every view's
-    surface depth of the whole model."""
+) -> tuple[list[_Shown], list[SurfaceView]]:
+    """The views in which the removed Gaussians showed (:class:`_Shown`), and every view with
+    its surface depth of the whole model."""
     whole = gaussians.detach().to(backend.device)
     poses = [torch.as_tensor(v.cam_from_world, dtype=torch.float32, device=backend.device) for v in views]
     rim = np.ones((2 * options.rim + 1,) * 2, np.uint8)
@@ -322,6 +325,7 @@ def _removal_views(
             )
             drawn = segment_pixels(whole, removed.astype(np.uint8), view.camera, pose, backend=backend) == 1
             silhouettes.append(cv2.dilate(drawn.astype(np.uint8), rim) > 0)
+        seen_by = [(v.camera, np.asarray(v.cam_from_world, np.float64), d) for v, d in zip(views, depths)]
         shown = []
         for i, (view, pose) in enumerate(zip(views, poses)):
             if not silhouettes[i].any():
@@ -331,23 +335,18 @@ def _removal_views(
                 kept, view.camera, pose, sh_degree=sh_degree, background=bg, with_features=False, backend=backend
             )
             depth = surface_depth(out)
-            others = [
-                (v.camera, np.asarray(v.cam_from_world, np.float64), d)
-                for j, (v, d) in enumerate(zip(views, depths))
-                if j != i
-            ]
-            pose64 = np.asarray(view.cam_from_world, np.float64)
-            unseen = unseen_pixels(silhouettes[i], depth, view.camera, pose64, others, options.depth_tolerance)
+            others = seen_by[:i] + seen_by[i + 1 :]
+            unseen = unseen_pixels(silhouettes[i], depth, *seen_by[i][:2], others, options.depth_tolerance)
             unseen = cv2.morphologyEx(unseen.astype(np.uint8), cv2.MORPH_OPEN, np.ones((3, 3), np.uint8)) > 0
             shown.append(_Shown(i, silhouettes[i], unseen, to_uint8(out.rgb), depth))
-    return shown, depths
+    return shown, seen_by
 
 
 def _seed(
     holes: list[_Shown],
     targets: dict[int, np.ndarray],
     views: Sequence[Masked],
-    seen_by: list[tuple[PinholeCamera, np.ndarray, np.ndarray]],
+    seen_by: list[SurfaceView],
     features: int,
     options: FillOptions,
 ) -> Gaussians:
