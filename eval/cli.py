@@ -56,6 +56,12 @@ def cli() -> None:
     default=None,
     help="LPIPS network (ONNX, from `gseval export-lpips`); without it LPIPS is n/a.",
 )
+@click.option(
+    "--fill/--no-fill",
+    default=None,
+    help="Whether the removal shown fills what no training view saw behind the object, as `gsseg edit` does "
+    "(by default it does).",
+)
 @click.option("--force", is_flag=True, help="Replace --out if it exists.")
 @other_scene_option
 def report(
@@ -68,6 +74,7 @@ def report(
     color: tuple[int, int, int],
     backend: str,
     lpips: Path | None,
+    fill: bool | None,
     force: bool,
     other_scene: bool,
 ) -> None:
@@ -86,6 +93,7 @@ def report(
         lpips=lpips,
         overwrite=force,
         other_scene=other_scene,
+        **({} if fill is None else {"fill": fill}),  # report_run's default decides
     )
     s = ev.summary()
     scores = (

@@ -70,21 +70,22 @@ def edit_panels(
     *,
     train_views: list[View],
     removal: Gaussians | None = None,
+    fill: bool = True,
     progress: bool = True,
 ) -> dict[str, list[np.ndarray]]:
     """Renders of ``views`` after removing and extracting (on white) the (N,) bool ``completed``
     Gaussians (the selection with what served it alone, as ``gsseg edit`` takes them) and
     recolouring the ``selected`` ones; the removal filled from the ``train_views`` as ``gsseg
-    edit`` fills it (:mod:`gsseg.fill`), or the model ``removal`` where it is given (an edit
-    made already)."""
+    edit`` fills it (:mod:`gsseg.fill`; without ``fill``, the removal alone), or the model
+    ``removal`` where it is given (an edit made already)."""
     backend = get_backend(backend)
     out: dict[str, list[np.ndarray]] = {}
     for op in OPS:
         chosen = completed if op in COMPLETED_OPS else selected
-        if op == "remove":
+        if op == "remove" and removal is not None:
             edited = removal
-            if edited is None:
-                edited = fill_run_removal(run, chosen, train_views, backend=backend, progress=progress).gaussians
+        elif op == "remove" and fill:
+            edited = fill_run_removal(run, chosen, train_views, backend=backend, progress=progress).gaussians
         else:
             edited = apply_edit(run.gaussians, chosen, op, tuple(c / 255 for c in color))
         edited = edited.to(backend.device)
@@ -322,6 +323,7 @@ def report_run(
     selection: Selection | None = None,
     color: tuple[int, int, int] = (255, 40, 200),
     removal: Gaussians | None = None,
+    fill: bool = True,
     backend: str = "auto",
     lpips: Path | str | None = None,
     overwrite: bool = False,
@@ -332,7 +334,7 @@ def report_run(
     (LPIPS with the network file ``lpips``, else reported as not available). The edits shown
     are of ``object_id``, or of a ``selection`` made by clicks (:func:`gsseg.edits.select`), or
     of the largest object; ``removal``: the model after that object's removal where it was
-    made already (``gsseg edit``'s, filled), else it is made here."""
+    made already (``gsseg edit``'s, filled), else it is made here (filled unless not ``fill``)."""
     run_dir, scene_dir, out_dir = Path(run_dir), Path(scene_dir), Path(out_dir)
     refuse_overlap(
         out_dir,
@@ -372,6 +374,7 @@ def report_run(
         backend,
         train_views=train_views,
         removal=removal,
+        fill=fill,
         progress=progress,
     )
     truth = truth_rows(scene_dir, views, ev.id_map.get(label), edits) if ev.edits else None

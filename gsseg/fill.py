@@ -130,7 +130,7 @@ class _Crop:
     pose: torch.Tensor  # (3, 4)
     target: torch.Tensor  # (h, w, 3) in [0, 1]: the removal's render, inpainted where unseen
     background: torch.Tensor | None  # (h, w, 3) the environment in the crop
-    drawn: torch.Tensor  # (N_kept,) bool: the kept Gaussians drawn in the crop
+    drawn: Gaussians  # the kept Gaussians drawn in the crop
 
 
 def crop_camera(camera: PinholeCamera, x0: int, y0: int, x1: int, y1: int) -> PinholeCamera:
@@ -266,7 +266,7 @@ def fill_removal(
     targets = {s.index: inpaint(s.rgb, s.unseen) for s in holes}
     seeds = _seed(_spread(holes, options.views), targets, views, seen_by, kept.obj_feat.shape[1], options)
     crops = [_crop(s, targets.get(s.index, s.rgb), views[s.index], kept, environment, options, backend) for s in shown]
-    fill = _fit(seeds.to(backend.device), kept, crops, sh_degree, extent, options, backend, progress)
+    fill = _fit(seeds.to(backend.device), crops, sh_degree, extent, options, backend, progress)
     with torch.no_grad():
         visible = (fill.opacities > 0.02).cpu().numpy() & ~seen_through(
             fill.means.cpu().numpy().astype(np.float64), seen_by, options.depth_tolerance
@@ -392,12 +392,11 @@ def _crop(
     with torch.no_grad():
         drawn = render(kept, camera, pose, sh_degree=0, with_features=False, backend=backend).radii > 0
     pixels = torch.as_tensor(target[y0:y1, x0:x1], dtype=torch.float32, device=backend.device) / 255
-    return _Crop(camera, pose, pixels, background_image(environment, camera, pose), drawn)
+    return _Crop(camera, pose, pixels, background_image(environment, camera, pose), kept.select(drawn))
 
 
 def _fit(
     seeds: Gaussians,
-    kept: Gaussians,
     crops: list[_Crop],
     sh_degree: int,
     extent: float,
@@ -405,8 +404,8 @@ def _fit(
     backend: Backend,
     progress: bool,
 ) -> Gaussians:
-    """``seeds`` optimised (:data:`FITTED` alone) in front of the frozen ``kept`` to the crops'
-    targets, one crop a step."""
+    """``seeds`` optimised (:data:`FITTED` alone) in front of the crops' frozen Gaussians to
+    their targets, one crop a step."""
     if not len(seeds):
         return seeds
     optimizer = GaussianOptimizer(seeds, LearningRates(), extent)
@@ -416,7 +415,7 @@ def _fit(
     with torch.enable_grad():  # also where the caller renders without gradients
         for k in tqdm(order, desc="fill: fitting", unit="step", disable=not progress):
             crop, fill = crops[k], optimizer.gaussians
-            scene = Gaussians.concat(kept.select(crop.drawn), fill)
+            scene = Gaussians.concat(crop.drawn, fill)
             out = render(
                 scene,
                 crop.camera,

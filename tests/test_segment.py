@@ -197,7 +197,7 @@ def test_segment_edit_and_render_segments_from_the_command_line(trained, small_s
     # A point at the centre of object 2's Gaussians selects object 2; removing it edits only them.
     means = read_ply(run / "gaussians.ply").means
     point = np.median(means[torch.as_tensor(seg.selection(2))].numpy(), axis=0)
-    ok("edit", run, "--point", *point, "--op", "remove", "--name", "gone", "--split", "train")
+    ok("edit", run, "--point", *point, "--op", "remove", "--name", "gone", "--split", "train", "--no-fill")
     edit = json.loads((run / "edits" / "gone" / "edit.json").read_text())
     assert edit["object_id"] == 2 and edit["selected_gaussians"] == int(seg.selection(2).sum())
     assert edit["labels"] == {"method": "prior", "mode": "multi", "gamma_p": 0.2, "smooth": 0, "fill": False}
