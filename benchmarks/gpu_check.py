@@ -63,8 +63,8 @@ from gsseg.model.environment import background_image
 from gsseg.model.gaussians import Gaussians, gaussians_from_points
 from gsseg.render import get_backend, render
 from gsseg.run.loaded import Run, load_run
-from gsseg.segment.clicks import ClickEvidence, ClickSelector
-from gsseg.segment.prompts import click_weights
+from gsseg.segment.clicks import ClickSelector
+from gsseg.segment.prompts import click_evidence
 from gsseg.segment.segment_run import label_gaussians, mask_contributions, mask_regions, segment_run
 from gsseg.train.config import TrainConfig
 from gsseg.train.trainer import train
@@ -271,8 +271,8 @@ def parity(run: Run, scene: Path, backend: str, click: tuple[float, float], firs
     for name, matrix in contributions.items():
         labels[name] = label_gaussians(run, matrix, DEMO_LABELS).labels
         regions = mask_regions(run, scene, masks=DEPTH_MASKS, backend=name, first=matrix, progress=False)
-        weights = click_weights(g, first_view.camera, first_view.cam_from_world, *click, backend=name)
-        selections[name] = ClickSelector(g, labels[name], regions).select([ClickEvidence(weights, True)])
+        seen = click_evidence(g, first_view.camera, first_view.cam_from_world, *click, backend=name)
+        selections[name] = ClickSelector(g, labels[name], regions).select([seen])
     out["labels_agree"] = float((labels[backend] == labels["cpu"]).mean())
     sa, sb = selections[backend], selections["cpu"]
     out["selection_iou"] = float((sa & sb).sum() / max((sa | sb).sum(), 1))

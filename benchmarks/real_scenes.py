@@ -55,7 +55,7 @@ from gsseg.render.contributions import MaskedView, contribution_matrix
 from gsseg.render.pixel_labels import segment_pixels
 from gsseg.run.loaded import Run, load_run
 from gsseg.segment.clicks import ClickEvidence, ClickSelector
-from gsseg.segment.prompts import click_weights
+from gsseg.segment.prompts import click_evidence
 from gsseg.segment.segment_run import run_regions, segment_run
 from gsseg.train.config import TrainConfig
 from gsseg.train.trainer import train
@@ -123,10 +123,11 @@ class Clicker:
         """Add a click at pixel (u, v) of the first view; a click on nothing opaque, or a
         negative one before any positive, is spent without changing the selection."""
         try:
-            weights = click_weights(
-                self.run.gaussians, self.first.camera, self.first.cam_from_world, u, v, backend=self.backend
+            first = self.first
+            seen = click_evidence(
+                self.run.gaussians, first.camera, first.cam_from_world, u, v, positive, backend=self.backend
             )
-            clicks = self.clicks + [ClickEvidence(weights, positive)]
+            clicks = [*self.clicks, seen]
             self.selected = self.selector.cut(clicks, self.selected if self.clicks else None)
             self.clicks = clicks
         except InputError:

@@ -24,8 +24,8 @@ from gsseg.model.sh import C0, rgb_to_sh_dc
 from gsseg.render import Backend, get_backend
 from gsseg.run.folder import write_edit_record
 from gsseg.run.loaded import Background, Run, load_run
-from gsseg.segment.clicks import Click, ClickEvidence, ClickSelector
-from gsseg.segment.prompts import click_weights, pick_object, point_evidence
+from gsseg.segment.clicks import Click, ClickSelector
+from gsseg.segment.prompts import click_evidence, pick_object, point_evidence
 from gsseg.segment.reassign import Segmentation
 from gsseg.segment.segment_run import run_regions
 from gsseg.segment.served import complete_selection
@@ -137,8 +137,9 @@ def select(
     evidence = [point_evidence(run.gaussians, np.asarray(point, float), k)] if point is not None else []
     for c in clicks:
         view = scene.view(c.view)
-        weights = click_weights(run.gaussians, view.camera, view.cam_from_world, c.u, c.v, backend=backend)
-        evidence.append(ClickEvidence(weights, c.positive))
+        evidence.append(
+            click_evidence(run.gaussians, view.camera, view.cam_from_world, c.u, c.v, c.positive, backend=backend)
+        )
     selector = ClickSelector(run.gaussians, segmentation.labels, run_regions(run, scene.root, backend=backend))
     mask = selector.select(evidence)
     objects = sorted(set(np.unique(segmentation.labels[mask]).tolist()))

@@ -16,6 +16,7 @@ import torch
 from helpers import script
 from scipy import ndimage
 
+from dataset_tools.cameras import PinholeCamera
 from dataset_tools.image_files import encode_png
 from dataset_tools.infra.atomic import write_bytes_atomic
 from dataset_tools.infra.errors import InputError
@@ -25,7 +26,8 @@ from gsseg.model.ply import read_ply
 from gsseg.render.contributions import RegionWeights
 from gsseg.render.pixel_labels import segment_pixels
 from gsseg.run.loaded import load_run
-from gsseg.segment.clicks import ClickEvidence, ClickSelector
+from gsseg.segment.clicks import ClickEvidence, ClickOptions, ClickSelector
+from gsseg.segment.prompts import click_evidence
 from gsseg.segment.segment_run import segment_run
 from gsseg.segment.served import complete_selection
 
@@ -57,10 +59,10 @@ def _regions(n: int, groups: list[np.ndarray], views: int = 6) -> RegionWeights:
     )
 
 
-def _click(n: int, on: np.ndarray, positive: bool = True) -> ClickEvidence:
+def _click(n: int, on: np.ndarray, positive: bool = True, shown: np.ndarray | None = None) -> ClickEvidence:
     weights = np.zeros(n)
     weights[on[:5]] = 1.0
-    return ClickEvidence(weights, positive)
+    return ClickEvidence(weights, positive, shown)
 
 
 def test_a_click_selects_what_the_views_hold_apart_although_the_labels_join_it():
@@ -82,6 +84,41 @@ def test_a_negative_click_takes_out_a_part_the_views_and_labels_joined():
     assert both.all()
     alone = selector.select([_click(n, a), _click(n, b, positive=False)])
     assert alone[a].all() and not alone[b].any()
+
+
+def test_a_click_knows_how_much_of_each_gaussian_its_view_shows():
+    """Known answers of ``shown``: a Gaussian alone in view gives its whole footprint
+    o 2 pi sqrt(det Sigma2D) (1 up to the cut at alpha 1/255 and the pixel grid), one behind a
+    nearly opaque one almost nothing, one behind the camera nothing."""
+    g = gaussians_from_points(
+        np.array([[0.0, 0.0, 5.0], [0.0, 0.0, 8.0], [3.0, -3.0, 8.0], [0.0, 0.0, -3.0]]),
+        np.full((4, 3), 128, np.uint8),
+        initial_opacity=0.5,
+    )
+    g.log_scales = torch.log(torch.tensor([1.0, 0.1, 0.2, 0.2]))[:, None].repeat(1, 3)
+    g.opacity_logits = torch.logit(torch.tensor([0.995, 0.5, 0.5, 0.5]))
+    camera = PinholeCamera(128, 128, 100.0, 100.0, 64.0, 64.0)
+    seen = click_evidence(g, camera, np.eye(4)[:3], 64.0, 64.0)
+    assert seen.shown[0] == pytest.approx(1.0, abs=0.05) and seen.shown[2] == pytest.approx(1.0, abs=0.05)
+    assert seen.shown[1] < 0.02 and seen.shown[3] == 0.0
+    assert seen.positive and seen.weights[0] > 0.9 * seen.weights.sum()
+
+
+def test_a_negative_click_reaches_only_what_its_view_shows():
+    """The clicked view shows B's near half alone (its far half hidden behind it, as a face
+    hides the back of a head): a negative click on B takes that half; the hidden half keeps
+    what the views and labels say of it, and the same click seeing all of B takes all of it."""
+    g, a, b = _two_blobs()
+    n = len(g)
+    selector = ClickSelector(g, np.full(n, 7, np.uint8), _regions(n, [np.concatenate([a, b])]))
+    far = g.means[:, 0].numpy() > 3.0
+    shown = np.where(far, 0.0, 1.0)
+    near_b, far_b = b[~far[b]], b[far[b]]
+    against = _click(n, near_b, positive=False, shown=shown)
+    part = selector.select([_click(n, a), against])
+    assert part[a].all() and not part[near_b].any() and part[far_b].all()
+    whole = selector.select([_click(n, a), replace(against, shown=np.ones(n))])
+    assert whole[a].all() and not whole[b].any()
 
 
 def _spill():
@@ -208,8 +245,8 @@ def test_clicks_carve_objects_the_labels_joined(segmented, small_scene, tmp_path
     """The test run's two largest objects a and b given one label (as the weight-free masks
     join an object to what it stands on): a click on a selects a (the views hold it apart);
     where the masks join them as well, one click selects both and an excluding click on b
-    takes b out (most of it on this rough 200-step model), keeping a. ``gsseg export``
-    selects what ``gsseg edit`` selects."""
+    takes out what its view shows of b (most of it on this rough 200-step model), keeping a.
+    ``gsseg export`` selects what ``gsseg edit`` selects."""
     run_dir, run, seg, a, b = _joined_labels(segmented, tmp_path)
     clicks = _clickable(run, seg.labels, [a, b])
     at_a = ["--click", *map(str, clicks[a])]
@@ -229,7 +266,11 @@ def test_clicks_carve_objects_the_labels_joined(segmented, small_scene, tmp_path
     joined = _edit(run_dir, *at_a, *scene_args, "--name", "joined")
     assert _iou(joined, own_a | own_b) > 0.9
     split = _edit(run_dir, *at_a, "--exclude-click", *map(str, clicks[b]), *scene_args, "--name", "split")
-    assert (split & own_a).sum() >= 0.98 * (joined & own_a).sum() and (split & own_b).sum() < (joined & own_b).sum() / 3
+    view_b = run.scene().view(clicks[b][0])
+    shown = click_evidence(run.gaussians, view_b.camera, view_b.cam_from_world, *clicks[b][1:]).shown
+    shown_b = own_b & (shown >= ClickOptions().shown_share)
+    assert (split & own_a).sum() >= 0.98 * (joined & own_a).sum()
+    assert (split & shown_b).sum() < (joined & shown_b).sum() / 2 and (split & own_b).sum() < (joined & own_b).sum()
     record = json.loads((run_dir / "edits" / "split" / "edit.json").read_text())
     assert [c["positive"] for c in record["clicks"]] == [True, False] and record["object_id"] is None
     exported = tmp_path / "split.ply"

@@ -1,7 +1,7 @@
 """Selections made by clicks, each for or against, whatever the labels hold.
 
 A click is the set of Gaussians seen at the clicked pixel, each with its blended weight there
-(:func:`gsseg.segment.prompts.click_weights`); the Gaussians that carry most of that weight are
+(:func:`gsseg.segment.prompts.click_evidence`); the Gaussians that carry most of that weight are
 its seeds. The selection is a cut over a graph of the Gaussians (each joined to its nearest
 neighbours; an edge is strong between Gaussians of like colour and object feature) made by a
 max-flow solver (PyMaxflow), with a cost per Gaussian from four kinds of evidence:
@@ -28,7 +28,8 @@ max-flow solver (PyMaxflow), with a cost per Gaussian from four kinds of evidenc
   views and labels joined to the object goes, while the object's own Gaussians beside the
   click, nearly as near to a positive seed, keep their evidence, and so do those the views
   hold to the object more firmly than the clicked part (:meth:`ClickSelector._yielding`: a
-  spill beside a head goes, the top of the head next to it stays).
+  spill beside a head goes, the top of the head next to it stays); and it reaches only what
+  its view shows (:meth:`ClickSelector._in_sight`: the back of the head stays).
 
 The seeds are hard constraints; the source's side of the cut is the selection (parts apart
 in space, several objects under one mask, stay together where the views join them). A later
@@ -91,6 +92,8 @@ class ClickOptions:
         against_margin: on a negative click's side, a Gaussian the views hold to the object
             by twice this share more firmly than the clicked part keeps its evidence
             (:meth:`ClickSelector._yielding`).
+        shown_share: a negative click reaches a Gaussian its view shows this much of
+            (:attr:`ClickEvidence.shown`), in part one shown less (:meth:`ClickSelector._in_sight`).
         stickiness: weight of the selection before the click.
         smoothness: weight of the graph's edges.
     """
@@ -107,13 +110,22 @@ class ClickOptions:
     split_weight: float = 4.0
     split_full: float = 0.5
     against_margin: float = 0.2
+    shown_share: float = 0.1
     stickiness: float = 3.0
     smoothness: float = 1.0
 
     def __post_init__(self) -> None:
         if self.neighbours < 1 or self.iterations < 1:
             raise OptionError("{neighbours} and {iterations}: give 1 or more.", neighbours=self.neighbours)
-        for name in ("region_share", "seen_share", "seed_share", "overlap", "part_share", "against_margin"):
+        for name in (
+            "region_share",
+            "seen_share",
+            "seed_share",
+            "overlap",
+            "part_share",
+            "against_margin",
+            "shown_share",
+        ):
             if not 0 < getattr(self, name) <= 1:
                 raise OptionError(f"{{{name}}}: give a share in (0, 1].", **{name: getattr(self, name)})
 
@@ -121,10 +133,14 @@ class ClickOptions:
 @dataclass(frozen=True)
 class ClickEvidence:
     """What one click saw: ``weights`` (N,) each Gaussian's blended weight at the clicked
-    pixels, and whether the click is for (``positive``) or against the selection."""
+    pixels, whether the click is for (``positive``) or against the selection, and ``shown``
+    (N,) in [0, 1] how much of each Gaussian the clicked view shows (its blended weight over
+    the view over what it would give unoccluded; None: a prompt without a view, a 3D
+    point)."""
 
     weights: np.ndarray
     positive: bool
+    shown: np.ndarray | None = None
 
     def seeds(self, share: float) -> np.ndarray:
         """Indices of the Gaussians that carry ``share`` of the click's weight, heaviest first."""
@@ -321,6 +337,7 @@ class ClickSelector:
         if len(negative):  # deep on a negative click's side its word outweighs all else
             side = np.clip(self.graph.split(negative, positive) / o.split_full, 0, 1)
             side *= self._yielding(clicks, negative, voted_regions, share, seen)
+            side *= self._in_sight(clicks)
             cost = (1 - side) * cost - o.split_weight * side
         graph = maxflow.Graph[float]()
         graph.add_nodes(n)
@@ -335,6 +352,19 @@ class ClickSelector:
         if before is None:
             return cut
         return before | cut if clicks[-1].positive else before & cut
+
+    def _in_sight(self, clicks: Sequence[ClickEvidence]) -> np.ndarray:
+        """(N,) in [0, 1]: how far each Gaussian lies within a negative click's reach, by how
+        much of it the clicked view shows: fully from :attr:`ClickOptions.shown_share` on,
+        linearly below. A negative click speaks of what its view shows: the back of a head
+        that the view hides behind its face is beyond it, however near along the graph to the
+        clicked rim."""
+        reach = np.zeros(len(self.labels))
+        for click in clicks:
+            if not click.positive:
+                shown = np.ones(len(self.labels)) if click.shown is None else click.shown
+                reach = np.maximum(reach, np.clip(shown / self.options.shown_share, 0, 1))
+        return reach
 
     def _yielding(
         self,

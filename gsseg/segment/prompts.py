@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import torch
 from scipy.spatial import cKDTree
@@ -10,6 +12,7 @@ from dataset_tools.cameras import PinholeCamera
 from dataset_tools.infra.errors import InputError
 from gsseg.model.gaussians import Gaussians
 from gsseg.render import Backend, get_backend, render
+from gsseg.render.projection import project_gaussians
 from gsseg.segment.clicks import ClickEvidence
 
 
@@ -77,18 +80,21 @@ def point_from_click(
     return R.T @ (cam_point - t)
 
 
-def click_weights(
+def click_evidence(
     gaussians: Gaussians,
     camera: PinholeCamera,
     cam_from_world: np.ndarray,
     u: float,
     v: float,
+    positive: bool = True,
     *,
     radius: int = 1,
     backend: str | Backend = "cpu",
-) -> np.ndarray:
-    """(N,) float64: each Gaussian's blended weight alpha_i T_i summed over the pixels within
-    ``radius`` of pixel (u, v) of a view (a (2 radius + 1)^2 window): what a click there saw.
+) -> ClickEvidence:
+    """What a click at pixel (u, v) of a view saw: each Gaussian's blended weight alpha_i T_i
+    summed over the pixels within ``radius`` of it (a (2 radius + 1)^2 window), and how much
+    of it the view shows: its weight over the whole view over what its footprint would give
+    unoccluded, o_i 2 pi sqrt(det Sigma2D_i) (0: hidden or off screen, 1: in full view).
 
     Raises:
         InputError: the click lies outside the view, or less than half opaque is rendered there.
@@ -97,17 +103,22 @@ def click_weights(
         raise InputError(f"click ({u}, {v}) is outside the {camera.width}x{camera.height} view; click inside it.")
     backend = get_backend(backend)
     g = gaussians.detach().to(backend.device)
-    rows = np.full((camera.height, camera.width), -1, np.int64)
+    rows = np.zeros((camera.height, camera.width), np.int64)
     row, col = int(v), int(u)
     window = rows[max(0, row - radius) : row + radius + 1, max(0, col - radius) : col + radius + 1]
-    window[:] = 0
+    window[:] = 1
     pose = torch.as_tensor(cam_from_world, dtype=torch.float32, device=backend.device)
-    weights = backend.contributions(g.means, g.quats, g.scales, g.opacities, pose, camera, rows, 1)[0]
-    weights = weights.double().numpy()
-    alpha = weights.sum() / window.size
+    weights = backend.contributions(g.means, g.quats, g.scales, g.opacities, pose, camera, rows, 2).double().numpy()
+    alpha = weights[1].sum() / window.size
     if alpha < 0.5:
         raise InputError(f"nothing opaque is rendered at ({u}, {v}) (alpha {alpha:.2f}); click on an object.")
-    return weights
+    with torch.no_grad():
+        proj = project_gaussians(g.means, g.quats, g.scales, pose, camera, g.opacities)
+        footprint = (
+            g.opacities * 2 * math.pi / torch.sqrt(proj.conics[:, 0] * proj.conics[:, 2] - proj.conics[:, 1] ** 2)
+        )
+        footprint = torch.where(proj.radii > 0, footprint, torch.inf).double().cpu().numpy()
+    return ClickEvidence(weights[1], positive, shown=np.clip(weights.sum(0) / footprint, 0, 1))
 
 
 def point_evidence(gaussians: Gaussians, point: np.ndarray, k: int = 20) -> ClickEvidence:

@@ -7,7 +7,7 @@ from __future__ import annotations
 import math
 import threading
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -26,7 +26,7 @@ from gsseg.render.contributions import Contributions
 from gsseg.run.loaded import Run
 from gsseg.segment.clicks import ClickEvidence, ClickSelector
 from gsseg.segment.label_options import LabelOptions
-from gsseg.segment.prompts import click_weights
+from gsseg.segment.prompts import click_evidence
 from gsseg.segment.reassign import Segmentation
 from gsseg.segment.segment_run import label_gaussians, mask_contributions, run_regions
 from gsseg.segment.served import complete_selection
@@ -192,12 +192,12 @@ class ViewerSession:
         g, seg = self.current()
         if seg is None:
             raise InputError(self.segments_missing)
-        weights = click_weights(g, view.camera, view.cam_from_world, u, v, backend=self.backend)
+        seen = click_evidence(g, view.camera, view.cam_from_world, u, v, backend=self.backend)
         with self._lock:
             if mode == "exclude" and not self.clicks:
                 raise InputError("shift-click takes a part out of a selection: click an object first.")
             restart = mode == "select" or not self.clicks
-            click = ClickEvidence(weights, restart or mode == "add")
+            click = replace(seen, positive=restart or mode == "add")
             clicks = [click] if restart else [*self.clicks, click]
             selector = self._click_selector()
             self._click_selection = selector.cut(clicks, None if restart else self._click_selection)
