@@ -47,7 +47,7 @@ from gsseg.model.environment import Environment, background_image
 from gsseg.model.gaussians import Gaussians, gaussians_from_points
 from gsseg.render import Backend, get_backend, render, surface_depth, to_uint8
 from gsseg.render.contributions import Masked
-from gsseg.render.pixel_labels import segment_pixels
+from gsseg.render.pixel_labels import render_labels
 from gsseg.run.loaded import Run
 from gsseg.train.config import LearningRates, TrainConfig
 from gsseg.train.losses import photometric_loss
@@ -143,6 +143,11 @@ def crop_camera(camera: PinholeCamera, x0: int, y0: int, x1: int, y1: int) -> Pi
 SurfaceView = tuple[PinholeCamera, np.ndarray, np.ndarray]  # camera, (3, 4) cam_from_world, (H, W) surface depth
 
 
+def _pixel_rays(xs: np.ndarray, ys: np.ndarray, camera: PinholeCamera) -> np.ndarray:
+    """(P, 3) camera-space rays through the centres of the pixels (xs, ys) (P,), at depth 1."""
+    return np.stack([(xs + 0.5 - camera.cx) / camera.fx, (ys + 0.5 - camera.cy) / camera.fy, np.ones(len(xs))], 1)
+
+
 def _shown_depth(
     pc: np.ndarray, camera: PinholeCamera, depth: np.ndarray, min_z: float
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -175,7 +180,7 @@ def unseen_pixels(
     ys, xs = np.nonzero(hole)
     z = depth[ys, xs].astype(np.float64)
     far = z <= 0
-    rays = np.stack([(xs + 0.5 - camera.cx) / camera.fx, (ys + 0.5 - camera.cy) / camera.fy, np.ones(len(xs))], 1)
+    rays = _pixel_rays(xs, ys, camera)
     R, t = cam_from_world[:3, :3], cam_from_world[:3, 3]
     points = (rays * np.where(far, 1.0, z)[:, None] - t) @ R  # world points; directions where far
     directions = rays @ R
@@ -230,8 +235,7 @@ def _grid_points(
     grid[stride // 2 :: stride, stride // 2 :: stride] = True
     ys, xs = np.nonzero(unseen & grid & (depth > 0))
     z = depth[ys, xs].astype(np.float64)
-    rays = np.stack([(xs + 0.5 - camera.cx) / camera.fx, (ys + 0.5 - camera.cy) / camera.fy, np.ones(len(xs))], 1)
-    points = (rays * z[:, None] - pose[:3, 3]) @ pose[:3, :3]
+    points = (_pixel_rays(xs, ys, camera) * z[:, None] - pose[:3, 3]) @ pose[:3, :3]
     return points, rgb[ys, xs], 0.5 * stride * z / camera.fx
 
 
@@ -320,11 +324,9 @@ def _removal_views(
     silhouettes, depths = [], []
     with torch.no_grad():
         for view, pose in zip(tqdm(views, desc="fill: silhouettes", unit="view", disable=not progress), poses):
-            depths.append(
-                surface_depth(render(whole, view.camera, pose, sh_degree=0, with_features=False, backend=backend))
-            )
-            drawn = segment_pixels(whole, removed.astype(np.uint8), view.camera, pose, backend=backend) == 1
-            silhouettes.append(cv2.dilate(drawn.astype(np.uint8), rim) > 0)
+            labels, out = render_labels(whole, removed.astype(np.uint8), view.camera, pose, backend=backend)
+            depths.append(surface_depth(out))
+            silhouettes.append(cv2.dilate((labels == 1).astype(np.uint8), rim) > 0)
         seen_by = [(v.camera, np.asarray(v.cam_from_world, np.float64), d) for v, d in zip(views, depths)]
         shown = []
         for i, (view, pose) in enumerate(zip(views, poses)):
