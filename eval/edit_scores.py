@@ -107,26 +107,19 @@ def summarize_edits(rows: list[dict]) -> dict:
         kept = [v for v in values if v is not None and np.isfinite(v)]
         return float(np.mean(kept)) if kept else None
 
+    psnrs = ("psnr", "psnr_region", "psnr_seen", "psnr_unseen", "psnr_outside")  # of removal_scores
     filled = [r for r in rows if "removal_filled" in r]
     return {
         **(
             {
-                "filled_psnr": mean([r["removal_filled"]["psnr"] for r in filled]),
-                "filled_psnr_region": mean([r["removal_filled"]["psnr_region"] for r in filled]),
-                "filled_psnr_seen": mean([r["removal_filled"]["psnr_seen"] for r in filled]),
-                "filled_psnr_unseen": mean([r["removal_filled"]["psnr_unseen"] for r in filled]),
-                "filled_psnr_outside": mean([r["removal_filled"]["psnr_outside"] for r in filled]),
+                **{f"filled_{k}": mean([r["removal_filled"][k] for r in filled]) for k in psnrs},
                 "fill_seconds": mean(list({r["object"]: r["fill_seconds"] for r in filled}.values())),  # per object
             }
             if filled
             else {}
         ),
         "pairs": len(rows),
-        "removal_psnr": mean([r["removal"]["psnr"] for r in rows]),
-        "removal_psnr_region": mean([r["removal"]["psnr_region"] for r in rows]),
-        "removal_psnr_seen": mean([r["removal"]["psnr_seen"] for r in rows]),
-        "removal_psnr_unseen": mean([r["removal"]["psnr_unseen"] for r in rows]),
-        "removal_psnr_outside": mean([r["removal"]["psnr_outside"] for r in rows]),
+        **{f"removal_{k}": mean([r["removal"][k] for r in rows]) for k in psnrs},
         "extraction_iou": mean([r["extraction"]["iou"] for r in rows]),
         "extraction_iou_seen": mean([r["extraction"]["iou_seen"] for r in rows]),
         "extraction_psnr_inside": mean([r["extraction"]["psnr_inside"] for r in rows]),
