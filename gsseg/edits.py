@@ -20,7 +20,7 @@ from dataset_tools.scene import Scene
 from gsseg.fill import fill_run_removal
 from gsseg.model.gaussians import Gaussians
 from gsseg.model.ply import write_ply
-from gsseg.model.sh import C0, rgb_to_sh_dc
+from gsseg.model.sh import rgb_to_sh_dc
 from gsseg.render import Backend, get_backend
 from gsseg.run.folder import write_edit_record
 from gsseg.run.loaded import Background, Run, load_run
@@ -40,7 +40,7 @@ def recolor(g: Gaussians, selected: torch.Tensor, rgb: tuple[float, float, float
     new base colour is the target scaled by its luminance relative to the selection's mean,
     and its higher SH bands are scaled by the same luminance ratio as its DC."""
     out = Gaussians(**{k: v.clone() for k, v in g.tensors().items()})
-    base = (g.sh_dc[selected] * C0 + 0.5).clamp(0, 1)
+    base = g.base_colours[selected]
     luma = base @ LUMA
     target = torch.tensor(rgb, dtype=base.dtype)
     shade = (luma / luma.mean().clamp_min(1e-6))[:, None]

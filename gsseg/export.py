@@ -25,7 +25,6 @@ from gsseg.edits import check_prompts, edit_background, select
 from gsseg.model.environment import environment_shell, shell_radius, shell_spacing
 from gsseg.model.gaussians import Gaussians
 from gsseg.model.ply import read_ply, write_ply
-from gsseg.model.sh import C0
 from gsseg.run.folder import read_edit_record
 from gsseg.run.loaded import Run, load_run
 from gsseg.segment.clicks import Click
@@ -40,7 +39,7 @@ def splat_records(g: Gaussians) -> np.ndarray:
     with torch.no_grad():
         scales = g.scales.cpu().numpy()
         opacity = g.opacities.cpu().numpy()
-        rgb = (g.sh_dc * C0 + 0.5).clamp(0, 1).cpu().numpy()
+        rgb = g.base_colours.cpu().numpy()
         quats = torch.nn.functional.normalize(g.quats, dim=-1).cpu().numpy()
     order = np.argsort(-(scales.prod(1) * opacity), kind="stable")
     out = np.empty(len(g), SPLAT_RECORD)

@@ -8,7 +8,7 @@ import numpy as np
 import torch
 from scipy.spatial import cKDTree
 
-from gsseg.model.sh import MAX_DEGREE, num_coeffs, rgb_to_sh_dc
+from gsseg.model.sh import C0, MAX_DEGREE, num_coeffs, rgb_to_sh_dc
 
 OBJ_FEAT_DIM = 16
 
@@ -92,6 +92,11 @@ class Gaussians:
     def opacities(self) -> torch.Tensor:
         """(N,) opacities in (0, 1)."""
         return torch.sigmoid(self.opacity_logits)
+
+    @property
+    def base_colours(self) -> torch.Tensor:
+        """(N, 3) the view-independent colour of the DC coefficients, in [0, 1]."""
+        return (self.sh_dc * C0 + 0.5).clamp(0, 1)
 
     @property
     def sh(self) -> torch.Tensor:

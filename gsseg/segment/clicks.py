@@ -4,7 +4,7 @@ A click is the set of Gaussians seen at the clicked pixel, each with its blended
 (:func:`gsseg.segment.prompts.click_evidence`); the Gaussians that carry most of that weight are
 its seeds. The selection is a cut over a graph of the Gaussians (each joined to its nearest
 neighbours; an edge is strong between Gaussians of like colour and object feature) made by a
-max-flow solver (PyMaxflow), with a cost per Gaussian from four kinds of evidence:
+max-flow solver (PyMaxflow), with a cost per Gaussian from five kinds of evidence:
 
 - **the views** (the first positive click): in every training view where the click's Gaussians
   are seen, the mask region they fall in (of each mask layer: the masks that voted and the
@@ -18,6 +18,11 @@ max-flow solver (PyMaxflow), with a cost per Gaussian from four kinds of evidenc
   it apart;
 - **the labels**: the label under the first click's seeds, in proportion to how far it agrees
   with the views' vote (a label that swallowed the table under the object disagrees with it);
+- **the colours** (:class:`ColourModel`): as GrabCut learns the colours of the object and of the
+  rest from its last cut and cuts again, colour histograms of the selected Gaussians the views
+  vote in firmly and of the unselected ones (:attr:`ClickOptions.appearance_rounds`); where the
+  masks split an object (the back of a head that the views give to the table), its colour
+  carries the cut across the split, and where the views are sure they outweigh it;
 - **the selection before the click** (from the second click on): a click changes the
   selection only where its evidence outweighs :attr:`ClickOptions.stickiness`, and only its
   way: a positive click adds to the selection and takes nothing out, a negative click takes
@@ -46,12 +51,13 @@ from dataclasses import dataclass
 import maxflow
 import numpy as np
 import scipy.sparse as sp
+from scipy import ndimage
 from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
+from skimage.color import rgb2lab
 
 from dataset_tools.infra.errors import InputError, OptionError
 from gsseg.model.gaussians import Gaussians
-from gsseg.model.sh import C0
 from gsseg.render.contributions import RegionWeights
 
 HARD = 1e9  # the capacity that pins a seed to its side of the cut
@@ -96,6 +102,13 @@ class ClickOptions:
             (:attr:`ClickEvidence.shown`), in part one shown less (:meth:`ClickSelector._in_sight`).
         stickiness: weight of the selection before the click.
         smoothness: weight of the graph's edges.
+        appearance_rounds: rounds of the colour models (:class:`ColourModel`), each learned from
+            the cut before it (0: none).
+        appearance_weight: weight of the colour models' log-likelihood ratio.
+        appearance_bins: bins per channel of the colour histograms (CIE Lab).
+        appearance_firm: the object's colours are learned from the Gaussians the cut selects
+            that the views vote in by at least this share (a spill the cut took along does not
+            teach them).
     """
 
     neighbours: int = 10
@@ -113,10 +126,20 @@ class ClickOptions:
     shown_share: float = 0.1
     stickiness: float = 3.0
     smoothness: float = 1.0
+    appearance_rounds: int = 2
+    appearance_weight: float = 1.0
+    appearance_bins: int = 12
+    appearance_firm: float = 0.6
 
     def __post_init__(self) -> None:
         if self.neighbours < 1 or self.iterations < 1:
             raise OptionError("{neighbours} and {iterations}: give 1 or more.", neighbours=self.neighbours)
+        if self.appearance_rounds < 0 or self.appearance_bins < 2:
+            raise OptionError(
+                "{appearance_rounds}: give 0 or more; {appearance_bins}: 2 or more.",
+                appearance_rounds=self.appearance_rounds,
+                appearance_bins=self.appearance_bins,
+            )
         for name in (
             "region_share",
             "seen_share",
@@ -125,6 +148,7 @@ class ClickOptions:
             "part_share",
             "against_margin",
             "shown_share",
+            "appearance_firm",
         ):
             if not 0 < getattr(self, name) <= 1:
                 raise OptionError(f"{{{name}}}: give a share in (0, 1].", **{name: getattr(self, name)})
@@ -167,7 +191,7 @@ class GaussianGraph:
         if k < 1:
             empty = np.zeros(0, np.int64)
             return cls(empty, empty, np.zeros(0), sp.csr_matrix((n, n)))
-        colours = np.clip(gaussians.sh_dc.detach().cpu().numpy() * C0 + 0.5, 0, 1)
+        colours = gaussians.base_colours.detach().cpu().numpy()
         features = gaussians.obj_feat.detach().cpu().numpy().astype(np.float64)
         dist, nbr = cKDTree(means).query(means, k=k + 1)
         a, b = np.repeat(np.arange(n), k), nbr[:, 1:].ravel()
@@ -270,6 +294,42 @@ class RegionVote:
         return share, seen, counted
 
 
+class ColourModel:
+    """The colours of a set of Gaussians as a smoothed histogram over CIE Lab (L over [0, 100],
+    a and b over [-60, 60], ``bins`` per channel, smoothed by one bin), each Gaussian counted by
+    its opacity: the appearance model of GrabCut, over the Gaussians of a cut rather than the
+    pixels of a box. Dark bronze and dark green lie in neighbouring RGB bins but apart in a and
+    b.
+
+    Args:
+        colours: (N, 3) RGB in [0, 1]. opacities: (N,) in [0, 1].
+    """
+
+    LAB_RANGE = np.array([[0.0, -60.0, -60.0], [100.0, 60.0, 60.0]])
+    CLIP = 3.0  # the log-likelihood ratio is clipped to +-CLIP: one colour never outweighs the views
+
+    def __init__(self, colours: np.ndarray, opacities: np.ndarray, bins: int):
+        lab = rgb2lab(np.asarray(colours, np.float64)[None])[0]
+        unit = (lab - self.LAB_RANGE[0]) / (self.LAB_RANGE[1] - self.LAB_RANGE[0])
+        self.bin = np.minimum((np.clip(unit, 0.0, 1.0) * bins).astype(np.int64), bins - 1)
+        self.opacities = np.asarray(opacities, np.float64)
+        self.bins = bins
+
+    def log_density(self, fit: np.ndarray) -> np.ndarray:
+        """(N,) the log-density at each Gaussian's colour of the histogram of the ``fit`` (N,)
+        bool Gaussians."""
+        b = self.bins
+        flat = np.ravel_multi_index(self.bin.T, (b, b, b))
+        hist = np.bincount(flat[fit], self.opacities[fit], minlength=b**3).reshape(b, b, b)
+        hist = ndimage.gaussian_filter(hist, 1.0, mode="constant")
+        hist = hist / max(float(hist.sum()), 1e-12) + 1e-6 / b**3
+        return np.log(hist.ravel()[flat])
+
+    def ratio(self, inside: np.ndarray, outside: np.ndarray) -> np.ndarray:
+        """(N,) log p(colour | inside) - log p(colour | outside), clipped to +-:attr:`CLIP`."""
+        return np.clip(self.log_density(inside) - self.log_density(outside), -self.CLIP, self.CLIP)
+
+
 def log_odds(p: np.ndarray) -> np.ndarray:
     p = np.clip(p, 0.02, 0.98)
     return np.log(p / (1 - p))
@@ -295,6 +355,11 @@ class ClickSelector:
         self.labels = np.asarray(labels)
         self.graph = GaussianGraph.of(gaussians, options.neighbours)
         self.vote = RegionVote(regions)
+        self.colours = ColourModel(
+            gaussians.base_colours.detach().cpu().numpy(),
+            gaussians.opacities.detach().cpu().numpy(),
+            options.appearance_bins,
+        )
 
     def select(self, clicks: Sequence[ClickEvidence]) -> np.ndarray:
         """(N,) bool: the selection after ``clicks`` in order, each made from the one before.
@@ -314,7 +379,7 @@ class ClickSelector:
         but the last of them (None for the first click): one step of :meth:`select`."""
         if not clicks or not clicks[0].positive:
             raise InputError("a selection starts with a click on the object; click on it first.")
-        o, n = self.options, len(self.labels)
+        o = self.options
         clicked = self.vote.clicked_regions(clicks[0], o.seen_share)
         for later in clicks[1:]:
             if later.positive and before is not None:  # a part beside the selection joins the vote
@@ -332,6 +397,8 @@ class ClickSelector:
         negative = negative.astype(np.int64)
         both = np.intersect1d(positive, negative)
         positive, negative = np.setdiff1d(positive, both), np.setdiff1d(negative, both)
+        if o.appearance_rounds:
+            cost += o.appearance_weight * self._appearance(cost, share, positive)
         if before is not None:
             cost += o.stickiness * np.where(before, 1.0, -1.0)
         if len(negative):  # deep on a negative click's side its word outweighs all else
@@ -339,19 +406,42 @@ class ClickSelector:
             side *= self._yielding(clicks, negative, voted_regions, share, seen)
             side *= self._in_sight(clicks)
             cost = (1 - side) * cost - o.split_weight * side
+        cut = self._min_cut(cost, positive, negative)
+        if before is None:
+            return cut
+        return before | cut if clicks[-1].positive else before & cut
+
+    def _min_cut(self, cost: np.ndarray, positive: np.ndarray, negative: np.ndarray) -> np.ndarray:
+        """(N,) bool: the source's side of the minimum cut of the graph's edges (times
+        :attr:`ClickOptions.smoothness`) and the costs ``cost`` (N,) (> 0: the selection's), the
+        ``positive`` and ``negative`` seeds pinned to their sides."""
+        n = len(cost)
         graph = maxflow.Graph[float]()
         graph.add_nodes(n)
-        edges = o.smoothness * self.graph.affinity
+        edges = self.options.smoothness * self.graph.affinity
         graph.add_edges(self.graph.a, self.graph.b, edges, edges)
         source, sink = np.maximum(cost, 0.0), np.maximum(-cost, 0.0)
         source[positive], sink[negative] = HARD, HARD
         nodes = np.arange(n)
         graph.add_grid_tedges(nodes, source, sink)
         graph.maxflow()
-        cut = ~graph.get_grid_segments(nodes)  # the source's side: selected
-        if before is None:
-            return cut
-        return before | cut if clicks[-1].positive else before & cut
+        return ~graph.get_grid_segments(nodes)
+
+    def _appearance(self, cost: np.ndarray, share: np.ndarray, positive: np.ndarray) -> np.ndarray:
+        """(N,) the colour term of the cost, as GrabCut iterates its colour models: cut with
+        the views' and labels' ``cost`` (N,) and the colour term so far, learn the object's
+        colours from the selected Gaussians the views vote in firmly (``share`` (N,) at least
+        :attr:`ClickOptions.appearance_firm`) and the rest's from the unselected, again for
+        :attr:`ClickOptions.appearance_rounds`. Where the masks split an object (a head whose
+        back the views give to the table), its colour carries the cut over the split; where
+        the views are sure, they outweigh it."""
+        o = self.options
+        term = np.zeros_like(cost)
+        none = np.zeros(0, np.int64)
+        for _ in range(o.appearance_rounds):
+            selected = self._min_cut(cost + o.appearance_weight * term, positive, none)
+            term = self.colours.ratio(selected & (share >= o.appearance_firm), ~selected)
+        return term
 
     def _in_sight(self, clicks: Sequence[ClickEvidence]) -> np.ndarray:
         """(N,) in [0, 1]: how far each Gaussian lies within a negative click's reach, by how
