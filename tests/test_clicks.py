@@ -26,7 +26,7 @@ from gsseg.model.ply import read_ply
 from gsseg.render.contributions import RegionWeights
 from gsseg.render.pixel_labels import segment_pixels
 from gsseg.run.loaded import load_run
-from gsseg.segment.clicks import ClickEvidence, ClickOptions, ClickSelector
+from gsseg.segment.clicks import ClickEvidence, ClickOptions, ClickSelector, ColourModel
 from gsseg.segment.prompts import click_evidence
 from gsseg.segment.segment_run import segment_run
 from gsseg.segment.served import complete_selection
@@ -167,6 +167,19 @@ def _views_split(groups_a: list[np.ndarray], views_a: int, groups_b: list[np.nda
         np.zeros(len(first.view) + len(second.view), np.uint8),
         ("m",),
     )
+
+
+def test_the_colour_model_favours_the_colours_of_its_set_and_learns_nothing_from_none():
+    """Red inside, blue outside: red Gaussians get the clipped ratio +3, blue ones -3, a green
+    that neither set holds about 0; an empty set teaches nothing (0 everywhere)."""
+    rgb = np.array([[0.8, 0.1, 0.1]] * 5 + [[0.1, 0.1, 0.8]] * 5 + [[0.1, 0.7, 0.1]])
+    model = ColourModel(rgb, np.ones(len(rgb)), bins=12)
+    red = np.arange(len(rgb)) < 5
+    blue = (np.arange(len(rgb)) >= 5) & (np.arange(len(rgb)) < 10)
+    ratio = model.ratio(red, blue)
+    assert np.allclose(ratio[red], ColourModel.CLIP) and np.allclose(ratio[blue], -ColourModel.CLIP)
+    assert abs(ratio[-1]) < 0.1
+    assert not model.ratio(np.zeros(len(rgb), bool), blue).any()
 
 
 def test_the_objects_colour_carries_the_cut_over_a_split_the_views_half_make():

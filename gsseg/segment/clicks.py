@@ -326,7 +326,10 @@ class ColourModel:
         return np.log(hist.ravel()[flat])
 
     def ratio(self, inside: np.ndarray, outside: np.ndarray) -> np.ndarray:
-        """(N,) log p(colour | inside) - log p(colour | outside), clipped to +-:attr:`CLIP`."""
+        """(N,) log p(colour | inside) - log p(colour | outside), clipped to +-:attr:`CLIP`; 0
+        where either set is empty (no colours to learn from)."""
+        if not inside.any() or not outside.any():
+            return np.zeros(len(self.bin))
         return np.clip(self.log_density(inside) - self.log_density(outside), -self.CLIP, self.CLIP)
 
 
