@@ -15,7 +15,10 @@ selection (docs/evaluation.md):
   masks of colour alone and for those cut at the depth jumps.
 - **the options**: the single-click mIoU under ``gsseg segment``'s defaults as well;
 - **the ceiling**: the mIoU of the Gaussians whose weight falls mostly inside the people's
-  masks over the views, what any selection of the model can reach.
+  masks over the views, what any selection of the model can reach;
+- **the object left by its removal**: the share of those Gaussians' weight inside the
+  people's masks that the single click's removal (with what served it alone, as ``gsseg edit
+  --op remove`` takes it) leaves in the scene: its ghost.
 
 ``--seed`` sets the training seed, ``--tag`` the JSON file's suffix: the same command with
 other seeds (and another ``--work``) shows the run-to-run spread.
@@ -36,6 +39,7 @@ import argparse
 import json
 import shutil
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -57,6 +61,7 @@ from gsseg.run.loaded import Run, load_run
 from gsseg.segment.clicks import ClickEvidence, ClickSelector
 from gsseg.segment.prompts import click_evidence
 from gsseg.segment.segment_run import run_regions, segment_run
+from gsseg.segment.served import complete_selection
 from gsseg.train.config import TrainConfig
 from gsseg.train.trainer import train
 from hqmask.build import BuildConfig, build_masks
@@ -187,14 +192,44 @@ def interactive(
     }
 
 
-def ceiling(run: Run, views: list[View], truth: dict[str, np.ndarray]) -> float:
-    """The mIoU over the other views of the Gaussians whose blended weight falls mostly inside
-    the people's masks of every view: what a selection of this model can reach at best (the
-    model's own blur and floaters bound it)."""
-    masked = [MaskedView(v.camera, v.cam_from_world, truth[v.name].astype(np.uint8)) for v in views]
-    weights = contribution_matrix(run.gaussians, masked, backend="cpu", progress=False).weights.numpy()
-    inside = weights[-1] > 0.5 * weights.sum(0) if len(weights) == 2 else np.zeros(len(run.gaussians), bool)
-    return float(np.mean([binary_scores(rendered_selection(run, inside, v), truth[v.name])[0] for v in views[1:]]))
+@dataclass(frozen=True)
+class TrueObject:
+    """What the people's masks hold of a model: ``weight`` (N,) each Gaussian's blended weight
+    inside the masks over the views, and ``held`` (N,) whether most of its weight falls there
+    (the object's Gaussians)."""
+
+    weight: np.ndarray
+    held: np.ndarray
+
+    @classmethod
+    def of(cls, run: Run, views: list[View], truth: dict[str, np.ndarray]) -> TrueObject:
+        masked = [MaskedView(v.camera, v.cam_from_world, truth[v.name].astype(np.uint8)) for v in views]
+        weights = contribution_matrix(run.gaussians, masked, backend="cpu", progress=False).weights.numpy()
+        if len(weights) < 2:
+            return cls(np.zeros(len(run.gaussians)), np.zeros(len(run.gaussians), bool))
+        return cls(weights[-1].astype(np.float64), weights[-1] > 0.5 * weights.sum(0))
+
+    def ceiling(self, run: Run, views: list[View], truth: dict[str, np.ndarray]) -> float:
+        """The mIoU over the other views of the object's Gaussians: what a selection of this
+        model can reach at best (the model's own blur and floaters bound it)."""
+        return float(
+            np.mean([binary_scores(rendered_selection(run, self.held, v), truth[v.name])[0] for v in views[1:]])
+        )
+
+    def left(self, removed: np.ndarray) -> float:
+        """The share of the object's weight (its Gaussians' weight inside the masks) that a
+        removal of ``removed`` (N,) leaves in the scene: its ghost."""
+        return float(self.weight[self.held & ~removed].sum() / max(self.weight[self.held].sum(), 1e-12))
+
+
+def removal_left(run: Run, views: list[View], truth: dict[str, np.ndarray], obj: TrueObject) -> float:
+    """What :meth:`TrueObject.left` the single click's removal leaves: the click's selection with
+    the Gaussians that served it alone in the training views, as ``gsseg edit --op remove``
+    takes them."""
+    clicker = Clicker(run, views, truth)
+    clicker.click(*deepest_pixel(truth[views[0].name]), True)
+    removed = complete_selection(run.gaussians, clicker.selected, run.scene().split("train"), backend=clicker.backend)
+    return obj.left(removed.mask)
 
 
 def mask_scores(scene_dir: Path, images: str, masks: str, truth: dict[str, np.ndarray]) -> dict:
@@ -269,8 +304,10 @@ def run_scene(
     segment_run(run_dir, scene_dir, options=DEMO_LABELS, masks=DEPTH_MASKS)
     times["segment_s"] = time.perf_counter() - start
     start = time.perf_counter()
-    clicks = interactive(load_run(run_dir), views, truth)
+    run = load_run(run_dir)
+    clicks = interactive(run, views, truth)
     times["clicks_s"] = time.perf_counter() - start
+    obj = TrueObject.of(run, views, truth)
     return {
         "scene": name,
         "images": images,
@@ -280,7 +317,8 @@ def run_scene(
         "gaussians": len(run.gaussians),
         "iters": run.config.timing.iters,
         **clicks,
-        "ceiling_miou": ceiling(load_run(run_dir), views, truth),
+        "ceiling_miou": obj.ceiling(run, views, truth),
+        "object_left": removal_left(run, views, truth, obj),
         "single_click_miou_default_options": default_options,
         "masks": mask_scores(scene_dir, images, MASKS, truth),
         "depth_masks": mask_scores(scene_dir, images, DEPTH_MASKS, truth),
@@ -335,6 +373,7 @@ def report(r: dict) -> tuple[str, str]:
             f"{x['single_click_macc']:.3f}",
             f"{x['single_click_miou_default_options']:.3f}",
             f"{x['ceiling_miou']:.3f}" if "ceiling_miou" in x else "n/a",
+            f"{x['object_left']:.1%}" if "object_left" in x else "n/a",
             noc(x),
             " ".join(f"{m:.2f}" for m in x["miou_by_clicks"]),
             masks(x["masks"]),
@@ -354,6 +393,7 @@ def report(r: dict) -> tuple[str, str]:
             "mAcc, 1 click",
             "mIoU, 1 click, segment defaults",
             "ceiling: the people's masks' Gaussians",
+            "object left by its removal",
             "NoC@90",
             "mIoU after each click",
             "masks of colour: best ID / union / consistency",
