@@ -311,7 +311,8 @@ class ColourModel:
     def __init__(self, colours: np.ndarray, opacities: np.ndarray, bins: int):
         lab = rgb2lab(np.asarray(colours, np.float64)[None])[0]
         unit = (lab - self.LAB_RANGE[0]) / (self.LAB_RANGE[1] - self.LAB_RANGE[0])
-        self.bin = np.minimum((np.clip(unit, 0.0, 1.0) * bins).astype(np.int64), bins - 1)
+        cell = np.minimum((np.clip(unit, 0.0, 1.0) * bins).astype(np.int64), bins - 1)
+        self.bin = np.ravel_multi_index(cell.T, (bins,) * 3)  # (N,) each Gaussian's histogram bin
         self.opacities = np.asarray(opacities, np.float64)
         self.bins = bins
 
@@ -319,11 +320,10 @@ class ColourModel:
         """(N,) the log-density at each Gaussian's colour of the histogram of the ``fit`` (N,)
         bool Gaussians."""
         b = self.bins
-        flat = np.ravel_multi_index(self.bin.T, (b, b, b))
-        hist = np.bincount(flat[fit], self.opacities[fit], minlength=b**3).reshape(b, b, b)
+        hist = np.bincount(self.bin[fit], self.opacities[fit], minlength=b**3).reshape(b, b, b)
         hist = ndimage.gaussian_filter(hist, 1.0, mode="constant")
         hist = hist / max(float(hist.sum()), 1e-12) + 1e-6 / b**3
-        return np.log(hist.ravel()[flat])
+        return np.log(hist.ravel()[self.bin])
 
     def ratio(self, inside: np.ndarray, outside: np.ndarray) -> np.ndarray:
         """(N,) log p(colour | inside) - log p(colour | outside), clipped to +-:attr:`CLIP`; 0
