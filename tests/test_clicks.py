@@ -26,7 +26,7 @@ from gsseg.model.ply import read_ply
 from gsseg.render.contributions import RegionWeights
 from gsseg.render.pixel_labels import segment_pixels
 from gsseg.run.loaded import load_run
-from gsseg.segment.clicks import ClickEvidence, ClickOptions, ClickSelector, ColourModel
+from gsseg.segment.clicks import ClickEvidence, ClickOptions, ClickSelector, ColourModel, RegionVote
 from gsseg.segment.prompts import click_evidence
 from gsseg.segment.segment_run import segment_run
 from gsseg.segment.served import complete_selection
@@ -235,6 +235,52 @@ def test_a_positive_click_adds_a_part_no_label_holds_and_keeps_what_was_selected
     both = selector.cut([_click(n, a), _click(n, b)], first)
     assert both[a].all() and both[b].all()
     assert np.array_equal(both, selector.select([_click(n, a), _click(n, b)]))
+
+
+def test_a_part_raises_the_views_vote_and_lowers_it_nowhere():
+    """Three views show A alone as an object (B under the background), three show B alone (A
+    under the background): the first click on A is seen in the first three, and A's share is
+    1. A positive click on B brings in B's regions, and so the last three views, where A falls
+    in the background: A's share stays 1 (counted over all six views it would fall to one
+    half) and B's rises from 0 to one half."""
+    g, a, b = _two_blobs()
+    n = len(g)
+    regions = _views_split([a], 3, [b], 3, n)
+    selector = ClickSelector(g, np.full(n, 7, np.uint8), regions)
+    first = selector.select([_click(n, a)])
+    share, _, _ = selector.views_vote([_click(n, a)], None)
+    assert np.allclose(share[a], 1) and np.allclose(share[b], 0)
+    share, seen, _ = selector.views_vote([_click(n, a), _click(n, b)], first)
+    assert np.allclose(share[a], 1) and np.allclose(share[b], 0.5) and seen.all()
+    both = RegionVote(regions).vote(
+        selector.vote.clicked_regions(_click(n, a), 0.2) | (regions.label == 1) & (regions.view >= 3),
+        ClickOptions(),
+    )[0]
+    assert np.allclose(both[a], 0.5)
+
+
+def test_a_negative_click_on_a_floater_leaves_the_objects_side_of_its_own_colour():
+    """A red object A (x from 0 to 4) and a green floater F beside its far end, which every
+    view's masks join to A: a negative click on F takes F; A's far end, nearer F than the
+    positive click along the graph and held by the views as firmly as F, stays because it
+    looks like the selection and not like F. Without the colour's word (``against_colour``
+    so large that every colour is alike) the far end goes with F."""
+    rng = np.random.default_rng(1)
+    xyz = np.concatenate(
+        [rng.uniform([0, -0.2, -0.2], [4, 0.2, 0.2], (400, 3)), rng.normal([4.6, 0, 0], 0.15, (60, 3))]
+    )
+    rgb = np.concatenate([np.tile([200, 60, 60], (400, 1)), np.tile([60, 170, 60], (60, 1))])
+    rgb = (rgb + rng.uniform(-40, 40, rgb.shape)).astype(np.uint8)  # a trained model's colours vary
+    g = gaussians_from_points(xyz, rgb, initial_opacity=0.9)
+    n, a, f = len(xyz), np.arange(400), np.arange(400, 460)
+    far_end = a[np.argsort(xyz[a, 0])[-80:]]
+    near_end = a[np.argsort(xyz[a, 0])[:5]]
+    regions, labels = _regions(n, [np.concatenate([a, f])]), np.full(n, 7, np.uint8)
+    clicks = [_click(n, near_end), _click(n, f, positive=False)]
+    after = ClickSelector(g, labels, regions).select(clicks)
+    assert after[f].mean() < 0.2 and after[a].all()
+    blind = ClickSelector(g, labels, regions, ClickOptions(against_colour=1e6)).select(clicks)
+    assert blind[f].mean() < 0.2 and blind[far_end].mean() < 0.5
 
 
 # --- the rule on a trained run, through gsseg edit, export and the viewer ----------------------

@@ -33,14 +33,18 @@ max-flow solver (PyMaxflow), with a cost per Gaussian from five kinds of evidenc
   views and labels joined to the object goes, while the object's own Gaussians beside the
   click, nearly as near to a positive seed, keep their evidence, and so do those the views
   hold to the object more firmly than the clicked part (:meth:`ClickSelector._yielding`: a
-  spill beside a head goes, the top of the head next to it stays); and it reaches only what
-  its view shows (:meth:`ClickSelector._in_sight`: the back of the head stays).
+  spill beside a head goes, the top of the head next to it stays); it reaches only what
+  its view shows (:meth:`ClickSelector._in_sight`: the back of the head stays), and only
+  what looks more like the clicked part than like the selection
+  (:meth:`ClickSelector._alike`: a green floater beside a bronze head goes, the head's side
+  next to it stays).
 
 The seeds are hard constraints; the source's side of the cut is the selection (parts apart
 in space, several objects under one mask, stay together where the views join them). A later
 positive click adds its seeds, what the cut joins to them, and the regions under it that lie
-beside the selection (a part the first click's vote missed); a region the masks joined to the
-selection (a statue's head and the bush behind it) it leaves out of the vote.
+beside the selection (a part the first click's vote missed), which raise the vote and lower
+it nowhere (:meth:`ClickSelector.views_vote`); a region the masks joined to the selection (a
+statue's head and the bush behind it) it leaves out of the vote.
 """
 
 from __future__ import annotations
@@ -100,6 +104,9 @@ class ClickOptions:
             (:meth:`ClickSelector._yielding`).
         shown_share: a negative click reaches a Gaussian its view shows this much of
             (:attr:`ClickEvidence.shown`), in part one shown less (:meth:`ClickSelector._in_sight`).
+        against_colour: a negative click reaches no Gaussian whose colour is this many
+            log-units likelier under the selection's colours than under the clicked part's
+            (:meth:`ClickSelector._alike`).
         stickiness: weight of the selection before the click.
         smoothness: weight of the graph's edges.
         appearance_rounds: rounds of the colour models (:class:`ColourModel`), each learned from
@@ -124,6 +131,7 @@ class ClickOptions:
     split_full: float = 0.5
     against_margin: float = 0.2
     shown_share: float = 0.1
+    against_colour: float = 1.0
     stickiness: float = 3.0
     smoothness: float = 1.0
     appearance_rounds: int = 2
@@ -134,6 +142,10 @@ class ClickOptions:
     def __post_init__(self) -> None:
         if self.neighbours < 1 or self.iterations < 1:
             raise OptionError("{neighbours} and {iterations}: give 1 or more.", neighbours=self.neighbours)
+        if self.against_colour <= 0:
+            raise OptionError(
+                "{against_colour}: give a number of log-units above 0.", against_colour=self.against_colour
+            )
         if self.appearance_rounds < 0 or self.appearance_bins < 2:
             raise OptionError(
                 "{appearance_rounds}: give 0 or more; {appearance_bins}: 2 or more.",
@@ -383,12 +395,7 @@ class ClickSelector:
         if not clicks or not clicks[0].positive:
             raise InputError("a selection starts with a click on the object; click on it first.")
         o = self.options
-        clicked = self.vote.clicked_regions(clicks[0], o.seen_share)
-        for later in clicks[1:]:
-            if later.positive and before is not None:  # a part beside the selection joins the vote
-                under = self.vote.clicked_regions(later, o.seen_share, o.part_share)
-                clicked |= self.vote.apart_from(under, before, o.overlap)
-        share, seen, voted_regions = self.vote.vote(clicked, o)
+        share, seen, voted_regions = self.views_vote(clicks, before)
         cost = o.evidence * np.where(seen, log_odds(share), -1.0)  # > 0: the object's
         picked = np.setdiff1d(np.unique(self.labels[clicks[0].seeds(o.seed_share)]), [0])
         labelled = np.isin(self.labels, picked)
@@ -408,11 +415,35 @@ class ClickSelector:
             side = np.clip(self.graph.split(negative, positive) / o.split_full, 0, 1)
             side *= self._yielding(clicks, negative, voted_regions, share, seen)
             side *= self._in_sight(clicks)
+            side *= self._alike(negative, before)
             cost = (1 - side) * cost - o.split_weight * side
         cut = self._min_cut(cost, positive, negative)
         if before is None:
             return cut
         return before | cut if clicks[-1].positive else before & cut
+
+    def views_vote(
+        self, clicks: Sequence[ClickEvidence], before: np.ndarray | None
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The views' vote of ``clicks`` (:meth:`RegionVote.vote`): (N,) each Gaussian's share of
+        weight in the object's regions, (N,) whether a view of the object sees it, (R,) the
+        object's regions. The first click's regions start it; the regions under a later
+        positive click that lie beside the selection ``before`` (N,) (a part the first vote
+        missed) raise it where they speak and lower it nowhere: a part seen in views where the
+        first click is not counts those views against the rest of the object, which the
+        selection holds all the same."""
+        o = self.options
+        clicked = self.vote.clicked_regions(clicks[0], o.seen_share)
+        share, seen, regions = self.vote.vote(clicked, o)
+        parts = np.zeros_like(clicked)
+        for later in clicks[1:]:
+            if later.positive and before is not None:
+                under = self.vote.clicked_regions(later, o.seen_share, o.part_share)
+                parts |= self.vote.apart_from(under, before, o.overlap)
+        if (parts & ~clicked).any():
+            more, more_seen, more_regions = self.vote.vote(clicked | parts, o)
+            share, seen, regions = np.maximum(share, more), seen | more_seen, regions | more_regions
+        return share, seen, regions
 
     def _min_cut(self, cost: np.ndarray, positive: np.ndarray, negative: np.ndarray) -> np.ndarray:
         """(N,) bool: the source's side of the minimum cut of the graph's edges (times
@@ -445,6 +476,20 @@ class ClickSelector:
             selected = self._min_cut(cost + o.appearance_weight * term, positive, none)
             term = self.colours.ratio(selected & (share >= o.appearance_firm), ~selected)
         return term
+
+    def _alike(self, negative: np.ndarray, before: np.ndarray | None) -> np.ndarray:
+        """(N,) in [0, 1]: how far each Gaussian lies within a negative click's reach, by its
+        colour: fully where it is at least as likely under the colours of the click's
+        ``negative`` (S,) seeds as under those of the selection ``before`` (N,), none where it is
+        :attr:`ClickOptions.against_colour` log-units likelier under the selection's, linearly
+        between. A floater beside a head goes, the head's own side next to it, of the head's
+        colours, stays; where the clicked part looks like the object, the graph alone decides."""
+        if before is None:
+            return np.ones(len(self.labels))
+        seeds = np.zeros(len(self.labels), bool)
+        seeds[negative] = True
+        ratio = self.colours.ratio(seeds, before & ~seeds)
+        return np.clip(1 + ratio / self.options.against_colour, 0, 1)
 
     def _in_sight(self, clicks: Sequence[ClickEvidence]) -> np.ndarray:
         """(N,) in [0, 1]: how far each Gaussian lies within a negative click's reach, by how
