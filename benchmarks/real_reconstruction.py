@@ -68,8 +68,8 @@ def run_scene(name: str, real: Path, work: Path, training: Training) -> dict:
     sfm_s = time.perf_counter() - start
     images = demo_images(scene_dir)
     if training.demo:
-        iters, _ = demo_training(scene_dir, images, DemoOptions(scene=scene_dir))
-        training = replace(training, iters=iters, max_gaussians=DemoOptions.max_gaussians)
+        plan = demo_training(scene_dir, images, DemoOptions(scene=scene_dir))
+        training = replace(training, iters=plan.iters, max_gaussians=plan.max_gaussians)
     start = time.perf_counter()
     run_dir = out / training.run_name
     if not (run_dir / "gaussians.ply").is_file():

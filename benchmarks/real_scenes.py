@@ -278,8 +278,8 @@ def run_scene(
     times["sfm_s"] = time.perf_counter() - start
     images = demo_images(scene_dir)
     if demo:
-        iters, _ = demo_training(scene_dir, images, DemoOptions(scene=scene_dir))
-        max_gaussians = DemoOptions.max_gaussians
+        plan = demo_training(scene_dir, images, DemoOptions(scene=scene_dir))
+        iters, max_gaussians = plan.iters, plan.max_gaussians
     start = time.perf_counter()
     if not (scene_dir / MASKS).is_dir():
         build_masks(scene_dir, BuildConfig(proposer="graph", associate="tracks", out_masks=MASKS, images=images))

@@ -18,7 +18,15 @@ from dataset_tools.infra.cli_support import (
 from dataset_tools.scene import Split
 from gsseg.segment.label_options import METHODS, MODES, LabelOptions
 from gsseg.train.config import SCHEDULES, TrainConfig
-from pipeline.demo_options import EMBEDDED_ITERS, MAX_SCENE_ITERS, MIN_SCENE_ITERS, DemoOptions
+from pipeline.demo_options import (
+    EMBEDDED_ITERS,
+    GAUSSIANS_PER_POINT,
+    MAX_SCENE_GAUSSIANS,
+    MAX_SCENE_ITERS,
+    MIN_SCENE_GAUSSIANS,
+    MIN_SCENE_ITERS,
+    DemoOptions,
+)
 
 BACKEND = Registry("gsseg.render.backends:BACKENDS", ("auto",))
 SPLITS = get_args(Split)
@@ -359,7 +367,13 @@ def export(
     help=f"Training iterations [default: {EMBEDDED_ITERS} on the embedded scene; on --scene "
     f"{MIN_SCENE_ITERS}-{MAX_SCENE_ITERS}, fewer for larger views].",
 )
-@field_option(DemoOptions, "max_gaussians", type=int, help="Densification stops at this many Gaussians.")
+@field_option(
+    DemoOptions,
+    "max_gaussians",
+    type=int,
+    help=f"Densification stops at this many Gaussians [default: {MIN_SCENE_GAUSSIANS:,} on the embedded "
+    f"scene; on --scene {GAUSSIANS_PER_POINT}x its SfM points, {MIN_SCENE_GAUSSIANS:,}-{MAX_SCENE_GAUSSIANS:,}].",
+)
 @field_option(DemoOptions, "backend", type=BACKEND)
 @click.option("--force", is_flag=True, help="Replace the outputs in --out.")
 def demo(out: Path, force: bool, **_) -> None:

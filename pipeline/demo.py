@@ -6,8 +6,8 @@
    (``dataset_tools.sfm``);
 2. masks from the weight-free ``graph`` proposer, associated across views by SfM tracks and
    cleaned (``hqmask build``);
-3. 3D-GS with object features trained on those masks (CPU schedule, shortened, at most
-   30k Gaussians);
+3. 3D-GS with object features trained on those masks (CPU schedule, shortened to the
+   capture, at most 30k Gaussians or twice the SfM points);
 4. the masks built again, cut where the trained model's depth jumps (``gsseg render --what
    depth``, ``hqmask build --depth``): a dark head in front of a dark bush is two objects
    to colour alone, not to the depth;
@@ -32,6 +32,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
+from dataset_tools.colmap import read_model
 from dataset_tools.image_files import IMAGE_SUFFIXES, image_size, write_downsampled
 from dataset_tools.infra.atomic import first_missing, require_folder_path
 from dataset_tools.infra.errors import InputError, OptionError
@@ -55,10 +56,13 @@ from gsseg.train.trainer import train
 from hqmask.build import BuildConfig, build_masks
 from pipeline.demo_options import (
     EMBEDDED_ITERS,
+    GAUSSIANS_PER_POINT,
     MAX_SCENE_ITERS,
+    MIN_SCENE_GAUSSIANS,
     MIN_SCENE_ITERS,
     RUN_PIXELS,
     DemoOptions,
+    capture_gaussians,
     capture_iters,
 )
 
@@ -144,23 +148,53 @@ def _first_image(folder: Path) -> Path | None:
     return next((p for p in sorted(folder.rglob("*")) if p.suffix in IMAGE_SUFFIXES), None)
 
 
-def demo_training(scene_dir: Path, images: str, options: DemoOptions) -> tuple[int, str]:
-    """The demo's training steps on the views of ``scene_dir/images``, and why, in a sentence:
-    ``options.iters`` where given, :data:`EMBEDDED_ITERS` on the embedded scene, else the
-    capture's (:func:`pipeline.demo_options.capture_iters` of the first view's size)."""
+@dataclass(frozen=True)
+class DemoTraining:
+    """How long the demo trains and how large its model may grow: ``iters`` steps, at most
+    ``max_gaussians`` Gaussians, and ``why``, a sentence for the user."""
+
+    iters: int
+    max_gaussians: int
+    why: str
+
+
+def demo_training(scene_dir: Path, images: str, options: DemoOptions) -> DemoTraining:
+    """The demo's training on the views of ``scene_dir/images``: ``options.iters`` and
+    ``options.max_gaussians`` where given; on the embedded scene :data:`EMBEDDED_ITERS` steps
+    and :data:`MIN_SCENE_GAUSSIANS`; else the capture's
+    (:func:`pipeline.demo_options.capture_iters` of the first view's size,
+    :func:`pipeline.demo_options.capture_gaussians` of its SfM points)."""
+    reasons = []
     if options.iters is not None:
-        iters, why = options.iters, "as asked"
+        iters = options.iters
+        reasons.append("steps as asked")
     elif options.scene is None:
-        iters, why = EMBEDDED_ITERS, "the embedded scene's"
+        iters = EMBEDDED_ITERS
+        reasons.append("the embedded scene's steps")
     else:
         first = _first_image(scene_dir / images)
         width, height = image_size(first) if first is not None else (0, 0)
         iters = capture_iters(width * height)
-        why = (
+        reasons.append(
             f"{RUN_PIXELS / 1e6:.0f} million pixels in all at {width}x{height} a view, "
             f"{MIN_SCENE_ITERS}-{MAX_SCENE_ITERS} steps"
         )
-    return iters, f"training {iters} steps, at most {options.max_gaussians:,} Gaussians ({why})"
+    if options.max_gaussians is not None:
+        cap = options.max_gaussians
+        reasons.append("the cap as asked")
+    elif options.scene is None:
+        cap = MIN_SCENE_GAUSSIANS
+    else:
+        points = sfm_point_count(scene_dir)
+        cap = capture_gaussians(points)
+        reasons.append(f"{points:,} SfM points, room to grow them {GAUSSIANS_PER_POINT}x")
+    why = "; ".join(reasons)
+    return DemoTraining(iters, cap, f"training {iters} steps, at most {cap:,} Gaussians ({why})")
+
+
+def sfm_point_count(scene_dir: Path) -> int:
+    """The number of points of the SfM model ``scene_dir/sparse/0``."""
+    return len(read_model(scene_dir / "sparse" / "0").xyz)
 
 
 def masks_at_depth_jumps(
@@ -207,7 +241,7 @@ def run_demo(
         masks=MASKS,
         images=options.images or TrainConfig.images,
         backend=backend.name,
-        max_gaussians=options.max_gaussians,
+        max_gaussians=options.max_gaussians,  # checked here, before any work; the capture's later
     )
     if scene is not None and not scene.exists():
         raise OptionError("not found; pass a scene folder, a folder of photos or a video as {scene}.", file=scene)
@@ -258,10 +292,10 @@ def _run_demo(
         gt_masks = None
         images = options.images or demo_images(scene_dir, options.max_side)
         mask_images = images
-    iters, plan = demo_training(scene_dir, images, options)
+    plan = demo_training(scene_dir, images, options)
     if progress:
-        tqdm.write(plan, file=sys.stderr)
-    cfg = replace(cfg, images=images, iters=iters)
+        tqdm.write(plan.why, file=sys.stderr)
+    cfg = replace(cfg, images=images, iters=plan.iters, max_gaussians=plan.max_gaussians)
     build_masks(
         scene_dir,
         BuildConfig(proposer="graph", associate="tracks", out_masks=MASKS, images=mask_images),

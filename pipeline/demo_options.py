@@ -6,8 +6,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-# The demo trains the cpu schedule shortened, with at most 30k Gaussians. 1500 steps on the
-# embedded 128x128 scene. On the user's capture the run renders about RUN_PIXELS pixels in
+# The demo trains the cpu schedule shortened. 1500 steps and 30k Gaussians on the embedded
+# 128x128 scene. On the user's capture the run renders about RUN_PIXELS pixels in
 # all, since a step's time grows with its view's pixels: 2000 steps of 424x424 views, about
 # 6 minutes with the object features on 2 cores; fewer steps for larger views, never under MIN_SCENE_ITERS, never over
 # MAX_SCENE_ITERS. On nerd_ethiopian_head 2000 steps reached 21.6 dB where 1000 reached 19.8
@@ -17,6 +17,12 @@ EMBEDDED_ITERS = 1_500
 RUN_PIXELS = 2_000 * 424 * 424
 MIN_SCENE_ITERS = 1_000
 MAX_SCENE_ITERS = 2_000
+# The cap: 30k Gaussians, or room for densification to double the SfM points where they are
+# more than half of that (gaussctrl_bear's 34 790 points left no room under 30k: 22.05 dB in
+# 1400 steps, 22.80 with 70k in 1.2x the time), up to MAX_SCENE_GAUSSIANS.
+MIN_SCENE_GAUSSIANS = 30_000
+GAUSSIANS_PER_POINT = 2
+MAX_SCENE_GAUSSIANS = 100_000
 
 
 @dataclass(frozen=True)
@@ -31,7 +37,9 @@ class DemoOptions:
         iters: training iterations; None: :data:`EMBEDDED_ITERS` on the embedded scene, the
             capture's (:func:`capture_iters`) on the user's
             (:func:`pipeline.demo.demo_training`).
-        max_gaussians: densification stops at this many Gaussians.
+        max_gaussians: densification stops at this many Gaussians; None:
+            :data:`MIN_SCENE_GAUSSIANS` on the embedded scene, the capture's
+            (:func:`capture_gaussians`) on the user's.
         max_side: the longest image side the default ``images`` may have.
         backend: the renderer (``auto``: gsplat where it can run, else cpu).
     """
@@ -39,7 +47,7 @@ class DemoOptions:
     scene: Path | None = None
     images: str | None = None
     iters: int | None = None
-    max_gaussians: int = 30_000
+    max_gaussians: int | None = None
     max_side: int = 640
     backend: str = "auto"
 
@@ -50,3 +58,11 @@ def capture_iters(view_pixels: int) -> int:
     :data:`MAX_SCENE_ITERS`."""
     steps = round(RUN_PIXELS / max(view_pixels, 1), -2)
     return int(min(max(steps, MIN_SCENE_ITERS), MAX_SCENE_ITERS))
+
+
+def capture_gaussians(points: int) -> int:
+    """The demo's Gaussian cap on a capture whose SfM model has ``points`` points:
+    :data:`GAUSSIANS_PER_POINT` per point in thousands (rounded up), between
+    :data:`MIN_SCENE_GAUSSIANS` and :data:`MAX_SCENE_GAUSSIANS`."""
+    cap = -(-GAUSSIANS_PER_POINT * points // 1_000) * 1_000
+    return int(min(max(cap, MIN_SCENE_GAUSSIANS), MAX_SCENE_GAUSSIANS))

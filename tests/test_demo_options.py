@@ -1,18 +1,45 @@
 """The demo's training sized to the capture: known answers of the rule and what it prints."""
 
+from pathlib import Path
+
 import cv2
 import numpy as np
 import pytest
 
+from dataset_tools import colmap
+from dataset_tools.cameras import PinholeCamera
 from pipeline.demo import demo_training
 from pipeline.demo_options import (
     EMBEDDED_ITERS,
+    MAX_SCENE_GAUSSIANS,
     MAX_SCENE_ITERS,
+    MIN_SCENE_GAUSSIANS,
     MIN_SCENE_ITERS,
     RUN_PIXELS,
     DemoOptions,
+    capture_gaussians,
     capture_iters,
 )
+
+
+def _capture(root: Path, size: int, points: int, folder: str = "images") -> Path:
+    """A capture of one black ``size`` x ``size`` view and an SfM model of ``points`` points."""
+    (root / folder).mkdir(parents=True)
+    cv2.imwrite(str(root / folder / "a.png"), np.zeros((size, size, 3), np.uint8))
+    rng = np.random.default_rng(0)
+    xyz = rng.normal(0, 1, (points, 3)) + [0, 0, 5]
+    camera = PinholeCamera(size, size, size, size, size / 2, size / 2)
+    uv = xyz[:, :2] / xyz[:, 2:] * size + size / 2
+    colmap.write_model(
+        root / "sparse" / "0",
+        ["a.png"],
+        [camera],
+        [np.eye(4)[:3]],
+        [(np.arange(points), uv)],
+        xyz,
+        np.zeros((points, 3), np.uint8),
+    )
+    return root
 
 
 @pytest.mark.parametrize(
@@ -39,18 +66,33 @@ def test_capture_iters_spends_the_pixel_budget_in_hundreds_of_steps_within_bound
     ],
 )
 def test_the_asked_iterations_and_the_embedded_scene_keep_their_own(tmp_path, size, options, steps):
-    (tmp_path / "images").mkdir()
-    cv2.imwrite(str(tmp_path / "images" / "a.png"), np.zeros((size, size, 3), np.uint8))
-    assert demo_training(tmp_path, "images", options(tmp_path))[0] == steps
+    scene = _capture(tmp_path, size, 10)
+    assert demo_training(scene, "images", options(scene)).iters == steps
 
 
-def test_demo_training_reads_the_view_size_and_says_why(tmp_path):
-    (tmp_path / "images" / "sub").mkdir(parents=True)
-    cv2.imwrite(str(tmp_path / "images" / "sub" / "a.png"), np.zeros((509, 509, 3), np.uint8))
-    iters, why = demo_training(tmp_path, "images", DemoOptions(scene=tmp_path))
-    assert iters == 1400
-    assert why == (
-        "training 1400 steps, at most 30,000 Gaussians (360 million pixels in all at 509x509 a view, 1000-2000 steps)"
+@pytest.mark.parametrize(
+    "points, cap",
+    [
+        (3_985, MIN_SCENE_GAUSSIANS),  # the statue: room enough under 30k
+        (15_000, MIN_SCENE_GAUSSIANS),  # twice the points is the least cap
+        (34_790, 70_000),  # gaussctrl_bear: 69 580, in thousands
+        (80_000, MAX_SCENE_GAUSSIANS),
+    ],
+)
+def test_capture_gaussians_leaves_room_to_double_the_sfm_points_within_bounds(points, cap):
+    assert capture_gaussians(points) == cap
+
+
+def test_demo_training_reads_the_view_size_and_the_sfm_points_and_says_why(tmp_path):
+    scene = _capture(tmp_path, 509, 16_000, folder="images/sub")
+    plan = demo_training(scene, "images", DemoOptions(scene=scene))
+    assert (plan.iters, plan.max_gaussians) == (1400, 32_000)
+    assert plan.why == (
+        "training 1400 steps, at most 32,000 Gaussians (360 million pixels in all at 509x509 a view, "
+        "1000-2000 steps; 16,000 SfM points, room to grow them 2x)"
     )
-    iters, why = demo_training(tmp_path, "images", DemoOptions(scene=tmp_path, iters=300, max_gaussians=5000))
-    assert (iters, why) == (300, "training 300 steps, at most 5,000 Gaussians (as asked)")
+    plan = demo_training(scene, "images", DemoOptions(scene=scene, iters=300, max_gaussians=5000))
+    assert (plan.iters, plan.max_gaussians) == (300, 5000)
+    assert plan.why == "training 300 steps, at most 5,000 Gaussians (steps as asked; the cap as asked)"
+    embedded = demo_training(scene, "images", DemoOptions())
+    assert (embedded.iters, embedded.max_gaussians) == (EMBEDDED_ITERS, MIN_SCENE_GAUSSIANS)

@@ -312,7 +312,7 @@ def test_demo_plumbing_runs_every_stage_with_few_iterations(tmp_path):
     assert r.returncode == 0, r.stderr
     report = tmp_path / "demo" / "report" / "report.html"
     assert f"report: {report}" in r.stdout and report.is_file()
-    assert "training 20 steps, at most 30,000 Gaussians (as asked)" in r.stderr
+    assert "training 20 steps, at most 30,000 Gaussians (steps as asked)" in r.stderr
     stages = next(line for line in r.stdout.splitlines() if line.startswith("stages: "))
     named = [part.rsplit(" ", 2)[0] for part in stages.removeprefix("stages: ").split(", ")]
     assert named == ["synthetic scene", "masks", "training", "masks at depth jumps", "segmentation", "edits", "report"]
