@@ -19,7 +19,8 @@ MIN_SCENE_ITERS = 1_000
 MAX_SCENE_ITERS = 2_000
 # The cap: 30k Gaussians, or room for densification to double the SfM points where they are
 # more than half of that (gaussctrl_bear's 34 790 points left no room under 30k: 22.05 dB in
-# 1400 steps, 22.80 with 70k in 1.2x the time), up to MAX_SCENE_GAUSSIANS.
+# 1400 steps and 293 s of colour-only training, 22.80 with 70k in 330 s), up to
+# MAX_SCENE_GAUSSIANS.
 MIN_SCENE_GAUSSIANS = 30_000
 GAUSSIANS_PER_POINT = 2
 MAX_SCENE_GAUSSIANS = 100_000
