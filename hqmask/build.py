@@ -39,7 +39,7 @@ from hqmask.consensus import multiview_consensus
 from hqmask.depth_prior import depth_from_anchors, depth_from_points
 from hqmask.proposers.base import Proposer
 from hqmask.proposers.registry import make_proposer
-from hqmask.support_plane import SupportPlane, support_plane
+from hqmask.support_plane import Heights, SupportPlane, support_plane
 
 CACHE = ".hqmask_cache"
 
@@ -92,7 +92,7 @@ class SceneGeometry:
 
     depths: list[np.ndarray]
     plane: SupportPlane | None
-    heights: list[np.ndarray] | None
+    heights: list[Heights] | None
     digest: str
 
 
@@ -106,13 +106,17 @@ def read_geometry(scene: Scene, folder: Path) -> SceneGeometry:
             file=folder,
         )
     depths = [read_depth(folder / f"{view.stem}.npy", (view.camera.width, view.camera.height)) for view in scene.views]
-    plane = support_plane(scene.points.xyz, np.array([view.center for view in scene.views]))
+    plane = support_plane(scene.points.xyz, np.array([view.cam_from_world for view in scene.views]))
     heights = None if plane is None else [plane.heights(v, d) for v, d in zip(scene.views, depths)]
     digest = hashlib.blake2b(digest_size=8)
     for depth in depths:
         digest.update(depth.tobytes())
     if plane is not None:
-        digest.update(np.array([*plane.normal, plane.offset, plane.scale, *plane.centre, plane.reach]).tobytes())
+        digest.update(
+            np.array(
+                [*plane.normal, plane.offset, plane.scale, *plane.centre, plane.reach, plane.under_focus]
+            ).tobytes()
+        )
     return SceneGeometry(depths, plane, heights, digest.hexdigest())
 
 
@@ -264,7 +268,9 @@ def _geometry_record(cfg: BuildConfig, geometry: SceneGeometry) -> dict:
     return {
         "folder": str(Path(cfg.depth).resolve()),
         "digest": geometry.digest,
-        "support_plane": None if plane is None else {"normal": plane.normal.tolist(), "offset": plane.offset},
+        "support_plane": None
+        if plane is None
+        else {"normal": plane.normal.tolist(), "offset": plane.offset, "under_focus": plane.under_focus},
     }
 
 

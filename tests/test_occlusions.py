@@ -14,6 +14,7 @@ from dataset_tools.synth.generator import render_view
 from hqmask.build import CACHE, BuildConfig, build_masks
 from hqmask.occlusions import cut_at_edges, depth_jumps
 from hqmask.proposers.graph import GraphProposer
+from hqmask.support_plane import Heights
 
 
 def test_a_step_in_depth_is_an_edge_and_a_tilted_plane_is_not():
@@ -202,8 +203,10 @@ def test_the_support_plane_of_a_synthetic_scene_is_its_floor(small_scene, tmp_pa
     scene = load_scene(small_scene.root)
     geometry = read_geometry(scene, _exact_depths(small_scene, tmp_path / "depth"))
     assert geometry.plane is not None and geometry.plane.normal @ np.array([0.0, 0.0, 1.0]) > 0.99
-    floor = np.concatenate([h[(v.load_mask() == 0) & np.isfinite(h)] for v, h in zip(scene.views, geometry.heights)])
-    objects = np.concatenate([h[v.load_mask() > 0] for v, h in zip(scene.views, geometry.heights)])
+    floor = np.concatenate(
+        [h[(v.load_mask() == 0) & np.isfinite(h)] for v, h in zip(scene.views, [h.values for h in geometry.heights])]
+    )
+    objects = np.concatenate([h[v.load_mask() > 0] for v, h in zip(scene.views, [h.values for h in geometry.heights])])
     assert np.percentile(np.abs(floor), 99) < 0.01  # measured: 0.000
     assert np.median(objects) > 0.2  # measured: 0.30 (in units of the points' spread)
 
@@ -213,8 +216,25 @@ def test_what_rises_from_the_floor_is_an_object_even_at_the_border():
     height = np.where(image[..., 0] == 170, 0.6, 0.0).astype(np.float32)  # the floor at 0
     proposer = GraphProposer()
     assert len(proposer.propose(image, None, depth).masks) == 0  # it touches the border
-    masks = proposer.propose(image, None, depth, height).masks
+    masks = proposer.propose(image, None, depth, Heights(height, contact=False)).masks
     assert len(masks) == 1 and masks[0][60, 10] and not masks[0][60, 100]
+
+
+def test_an_object_of_its_supports_colour_comes_apart_where_it_rises():
+    """A grey model on a grey floor, at the floor's depth where it stands (no jump): colour
+    and depth see one region touching the border, all background, and so do the heights
+    without the cut at the contact (a plane not under an orbit's focus); with it the region is
+    cut where it rises past ``contact_height`` and the model stands: an object, the floor
+    around it not."""
+    image, depth = _drawn([])
+    height = np.zeros(depth.shape, np.float32)
+    height[30:101, 0:51] = np.linspace(0.0, 0.6, 71, dtype=np.float32)[::-1, None]  # rising from its foot
+    proposer = GraphProposer()
+    assert len(proposer.propose(image, None, depth).masks) == 0
+    assert len(proposer.propose(image, None, depth, Heights(height, contact=False)).masks) == 0
+    masks = proposer.propose(image, None, depth, Heights(height, contact=True)).masks
+    rises = height >= proposer.contact_height
+    assert len(masks) == 1 and (masks[0] & rises).sum() / (masks[0] | rises).sum() > 0.95
 
 
 def test_what_rises_far_behind_the_scene_stays_background():
@@ -226,10 +246,49 @@ def test_what_rises_far_behind_the_scene_stays_background():
     height = np.zeros(depth.shape, np.float32)
     height[image[..., 0] == 170] = 0.6
     height[image[..., 0] == 20] = -np.inf
-    masks = GraphProposer().propose(image, None, depth, height).masks
+    masks = GraphProposer().propose(image, None, depth, Heights(height, contact=False)).masks
     assert len(masks) == 1 and masks[0][90, 10] and not masks[0][20, 60]
     height[image[..., 0] == 20] = 2.0  # the same backdrop within reach rises like the model
-    assert len(GraphProposer().propose(image, None, depth, height).masks) == 2
+    assert len(GraphProposer().propose(image, None, depth, Heights(height, contact=False)).masks) == 2
+
+
+def _looking_at(centre: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """(3, 4) cam_from_world of an upright camera (world z up) at ``centre`` looking at ``target``."""
+    forward = (target - centre) / np.linalg.norm(target - centre)
+    right = np.cross(forward, [0.0, 0.0, 1.0])
+    right /= np.linalg.norm(right)
+    R = np.stack([right, np.cross(forward, right), forward])  # rows: x right, y down, z forward
+    return np.concatenate([R, (-R @ centre)[:, None]], 1)
+
+
+def test_in_an_orbit_the_support_is_the_surface_under_the_focus():
+    """A slab (top at z = 0.5, radius 1) on a wide ground (z = 0) holding more points than the
+    slab, an object on the slab, twelve cameras in a ring of radius 4 looking at it. In the
+    orbit the support is the slab's top, whatever lies under it, and the reach ends at the
+    ring; the same points seen from one side (no orbit) stand on the ground, which has
+    nothing under it."""
+    from hqmask.support_plane import orbit_of, support_plane
+
+    rng = np.random.default_rng(0)
+    ground = np.c_[rng.uniform(-6, 6, (3000, 2)), np.zeros(3000)]
+    ground = ground[np.linalg.norm(ground[:, :2], axis=1) > 1.2]
+    radius, angle = np.sqrt(rng.uniform(0, 1, 600)), rng.uniform(0, 2 * np.pi, 600)
+    slab = np.c_[radius * np.cos(angle), radius * np.sin(angle), np.full(600, 0.5)]
+    model = rng.normal([0, 0, 0.9], 0.2, (400, 3))
+    points = np.concatenate([ground, slab, model])
+    target = np.array([0.0, 0.0, 0.8])
+    ring = [
+        _looking_at(np.array([4 * np.cos(a), 4 * np.sin(a), 2.0]), target) for a in np.linspace(0, 2 * np.pi, 13)[:-1]
+    ]
+    orbit = orbit_of(np.array(ring))
+    assert orbit is not None and np.allclose(orbit.focus, target, atol=1e-6) and orbit.up @ [0, 0, 1] > 0.99
+    plane = support_plane(points, np.array(ring))
+    assert plane.under_focus and plane.normal @ [0, 0, 1] > 0.99 and plane.offset == pytest.approx(-0.5, abs=0.02)
+    assert plane.reach * plane.scale == pytest.approx(4.0, rel=1e-6)
+    side = [_looking_at(np.array([x, -4.0, 2.0]), target) for x in np.linspace(-1, 1, 5)]
+    assert orbit_of(np.array(side)) is None
+    plane = support_plane(points, np.array(side))
+    assert not plane.under_focus and plane.normal @ [0, 0, 1] > 0.99 and plane.offset == pytest.approx(0.0, abs=0.02)
 
 
 def test_heights_beyond_the_reach_of_the_scene_are_minus_infinity():
@@ -246,7 +305,7 @@ def test_heights_beyond_the_reach_of_the_scene_are_minus_infinity():
     down = np.array([[1.0, 0, 0, 0], [0, -1, 0, 0], [0, 0, -1, 4.0]])  # camera at z = 4, looking along -z
     depth = np.full((64, 64), 4.0, np.float32)
     depth[0, 0] = 0.0
-    heights = plane.heights(SimpleNamespace(camera=camera, cam_from_world=down), depth)
+    heights = plane.heights(SimpleNamespace(camera=camera, cam_from_world=down), depth).values
     assert heights[32, 32] == pytest.approx(0.0, abs=1e-5) and heights[32, 37] == pytest.approx(0.0, abs=1e-5)
     assert np.isneginf(heights[32, 38]) and np.isneginf(heights[5, 5]) and np.isnan(heights[0, 0])  # 3.26 units out
     assert np.isfinite(heights[32, 26]) and np.isneginf(heights[32, 25])  # 2.76 and 3.26 units out

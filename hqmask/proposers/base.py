@@ -8,6 +8,7 @@ from typing import Protocol
 import numpy as np
 
 from dataset_tools.scene import View
+from hqmask.support_plane import Heights
 
 
 @dataclass
@@ -33,10 +34,10 @@ class Proposer(Protocol):
     cache_name: str | None
 
     def propose(
-        self, image: np.ndarray, view: View, depth: np.ndarray | None = None, height: np.ndarray | None = None
+        self, image: np.ndarray, view: View, depth: np.ndarray | None = None, height: Heights | None = None
     ) -> Proposals:
         """Candidate masks for ``image`` (H, W, 3) uint8, the loaded image of ``view``;
-        ``depth`` (H, W), the view's camera depth (0: nothing opaque), and ``height`` (H, W),
-        each pixel's height above the scene's support plane (NaN: nothing seen), where the
-        build has them (a proposer may ignore them)."""
+        ``depth`` (H, W), the view's camera depth (0: nothing opaque), and ``height``, each
+        pixel's height above the scene's support plane, where the build has them (a proposer
+        may ignore them)."""
         ...

@@ -7,6 +7,7 @@ import numpy as np
 
 from dataset_tools.scene import View
 from hqmask.proposers.base import Proposals
+from hqmask.support_plane import Heights
 
 
 def _from_label_map(ids: np.ndarray) -> Proposals:
@@ -21,7 +22,7 @@ class ExistingMasks:
     cache_name = None
 
     def propose(
-        self, image: np.ndarray, view: View, depth: np.ndarray | None = None, height: np.ndarray | None = None
+        self, image: np.ndarray, view: View, depth: np.ndarray | None = None, height: Heights | None = None
     ) -> Proposals:
         ids = view.load_mask()
         if ids is None:

@@ -21,6 +21,7 @@ from scipy.sparse.csgraph import connected_components
 from dataset_tools.scene import View
 from hqmask.occlusions import DepthJumps, cut_at_edges, depth_jumps
 from hqmask.proposers.base import Proposals
+from hqmask.support_plane import Heights
 
 
 def _in_front(seg: np.ndarray, occluding: np.ndarray, share: float) -> np.ndarray:
@@ -38,6 +39,13 @@ def _standing(seg: np.ndarray, height: np.ndarray, least: float) -> np.ndarray:
     seen = ~np.isnan(height)
     rise = ndimage.median(np.where(seen, height, 0.0), np.where(seen, seg, -1), np.arange(n))
     return np.nan_to_num(np.asarray(rise, float), nan=-np.inf) >= least
+
+
+def _contact(height: np.ndarray, level: float) -> np.ndarray:
+    """(H, W) bool: the line where the surface rises past ``level`` above the support plane
+    (``height`` (H, W), NaN or -inf where there is none): pixels on either side of it."""
+    rises = np.nan_to_num(height, nan=0.0, neginf=0.0) >= level
+    return ndimage.binary_dilation(rises) & ~ndimage.binary_erosion(rises, border_value=1)
 
 
 def _touching(seg: np.ndarray, edges: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -132,7 +140,10 @@ class GraphProposer:
     the log depth jumps by more than ``depth_jump`` and touch only where it does not; a region
     holding near-side jump pixels for ``occluding_share`` of its outline is no background by
     colour; and an object touching no background off the jumps joins the larger object it
-    shares the longest boundary with (docs/masks.md).
+    shares the longest boundary with. With heights above the support plane, a region whose
+    median height is at least ``standing_height`` is no background, and where the plane lies
+    under an orbit's focus regions are cut where the surface rises past ``contact_height`` (an
+    object of its support's colour comes apart from it) (docs/masks.md).
     """
 
     scale: float = 100.0
@@ -145,17 +156,18 @@ class GraphProposer:
     depth_jump: float = 0.2
     occluding_share: float = 0.25
     standing_height: float = 0.25
+    contact_height: float = 0.1
     cache_name = "graph"
 
     def propose(
-        self, image: np.ndarray, view: View, depth: np.ndarray | None = None, height: np.ndarray | None = None
+        self, image: np.ndarray, view: View, depth: np.ndarray | None = None, height: Heights | None = None
     ) -> Proposals:
         from skimage import color
 
         H, W = image.shape[:2]
         lab = color.rgb2lab(image)
         jumps = None if depth is None else depth_jumps(depth, self.depth_jump)
-        seg = self._regions(image, lab, jumps)
+        seg = self._regions(image, lab, jumps, height)
         counts, mean = _region_means(seg, lab)
         background = self._background(seg, counts, mean, jumps, height)
         pairs, touches = _touching(seg, None if jumps is None else jumps.edges)
@@ -168,15 +180,22 @@ class GraphProposer:
         masks = objects[None] == labels[:, None, None]
         return Proposals(masks, masks.sum((1, 2)) / (H * W))
 
-    def _regions(self, image: np.ndarray, lab: np.ndarray, jumps: DepthJumps | None) -> np.ndarray:
-        """(H, W) region map: Felzenszwalb, merged by colour, cut at the depth ``jumps``."""
+    def _regions(
+        self, image: np.ndarray, lab: np.ndarray, jumps: DepthJumps | None, height: Heights | None
+    ) -> np.ndarray:
+        """(H, W) region map: Felzenszwalb, merged by colour, cut at the depth ``jumps`` and,
+        where the ``height`` says so, where the surface leaves the support plane."""
         from skimage import segmentation
 
         H, W = image.shape[:2]
         min_size = max(20, int(0.0005 * H * W))
         seg = segmentation.felzenszwalb(image, scale=self.scale, sigma=self.sigma, min_size=min_size)
         seg = merge_by_mean_colour(seg, lab, self.merge_threshold)
-        return seg if jumps is None else cut_at_edges(seg, jumps.edges, min_size)
+        if jumps is not None:
+            seg = cut_at_edges(seg, jumps.edges, min_size)
+        if height is not None and height.contact:
+            seg = cut_at_edges(seg, _contact(height.values, self.contact_height), min_size)
+        return seg
 
     def _background(
         self,
@@ -184,7 +203,7 @@ class GraphProposer:
         counts: np.ndarray,
         mean: np.ndarray,
         jumps: DepthJumps | None,
-        height: np.ndarray | None,
+        height: Heights | None,
     ) -> np.ndarray:
         """(n,) bool: regions touching the image border, and regions coloured like a large one
         unless the depth puts them in front of the scene; with heights above the support
@@ -200,7 +219,7 @@ class GraphProposer:
                 alike &= ~_in_front(seg, jumps.near, self.occluding_share)
             background |= alike
         if height is not None:
-            background &= ~_standing(seg, height, self.standing_height)
+            background &= ~_standing(seg, height.values, self.standing_height)
         return background
 
     def _join(self, mean: np.ndarray, background: np.ndarray, pairs: np.ndarray) -> np.ndarray:

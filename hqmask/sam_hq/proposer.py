@@ -6,6 +6,7 @@ import numpy as np
 
 from dataset_tools.scene import View
 from hqmask.proposers.base import Proposals
+from hqmask.support_plane import Heights
 
 
 class SamHQProposer:
@@ -18,6 +19,6 @@ class SamHQProposer:
         self.cache_name = f"sam-hq-{generator.model.fingerprint}-p{points}"
 
     def propose(
-        self, image: np.ndarray, view: View, depth: np.ndarray | None = None, height: np.ndarray | None = None
+        self, image: np.ndarray, view: View, depth: np.ndarray | None = None, height: Heights | None = None
     ) -> Proposals:
         return self.generator.generate(image).proposals()
