@@ -108,26 +108,30 @@ def _demo_selection(
     """What the demo edits, and the prompt that selects it (``edit_run``'s keywords): the
     synthetic scene's first object, by a 3D point at its centre; in a user's scene what a click
     at the centre of the first test view selects (the rule of ``gsseg edit --click``), or,
-    where nothing is seen there, the largest object that does not cover most of every view
-    (such a label is the scene, not an object in it)."""
+    where nothing is seen there or the click selects most of every view (the scene, not an
+    object in it), the largest object that does not cover most of every view."""
     scene = run.scene(scene_dir)
     if synth_point is not None:
         prompt = {"point": np.asarray(synth_point, np.float64)}
         return select(run, segmentation, scene, backend=backend, **prompt), prompt
     view = scene.split("test")[0]
     prompt = {"clicks": [Click(view.name, view.camera.width / 2, view.camera.height / 2)]}
+    regions = run_regions(run, scene_dir, backend=backend)
     try:
-        return select(run, segmentation, scene, backend=backend, **prompt), prompt
+        clicked = select(run, segmentation, scene, backend=backend, **prompt)
+        if not regions.covers(clicked.mask):
+            return clicked, prompt
     except InputError:
-        scene_wide = run_regions(run, scene_dir, backend=backend).covering()
-        objects = [o for o in segmentation.objects if int(o) not in scene_wide and segmentation.selection(o).any()]
-        if not objects:
-            raise OptionError(
-                f"{run.folder.labels}: no object label holds less than most of every view; train longer "
-                f"({{iters}}) or check the masks in the scene's {MASKS}/."
-            ) from None
-        largest = int(max(objects, key=lambda o: segmentation.selection(o).sum()))
-        return select(run, segmentation, scene, object_id=largest, backend=backend), {"object_id": largest}
+        pass
+    scene_wide = regions.covering()
+    objects = [o for o in segmentation.objects if int(o) not in scene_wide and segmentation.selection(o).any()]
+    if not objects:
+        raise OptionError(
+            f"{run.folder.labels}: no object label holds less than most of every view; train longer "
+            f"({{iters}}) or check the masks in the scene's {MASKS}/."
+        )
+    largest = int(max(objects, key=lambda o: segmentation.selection(o).sum()))
+    return select(run, segmentation, scene, object_id=largest, backend=backend), {"object_id": largest}
 
 
 def demo_images(scene: Path, max_side: int = DemoOptions.max_side) -> str:

@@ -259,6 +259,48 @@ def test_a_part_raises_the_views_vote_and_lowers_it_nowhere():
     assert np.allclose(both[a], 0.5)
 
 
+def test_a_label_or_selection_over_most_of_every_view_is_the_scene():
+    """Six views, each of 400 Gaussians of weight 1: label 1 on 300 of them, label 2 on 100.
+    Label 1 and a selection of its Gaussians hold three quarters of every view: the scene;
+    label 2, and half of label 1 (three eighths of a view), are objects in it."""
+    n = 400
+    wide, small = np.arange(300), np.arange(300, 400)
+    regions = _regions(n, [wide, small])
+    assert regions.covering() == {1}
+    assert regions.covers(np.isin(np.arange(n), wide))
+    assert not regions.covers(np.isin(np.arange(n), small))
+    assert not regions.covers(np.isin(np.arange(n), wide[:150]))
+
+
+def test_a_mask_pass_that_lost_the_object_does_not_vote_against_it():
+    """Two mask layers: three views of the first hold A as an object; four of the second
+    leave A in the background but for a sliver (A's first Gaussian, one of the twenty the
+    click falls on, and ten more). The second layer holds a twentieth of the click: it does
+    not vote, and the sliver, a twentieth of A's weight in its views, joins no round, so A's
+    share is 1. Let every layer and region vote and A beyond the sliver falls to three views
+    of seven."""
+    g, a, b = _two_blobs()
+    n = len(g)
+    sliver = np.r_[a[0], a[190:]]
+    click = ClickEvidence(np.isin(np.arange(n), a[:20]).astype(float), True)
+    held, lost = _regions(n, [a, b], views=3), _regions(n, [sliver, b], views=4)
+    regions = RegionWeights(
+        sp.vstack([held.matrix, lost.matrix]).tocsr(),
+        np.concatenate([held.view, lost.view]),
+        np.concatenate([held.label, lost.label]),
+        np.r_[np.zeros(len(held.view), np.uint8), np.ones(len(lost.view), np.uint8)],
+        ("depth", "colour"),
+    )
+    labels = np.full(n, 7, np.uint8)
+    share, _, _ = ClickSelector(g, labels, regions).views_vote([click], None)
+    assert np.allclose(share[a], 1) and np.allclose(share[b], 0)
+    selected = ClickSelector(g, labels, regions).select([click])
+    assert selected[a].all() and not selected[b].any()
+    everyone = ClickSelector(g, labels, regions, ClickOptions(hold_share=0.01))
+    share, _, _ = everyone.views_vote([click], None)
+    assert np.allclose(share[a[1:190]], 3 / 7) and np.allclose(share[sliver], 1)
+
+
 def test_a_negative_click_on_a_floater_leaves_the_objects_side_of_its_own_colour():
     """A red object A (x from 0 to 4) and a green floater F beside its far end, which every
     view's masks join to A: a negative click on F takes F; A's far end, nearer F than the

@@ -73,14 +73,26 @@ class RegionWeights:
         """The labels of the first layer whose regions hold at least ``share`` of the blended
         weight of their view in at least ``views`` of its views: labels that cover most of
         every view, the scene rather than an object in it."""
-        first = self.layer == 0
-        matrix, view, label = self.matrix[np.flatnonzero(first)], self.view[first], self.label[first]
-        weight = np.asarray(matrix.sum(1)).ravel()
-        per_view = np.bincount(view, weight)
-        n_views = len(np.unique(view))
-        wide = label[weight >= share * per_view[view]]
+        first = np.flatnonzero(self.layer == 0)
+        weight = np.asarray(self.matrix[first].sum(1)).ravel()
+        wide = self.label[first][weight >= share * self._view_totals()[self.view[first]]]
         counts = np.bincount(wide, minlength=256)
-        return {int(k) for k in np.flatnonzero(counts >= views * max(n_views, 1))}
+        return {int(k) for k in np.flatnonzero(counts >= views * max(len(np.unique(self.view[first])), 1))}
+
+    def covers(self, selected: np.ndarray, share: float = 0.5, views: float = 0.75) -> bool:
+        """Whether the ``selected`` (N,) bool Gaussians hold at least ``share`` of the blended
+        weight of at least ``views`` of the first layer's views, as :meth:`covering`'s labels
+        do: a selection of the scene rather than of an object in it."""
+        first = np.flatnonzero(self.layer == 0)
+        held = np.bincount(self.view[first], self.matrix[first] @ selected.astype(np.float64))
+        seen = np.unique(self.view[first])
+        totals = self._view_totals()
+        return int((held[seen] >= share * totals[seen]).sum()) >= views * max(len(seen), 1)
+
+    def _view_totals(self) -> np.ndarray:
+        """(V,) the blended weight of each view of the first layer, over all its regions."""
+        first = np.flatnonzero(self.layer == 0)
+        return np.bincount(self.view[first], np.asarray(self.matrix[first].sum(1)).ravel())
 
     def subset(self, keep: np.ndarray) -> RegionWeights:
         """The weights of the Gaussians where (N,) bool ``keep`` is true (a model after a removal)."""

@@ -89,6 +89,11 @@ class ClickOptions:
         seen_share: a click is seen in a view where its Gaussians show at least this share of
             the weight they show in the view that shows them most.
         seed_share: the seeds are the Gaussians carrying this share of the click's weight.
+        hold_share: a mask layer votes for the first click where its regions under the click
+            hold, in the median over its views, at least this share of the click's weight (a
+            pass that left the object in the background, or in slivers, does not speak of
+            it); a round of the vote adds regions in the views where they hold at least this
+            share of the selection's weight.
         evidence: weight of the views' vote (times its log-odds).
         label_weight: weight of the label under the first click where it agrees with the vote.
         overlap: a later positive click's region joins the vote where it holds under this share
@@ -123,6 +128,7 @@ class ClickOptions:
     iterations: int = 3
     seen_share: float = 0.2
     seed_share: float = 0.8
+    hold_share: float = 0.1
     evidence: float = 2.0
     label_weight: float = 2.0
     overlap: float = 0.05
@@ -156,6 +162,7 @@ class ClickOptions:
             "region_share",
             "seen_share",
             "seed_share",
+            "hold_share",
             "overlap",
             "part_share",
             "against_margin",
@@ -247,6 +254,7 @@ class RegionVote:
         self.matrix = regions.matrix.tocsr().astype(np.float64)
         self.by_gaussian = self.matrix.T.tocsr()
         self.label = regions.label
+        self.layer = regions.layer
         self.row_sums = np.asarray(self.matrix.sum(1)).ravel()
         # A vote unit is one view of one mask layer.
         _, self.unit = np.unique(
@@ -258,12 +266,20 @@ class RegionVote:
         )
 
     def clicked_regions(
-        self, click: ClickEvidence, seen_share: float, hold: float = 0.0, any_label: bool = False
+        self,
+        click: ClickEvidence,
+        seen_share: float,
+        hold: float = 0.0,
+        any_label: bool = False,
+        layer_hold: float = 0.0,
     ) -> np.ndarray:
         """(R,) bool: in each vote unit where the click is seen (its Gaussians' weight there is
         at least ``seen_share`` of their weight in the unit where it is largest), the object
         region (not the background, label 0, unless ``any_label``) holding most of that
-        weight, where it holds at least ``hold`` of it."""
+        weight, where it holds at least ``hold`` of it; of the mask layers, only those whose
+        regions hold, in the median over their units that see the click, at least
+        ``layer_hold`` of it (a pass that left the object in the background, or in slivers,
+        does not speak of it)."""
         weight = self.matrix @ click.weights
         per_unit = self.units.T @ weight
         ranked = weight if any_label else np.where(self.label != 0, weight, -1.0)
@@ -271,8 +287,12 @@ class RegionVote:
         best = order[np.unique(self.unit[order], return_index=True)[1]]
         seen = per_unit[self.unit[best]] >= seen_share * max(float(per_unit.max(initial=0)), 1e-12)
         out = np.zeros(len(weight), bool)
-        held = weight[best] >= hold * per_unit[self.unit[best]]
-        out[best[seen & held & ((self.label[best] != 0) | any_label) & (weight[best] > 0)]] = True
+        holds = weight[best] / np.maximum(per_unit[self.unit[best]], 1e-12)
+        chosen = seen & (holds >= hold) & ((self.label[best] != 0) | any_label) & (weight[best] > 0)
+        layer = self.layer[best]
+        for quiet in [k for k in np.unique(layer[seen]) if np.median(holds[seen & (layer == k)]) < layer_hold]:
+            chosen &= layer != quiet
+        out[best[chosen]] = True
         return out
 
     def shares(self, inside: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -296,13 +316,18 @@ class RegionVote:
         """(N,) each Gaussian's share of weight in the object's regions, starting from the
         ``clicked`` (R,) ones, and (N,) whether it is seen where the object is, after
         :attr:`ClickOptions.iterations` rounds; and (R,) the object's regions the last round
-        counted."""
+        counted. A round adds the regions the selection (share above one half) covers for
+        more than :attr:`ClickOptions.region_share`, in the vote units where they hold at
+        least :attr:`ClickOptions.hold_share` of the selection's weight: a view whose masks
+        leave the object in the background does not count it against the object."""
         inside = clicked
         for _ in range(options.iterations):
             share, seen = self.shares(inside)
-            covered = (self.matrix @ (share > 0.5)) / np.maximum(self.row_sums, 1e-12)
+            held = self.matrix @ (share > 0.5)
+            covered = (held / np.maximum(self.row_sums, 1e-12) > options.region_share) & (self.label != 0)
+            holding = (self.units.T @ (held * covered)) >= options.hold_share * (self.units.T @ held)
             counted = inside
-            inside = (clicked | (covered > options.region_share)) & (self.label != 0)
+            inside = clicked | (covered & holding[self.unit])
         return share, seen, counted
 
 
@@ -433,7 +458,7 @@ class ClickSelector:
         first click is not counts those views against the rest of the object, which the
         selection holds all the same."""
         o = self.options
-        clicked = self.vote.clicked_regions(clicks[0], o.seen_share)
+        clicked = self.vote.clicked_regions(clicks[0], o.seen_share, layer_hold=o.hold_share)
         share, seen, regions = self.vote.vote(clicked, o)
         parts = np.zeros_like(clicked)
         for later in clicks[1:]:
