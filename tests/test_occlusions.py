@@ -252,6 +252,23 @@ def test_what_rises_far_behind_the_scene_stays_background():
     assert len(GraphProposer().propose(image, None, depth, Heights(height, contact=False)).masks) == 2
 
 
+def test_in_an_orbit_what_lies_beyond_the_cameras_is_no_object():
+    """A red model standing on the floor and a green bush seen over the floor beyond the
+    plane's reach (height -inf), neither touching the frame: under a plane found elsewhere the
+    bush is an object, under an orbit's focus (the reach is the cameras' ring: the bush grows
+    behind them) it is background."""
+    image, depth = _drawn(
+        [("circle", (90, 40, 15), (40, 140, 40), 9.0), ("rect", (20, 60, 60, 110), (170, 60, 50), 3.0)]
+    )
+    height = np.zeros(depth.shape, np.float32)
+    height[image[..., 0] == 170] = 0.6
+    height[image[..., 1] == 140] = -np.inf
+    proposer = GraphProposer()
+    assert len(proposer.propose(image, None, depth, Heights(height, contact=False)).masks) == 2
+    masks = proposer.propose(image, None, depth, Heights(height, contact=True)).masks
+    assert len(masks) == 1 and masks[0][80, 40] and not masks[0][40, 90]
+
+
 def _looking_at(centre: np.ndarray, target: np.ndarray) -> np.ndarray:
     """(3, 4) cam_from_world of an upright camera (world z up) at ``centre`` looking at ``target``."""
     forward = (target - centre) / np.linalg.norm(target - centre)

@@ -32,13 +32,12 @@ def _in_front(seg: np.ndarray, occluding: np.ndarray, share: float) -> np.ndarra
     return np.bincount(seg[occluding], minlength=n) >= share * np.maximum(np.bincount(seg[outline], minlength=n), 1)
 
 
-def _standing(seg: np.ndarray, height: np.ndarray, least: float) -> np.ndarray:
-    """(n,) bool: regions of ``seg`` whose median height above the support plane (``height``
-    (H, W), NaN where nothing is seen, -inf beyond the scene) is at least ``least``."""
-    n = int(seg.max()) + 1
+def _median_heights(seg: np.ndarray, height: np.ndarray) -> np.ndarray:
+    """(n,) each region of ``seg``'s median height above the support plane (``height`` (H, W),
+    NaN where nothing is seen, -inf beyond the scene's reach); NaN where it sees nothing."""
     seen = ~np.isnan(height)
-    rise = ndimage.median(np.where(seen, height, 0.0), np.where(seen, seg, -1), np.arange(n))
-    return np.nan_to_num(np.asarray(rise, float), nan=-np.inf) >= least
+    n = int(seg.max()) + 1
+    return np.asarray(ndimage.median(np.where(seen, height, 0.0), np.where(seen, seg, -1), np.arange(n)), float)
 
 
 def _contact(height: np.ndarray, level: float) -> np.ndarray:
@@ -141,9 +140,10 @@ class GraphProposer:
     holding near-side jump pixels for ``occluding_share`` of its outline is no background by
     colour; and an object touching no background off the jumps joins the larger object it
     shares the longest boundary with. With heights above the support plane, a region whose
-    median height is at least ``standing_height`` is no background, and where the plane lies
-    under an orbit's focus regions are cut where the surface rises past ``contact_height`` (an
-    object of its support's colour comes apart from it) (docs/masks.md).
+    median height is at least ``standing_height`` is no background; where the plane lies
+    under an orbit's focus, regions are cut where the surface rises past ``contact_height`` (an
+    object of its support's colour comes apart from it) and a region beyond the plane's reach
+    (behind the cameras) is background (docs/masks.md).
     """
 
     scale: float = 100.0
@@ -207,7 +207,8 @@ class GraphProposer:
     ) -> np.ndarray:
         """(n,) bool: regions touching the image border, and regions coloured like a large one
         unless the depth puts them in front of the scene; with heights above the support
-        plane, no region that rises from it."""
+        plane, no region that rises from it, and under an orbit's focus every region beyond
+        the plane's reach (the cameras' ring)."""
         H, W = seg.shape
         border = np.unique(np.concatenate([seg[0], seg[-1], seg[:, 0], seg[:, -1]]))
         reference = border[counts[border] >= self.reference_fraction * H * W]
@@ -219,7 +220,10 @@ class GraphProposer:
                 alike &= ~_in_front(seg, jumps.near, self.occluding_share)
             background |= alike
         if height is not None:
-            background &= ~_standing(seg, height.values, self.standing_height)
+            rise = _median_heights(seg, height.values)
+            background &= ~(rise >= self.standing_height)
+            if height.contact:  # in an orbit, what lies beyond the cameras is no object
+                background |= np.isneginf(rise)
         return background
 
     def _join(self, mean: np.ndarray, background: np.ndarray, pairs: np.ndarray) -> np.ndarray:
