@@ -278,7 +278,7 @@ def test_a_mask_pass_that_lost_the_object_does_not_vote_against_it():
     click falls on, and ten more). The second layer holds a twentieth of the click: it does
     not vote, and the sliver, a twentieth of A's weight in its views, joins no round, so A's
     share is 1. Let every layer and region vote and A beyond the sliver falls to three views
-    of seven."""
+    of seven; with the second layer alone, no pass holds more, and it votes."""
     g, a, b = _two_blobs()
     n = len(g)
     sliver = np.r_[a[0], a[190:]]
@@ -299,6 +299,8 @@ def test_a_mask_pass_that_lost_the_object_does_not_vote_against_it():
     everyone = ClickSelector(g, labels, regions, ClickOptions(hold_share=0.01))
     share, _, _ = everyone.views_vote([click], None)
     assert np.allclose(share[a[1:190]], 3 / 7) and np.allclose(share[sliver], 1)
+    alone, _, _ = ClickSelector(g, labels, lost).views_vote([click], None)  # no pass holds more: it votes
+    assert np.allclose(alone[sliver], 1)
 
 
 def test_a_negative_click_on_a_floater_leaves_the_objects_side_of_its_own_colour():

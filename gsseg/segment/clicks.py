@@ -89,11 +89,11 @@ class ClickOptions:
         seen_share: a click is seen in a view where its Gaussians show at least this share of
             the weight they show in the view that shows them most.
         seed_share: the seeds are the Gaussians carrying this share of the click's weight.
-        hold_share: a mask layer votes for the first click where its regions under the click
-            hold, in the median over its views, at least this share of the click's weight (a
-            pass that left the object in the background, or in slivers, does not speak of
-            it); a round of the vote adds regions in the views where they hold at least this
-            share of the selection's weight.
+        hold_share: where a mask layer's regions under the first click hold, in the median
+            over its views, at least this share of the click's weight, the layers that hold
+            less do not vote (a pass that left the object in the background, or in slivers,
+            beside one that holds it); a round of the vote adds regions in the views where
+            they hold at least this share of the selection's weight.
         evidence: weight of the views' vote (times its log-odds).
         label_weight: weight of the label under the first click where it agrees with the vote.
         overlap: a later positive click's region joins the vote where it holds under this share
@@ -276,10 +276,10 @@ class RegionVote:
         """(R,) bool: in each vote unit where the click is seen (its Gaussians' weight there is
         at least ``seen_share`` of their weight in the unit where it is largest), the object
         region (not the background, label 0, unless ``any_label``) holding most of that
-        weight, where it holds at least ``hold`` of it; of the mask layers, only those whose
-        regions hold, in the median over their units that see the click, at least
-        ``layer_hold`` of it (a pass that left the object in the background, or in slivers,
-        does not speak of it)."""
+        weight, where it holds at least ``hold`` of it; where some mask layer's regions hold,
+        in the median over its units that see the click, at least ``layer_hold`` of it, only
+        such layers (a pass that left the object in the background, or in slivers, beside one
+        that holds it, does not speak of it)."""
         weight = self.matrix @ click.weights
         per_unit = self.units.T @ weight
         ranked = weight if any_label else np.where(self.label != 0, weight, -1.0)
@@ -290,8 +290,10 @@ class RegionVote:
         holds = weight[best] / np.maximum(per_unit[self.unit[best]], 1e-12)
         chosen = seen & (holds >= hold) & ((self.label[best] != 0) | any_label) & (weight[best] > 0)
         layer = self.layer[best]
-        for quiet in [k for k in np.unique(layer[seen]) if np.median(holds[seen & (layer == k)]) < layer_hold]:
-            chosen &= layer != quiet
+        layers = np.unique(layer[seen])
+        loud = np.array([np.median(holds[seen & (layer == k)]) >= layer_hold for k in layers], bool)
+        if loud.any():
+            chosen &= np.isin(layer, layers[loud])
         out[best[chosen]] = True
         return out
 
