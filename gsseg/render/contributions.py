@@ -73,26 +73,25 @@ class RegionWeights:
         """The labels of the first layer whose regions hold at least ``share`` of the blended
         weight of their view in at least ``views`` of its views: labels that cover most of
         every view, the scene rather than an object in it."""
-        first = np.flatnonzero(self.layer == 0)
-        weight = np.asarray(self.matrix[first].sum(1)).ravel()
-        wide = self.label[first][weight >= share * self._view_totals()[self.view[first]]]
+        first, weight, totals, seen = self._first_layer()
+        wide = self.label[first][weight >= share * totals[self.view[first]]]
         counts = np.bincount(wide, minlength=256)
-        return {int(k) for k in np.flatnonzero(counts >= views * max(len(np.unique(self.view[first])), 1))}
+        return {int(k) for k in np.flatnonzero(counts >= views * max(len(seen), 1))}
 
     def covers(self, selected: np.ndarray, share: float = 0.5, views: float = 0.75) -> bool:
         """Whether the ``selected`` (N,) bool Gaussians hold at least ``share`` of the blended
         weight of at least ``views`` of the first layer's views, as :meth:`covering`'s labels
         do: a selection of the scene rather than of an object in it."""
-        first = np.flatnonzero(self.layer == 0)
-        held = np.bincount(self.view[first], self.matrix[first] @ selected.astype(np.float64))
-        seen = np.unique(self.view[first])
-        totals = self._view_totals()
+        first, _, totals, seen = self._first_layer()
+        held = np.bincount(self.view[first], self.matrix[first] @ selected.astype(np.float64), len(totals))
         return int((held[seen] >= share * totals[seen]).sum()) >= views * max(len(seen), 1)
 
-    def _view_totals(self) -> np.ndarray:
-        """(V,) the blended weight of each view of the first layer, over all its regions."""
+    def _first_layer(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The first layer's rows (R1,), each one's blended weight (R1,), each view's total
+        weight over them (V,), and the views that hold one (S,)."""
         first = np.flatnonzero(self.layer == 0)
-        return np.bincount(self.view[first], np.asarray(self.matrix[first].sum(1)).ravel())
+        weight = np.asarray(self.matrix[first].sum(1)).ravel()
+        return first, weight, np.bincount(self.view[first], weight), np.unique(self.view[first])
 
     def subset(self, keep: np.ndarray) -> RegionWeights:
         """The weights of the Gaussians where (N,) bool ``keep`` is true (a model after a removal)."""
