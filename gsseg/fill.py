@@ -5,14 +5,15 @@ that surface, the model already holds it; where none did, the removal shows what
 training left there (a smear, the environment). :func:`fill_removal` finds those pixels and
 fits new Gaussians to a 2D inpainting of them, with the rest of the model frozen:
 
-1. **Unseen pixels.** In each training view the object's silhouette is where the removed
-   Gaussians held most of the blended weight (widened by its rim). Each of its pixels shows,
-   after the removal, a surface point (its rendered depth) or the environment (a direction);
-   the point is seen when another training view's render of the *whole* model shows it there
-   (the depths agree within :attr:`FillOptions.depth_tolerance`), the direction when another
-   view shows the environment there. The rest is unseen.
-2. **Inpainting.** In every view the removal's render is inpainted over its unseen pixels
-   by frequency-selective reconstruction (OpenCV's ``xphoto``), which carries textures on
+1. **Unseen pixels.** In each training view the object shows in (at most
+   :attr:`FillOptions.fit_views` of them, spread over them) the object's silhouette is where
+   the removed Gaussians held most of the blended weight (widened by its rim). Each of its
+   pixels shows, after the removal, a surface point (its rendered depth) or the environment
+   (a direction); the point is seen when another training view's render of the *whole* model
+   shows it there (the depths agree within :attr:`FillOptions.depth_tolerance`), the
+   direction when another view shows the environment there. The rest is unseen.
+2. **Inpainting.** In each of those views the removal's render is inpainted over its unseen
+   pixels by frequency-selective reconstruction (OpenCV's ``xphoto``), which carries textures on
    where a diffusion (Telea) leaves a flat smudge.
 3. **Gaussians on the surface around the hole.** In up to :attr:`FillOptions.views` views
    spread over those with unseen pixels, new Gaussians are seeded on a pixel grid of the
@@ -21,7 +22,7 @@ fits new Gaussians to a 2D inpainting of them, with the rest of the model frozen
    of the surface it shows, or where it shows the environment) is dropped, there is nothing
    there.
 4. **A fit across the views.** The new Gaussians alone (positions, colours, opacities) are
-   optimised, a few hundred steps, to every view's inpainted render around the object (a
+   optimised, a few hundred steps, to those views' inpainted renders around the object (a
    crop: its silhouette and a margin, where the target is the removal's render as it is, so
    the fill must not show there): the views disagree where their inpaintings do, and the fit
    keeps what they share. Those left nearly transparent, or moved into space a view saw
@@ -62,7 +63,10 @@ class FillOptions:
 
     Attributes:
         steps: optimisation steps of the fill, one view each.
-        views: at most this many training views are inpainted and fitted to.
+        views: at most this many of the views with unseen pixels seed new Gaussians.
+        fit_views: the unseen pixels are found, inpainted and fitted to in at most this many
+            of the views the object shows in, spread over them (each is tested against every
+            training view; a capture of a hundred views costs no more than one of this many).
         stride: pixels between the new Gaussians seeded in each fitted view.
         rim: pixels the object's silhouettes are widened by (its blurred edge).
         margin: pixels of the removal's render kept as they are around each hole in the fit.
@@ -75,6 +79,7 @@ class FillOptions:
 
     steps: int = 800
     views: int = 12
+    fit_views: int = 32
     stride: int = 3
     rim: int = 2
     margin: int = 12
@@ -92,7 +97,7 @@ class Filled:
     Attributes:
         gaussians: the model without the removed Gaussians, with the fill (new ones last).
         added: new Gaussians.
-        unseen_share: share of the silhouettes' pixels, over the training views, that no other
+        unseen_share: share of the silhouettes' pixels, over the views tested, that no other
             view saw behind the object.
         seconds: wall time of the fill.
     """
@@ -316,8 +321,9 @@ def _removal_views(
     backend: Backend,
     progress: bool,
 ) -> tuple[list[_Shown], list[SurfaceView]]:
-    """The views in which the removed Gaussians showed (:class:`_Shown`), and every view with
-    its surface depth of the whole model."""
+    """Up to :attr:`FillOptions.fit_views` of the views in which the removed Gaussians showed,
+    spread over them (:class:`_Shown`), and every view with its surface depth of the whole
+    model."""
     whole = gaussians.detach().to(backend.device)
     poses = [torch.as_tensor(v.cam_from_world, dtype=torch.float32, device=backend.device) for v in views]
     rim = np.ones((2 * options.rim + 1,) * 2, np.uint8)
@@ -329,9 +335,8 @@ def _removal_views(
             silhouettes.append(cv2.dilate((labels == 1).astype(np.uint8), rim) > 0)
         seen_by = [(v.camera, np.asarray(v.cam_from_world, np.float64), d) for v, d in zip(views, depths)]
         shown = []
-        for i, (view, pose) in enumerate(zip(views, poses)):
-            if not silhouettes[i].any():
-                continue
+        for i in _spread([i for i, s in enumerate(silhouettes) if s.any()], options.fit_views):
+            view, pose = views[i], poses[i]
             bg = background_image(environment, view.camera, pose)
             out = render(
                 kept, view.camera, pose, sh_degree=sh_degree, background=bg, with_features=False, backend=backend

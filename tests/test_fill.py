@@ -9,6 +9,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+import pytest
 import torch
 from helpers import script
 
@@ -109,14 +110,23 @@ def _box_scene():
     return g, removed, views
 
 
-def test_fill_puts_the_wall_back():
+@pytest.mark.parametrize("fit_views", [FillOptions.fit_views, 1])
+def test_fill_puts_the_wall_back(fit_views):
     """Removing the box leaves a black hole in the wall no view saw; the fill makes it red,
     seen from a camera between the training views, and leaves the rest of the view as it was;
-    also called where gradients are off (as the evaluation renders)."""
+    also called where gradients are off (as the evaluation renders); also fitted in one of the
+    three views (a capture of many views is fitted in a few of them)."""
     g, removed, views = _box_scene()
     with torch.no_grad():
         filled = fill_removal(
-            g, removed, views, environment=None, sh_degree=0, extent=1.0, options=FillOptions(steps=150), progress=False
+            g,
+            removed,
+            views,
+            environment=None,
+            sh_degree=0,
+            extent=1.0,
+            options=FillOptions(steps=150, fit_views=fit_views),
+            progress=False,
         )
     assert filled.added > 0 and filled.unseen_share > 0.5
     pose = torch.as_tensor(_pose(0.05), dtype=torch.float32)
