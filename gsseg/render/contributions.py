@@ -47,6 +47,10 @@ class MaskedView:
 
 # A Gaussian's weight in a region under this (a thousandth of a pixel) is left out of RegionWeights.
 REGION_WEIGHT_FLOOR = 1e-3
+# A label or selection holding SCENE_SHARE of the blended weight of SCENE_VIEWS of the views
+# covers most of every view: it is the scene, not an object in it.
+SCENE_SHARE = 0.5
+SCENE_VIEWS = 0.75
 
 
 @dataclass
@@ -69,7 +73,7 @@ class RegionWeights:
     layers: tuple[str, ...]
     model: str = ""
 
-    def covering(self, share: float = 0.5, views: float = 0.75) -> set[int]:
+    def covering(self, share: float = SCENE_SHARE, views: float = SCENE_VIEWS) -> set[int]:
         """The labels of the first layer whose regions hold at least ``share`` of the blended
         weight of their view in at least ``views`` of its views: labels that cover most of
         every view, the scene rather than an object in it."""
@@ -78,7 +82,7 @@ class RegionWeights:
         counts = np.bincount(wide, minlength=256)
         return {int(k) for k in np.flatnonzero(counts >= views * max(len(seen), 1))}
 
-    def covers(self, selected: np.ndarray, share: float = 0.5, views: float = 0.75) -> bool:
+    def covers(self, selected: np.ndarray, share: float = SCENE_SHARE, views: float = SCENE_VIEWS) -> bool:
         """Whether the ``selected`` (N,) bool Gaussians hold at least ``share`` of the blended
         weight of at least ``views`` of the first layer's views, as :meth:`covering`'s labels
         do: a selection of the scene rather than of an object in it."""
