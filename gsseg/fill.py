@@ -66,7 +66,7 @@ class FillOptions:
         views: at most this many of the views with unseen pixels seed new Gaussians.
         fit_views: the unseen pixels are found, inpainted and fitted to in at most this many
             of the views the object shows in, spread over them (each is tested against every
-            training view; a capture of a hundred views costs no more than one of this many).
+            training view, each of which is still rendered once).
         stride: pixels between the new Gaussians seeded in each fitted view.
         rim: pixels the object's silhouettes are widened by (its blurred edge).
         margin: pixels of the removal's render kept as they are around each hole in the fit.
