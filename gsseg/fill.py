@@ -189,15 +189,15 @@ def unseen_pixels(
     R, t = cam_from_world[:3, :3], cam_from_world[:3, 3]
     points = (rays * np.where(far, 1.0, z)[:, None] - t) @ R  # world points; directions where far
     directions = rays @ R
-    seen = np.zeros(len(xs), bool)
+    unseen = np.arange(len(xs))  # the pixels no view has seen yet; each view tests only those
     for cam, pose, other_depth in others:
         Ro, to = pose[:3, :3], pose[:3, 3]
-        pc = np.where(far[:, None], directions @ Ro.T, points @ Ro.T + to)
+        pc = np.where(far[unseen, None], directions[unseen] @ Ro.T, points[unseen] @ Ro.T + to)
         rows, shown = _shown_depth(pc, cam, other_depth, 1e-9)
-        agree = np.where(far[rows], shown <= 0, np.abs(shown - pc[rows, 2]) <= tolerance * pc[rows, 2])
-        seen[rows[agree]] = True
+        agree = np.where(far[unseen[rows]], shown <= 0, np.abs(shown - pc[rows, 2]) <= tolerance * pc[rows, 2])
+        unseen = np.delete(unseen, rows[agree])
     out = np.zeros_like(hole)
-    out[ys[~seen], xs[~seen]] = True
+    out[ys[unseen], xs[unseen]] = True
     return out
 
 
