@@ -15,8 +15,8 @@
    --fill-interiors``): the rims and interiors that the masks leave to the background go
    with their object, so that a removal leaves no outline of it;
 6. the object under a 3D point (the first object's centre) in the synthetic scene, or in
-   the user's what a click at the centre of the first test view selects, removed (what no
-   photo saw behind it filled), extracted and recoloured (``gsseg edit``);
+   the user's the object the photos frame, removed (what no photo saw behind it filled),
+   extracted and recoloured (``gsseg edit``);
 7. the report (``gseval report``) against the exact masks where the scene has them.
 """
 
@@ -49,8 +49,9 @@ from gsseg.render.views import render_run
 from gsseg.run.loaded import Run, load_run
 from gsseg.segment.clicks import Click
 from gsseg.segment.label_options import LabelOptions
+from gsseg.segment.prompts import framed_object
 from gsseg.segment.reassign import Segmentation
-from gsseg.segment.segment_run import run_regions, segment_run
+from gsseg.segment.segment_run import masked_views, run_regions, segment_run
 from gsseg.train.config import TrainConfig
 from gsseg.train.trainer import train
 from hqmask.build import BuildConfig, build_masks
@@ -106,32 +107,31 @@ def _demo_selection(
     scene_dir: Path, run: Run, segmentation: Segmentation, synth_point: np.ndarray | None, backend: Backend
 ) -> tuple[Selection, dict]:
     """What the demo edits, and the prompt that selects it (``edit_run``'s keywords): the
-    synthetic scene's first object, by a 3D point at its centre; in a user's scene what a click
-    at the centre of the first test view selects (the rule of ``gsseg edit --click``), or,
-    where nothing is seen there or the click selects most of every view (the scene, not an
-    object in it), the largest object that does not cover most of every view."""
+    synthetic scene's first object, by a 3D point at its centre; in a user's scene the object
+    the photos frame (:func:`gsseg.segment.prompts.framed_object`) of those that do not cover
+    most of every view (the scene, not an object in it); in a close-up, where every object
+    the photos show covers most of every view, of all; where the model shows no object
+    (trained too briefly), of all that hold a Gaussian; where no label holds one, what a click
+    at the centre of the first test view selects."""
     scene = run.scene(scene_dir)
     if synth_point is not None:
         prompt = {"point": np.asarray(synth_point, np.float64)}
         return select(run, segmentation, scene, backend=backend, **prompt), prompt
-    view = scene.split("test")[0]
-    prompt = {"clicks": [Click(view.name, view.camera.width / 2, view.camera.height / 2)]}
     regions = run_regions(run, scene_dir, backend=backend)
-    try:
-        clicked = select(run, segmentation, scene, backend=backend, **prompt)
-        if not regions.covers(clicked.mask):
-            return clicked, prompt
-    except InputError:
-        pass
     scene_wide = regions.covering()
-    objects = [o for o in segmentation.objects if int(o) not in scene_wide and segmentation.selection(o).any()]
+    objects = {int(o): segmentation.selection(o) for o in segmentation.objects if segmentation.selection(o).any()}
     if not objects:
-        raise OptionError(
-            f"{run.folder.labels}: no object label holds less than most of every view; train longer "
-            f"({{iters}}) or check the masks in the scene's {MASKS}/."
-        )
-    largest = int(max(objects, key=lambda o: segmentation.selection(o).sum()))
-    return select(run, segmentation, scene, object_id=largest, backend=backend), {"object_id": largest}
+        view = scene.split("test")[0]
+        prompt = {"clicks": [Click(view.name, view.camera.width / 2, view.camera.height / 2)]}
+        return select(run, segmentation, scene, backend=backend, **prompt), prompt
+    views = masked_views(run, scene_dir, masks=regions.layers[0])
+    means = run.gaussians.means.numpy().astype(np.float64)
+    framed = framed_object(means, {k: s for k, s in objects.items() if k not in scene_wide}, regions, views)
+    if framed is None:
+        framed = framed_object(means, objects, regions, views)
+    if framed is None:
+        framed = framed_object(means, objects, regions, views, least_shown=0.0)
+    return select(run, segmentation, scene, object_id=framed, backend=backend), {"object_id": framed}
 
 
 def demo_images(scene: Path, max_side: int = DemoOptions.max_side) -> str:

@@ -16,7 +16,7 @@ import torch
 from helpers import script
 from scipy import ndimage
 
-from dataset_tools.cameras import PinholeCamera
+from dataset_tools.cameras import CameraPose, PinholeCamera
 from dataset_tools.image_files import encode_png
 from dataset_tools.infra.atomic import write_bytes_atomic
 from dataset_tools.infra.errors import InputError
@@ -27,7 +27,7 @@ from gsseg.render.contributions import RegionWeights
 from gsseg.render.pixel_labels import segment_pixels
 from gsseg.run.loaded import load_run
 from gsseg.segment.clicks import ClickEvidence, ClickOptions, ClickSelector, ColourModel, RegionVote
-from gsseg.segment.prompts import click_evidence
+from gsseg.segment.prompts import click_evidence, framed_object
 from gsseg.segment.segment_run import segment_run
 from gsseg.segment.served import complete_selection
 
@@ -270,6 +270,29 @@ def test_a_label_or_selection_over_most_of_every_view_is_the_scene():
     assert regions.covers(np.isin(np.arange(n), wide))
     assert not regions.covers(np.isin(np.arange(n), small))
     assert not regions.covers(np.isin(np.arange(n), wide[:150]))
+
+
+def test_the_framed_object_is_the_one_the_views_centre_on_not_the_largest():
+    """Six views of 400 Gaussians of weight 1 from a camera at the origin looking along +z:
+    object 1 (100 Gaussians) at the view's centre, object 2 (300) at its edge. The photos
+    frame object 1 although object 2 holds three times its weight; moved to the centre
+    and object 1 to the edge, object 2 is framed."""
+    n = 400
+    one, two = np.arange(100), np.arange(100, 400)
+    regions = _regions(n, [one, two])
+    camera = PinholeCamera(100, 100, 50.0, 50.0, 50.0, 50.0)
+    views = [CameraPose(camera, np.hstack([np.eye(3), np.zeros((3, 1))]))] * 6
+    means = np.zeros((n, 3))
+    means[:, 2] = 5.0
+    means[two, 0] = 4.5  # projects 45 px right of the centre, at the view's edge
+    selections = {1: np.isin(np.arange(n), one), 2: np.isin(np.arange(n), two)}
+    assert framed_object(means, selections, regions, views) == 1
+    means[:, 0] = 4.5 - means[:, 0]
+    assert framed_object(means, selections, regions, views) == 2
+    assert framed_object(means, selections, regions, views, least_shown=0.5) == 2  # 1 holds a quarter
+    assert framed_object(means, selections, regions, views, least_shown=0.8) is None
+    assert framed_object(means, {}, regions, views) is None
+    assert np.allclose(regions.view_weights().toarray(), 1.0)
 
 
 def test_a_mask_pass_that_lost_the_object_does_not_vote_against_it():

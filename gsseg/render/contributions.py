@@ -90,6 +90,16 @@ class RegionWeights:
         held = np.bincount(self.view[first], self.matrix[first] @ selected.astype(np.float64), len(totals))
         return int((held[seen] >= share * totals[seen]).sum()) >= views * max(len(seen), 1)
 
+    def view_weights(self) -> sp.csr_matrix:
+        """(V, N) each Gaussian's blended weight in each view of the first layer, over all the
+        view's regions (V: one more than the highest view index)."""
+        first = np.flatnonzero(self.layer == 0)
+        n_views = int(self.view.max()) + 1 if len(self.view) else 0
+        gather = sp.csr_matrix(
+            (np.ones(len(first), np.float32), (self.view[first], np.arange(len(first)))), shape=(n_views, len(first))
+        )
+        return (gather @ self.matrix[first]).tocsr()
+
     def _first_layer(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """The first layer's rows (R1,), each one's blended weight (R1,), each view's total
         weight over them (V,), and the views that hold one (S,)."""

@@ -3,15 +3,17 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 import torch
 from scipy.spatial import cKDTree
 
-from dataset_tools.cameras import PinholeCamera
+from dataset_tools.cameras import CameraPose, PinholeCamera
 from dataset_tools.infra.errors import InputError
 from gsseg.model.gaussians import Gaussians
 from gsseg.render import Backend, get_backend, render
+from gsseg.render.contributions import RegionWeights
 from gsseg.render.projection import project_gaussians
 from gsseg.segment.clicks import ClickEvidence
 
@@ -46,6 +48,54 @@ def pick_object(means: np.ndarray, labels: np.ndarray, point: np.ndarray, k: int
             f"the point {np.round(point, 3).tolist()} lies on the background (label 0); pick a point on an object."
         )
     return object_id
+
+
+# The spread of the centre weighting of framed_object, in half the view's width and height.
+FRAME_SPREAD = 0.5
+# framed_object passes over an object holding less than this share of the views' blended
+# weight (their mean): a speck no photo shows.
+LEAST_SHOWN = 0.01
+
+
+def framed_object(
+    means: np.ndarray,
+    selections: Mapping[int, np.ndarray],
+    regions: RegionWeights,
+    views: Sequence[CameraPose],
+    spread: float = FRAME_SPREAD,
+    least_shown: float = LEAST_SHOWN,
+) -> int | None:
+    """The object the photos frame: of ``selections`` (object ID -> (N,) bool Gaussians) that
+    hold at least ``least_shown`` of the views' blended weight, the one that holds the most of
+    it near the views' centres; None where none is shown so much. Each Gaussian's weight in a
+    view (:meth:`RegionWeights.view_weights`) counts exp(-r^2 / (2 spread^2)) times, r the
+    distance of its projected centre from the view's centre in half the view's width and
+    height; each view gives its weight as a share of all it shows, so every view counts alike.
+
+    Args:
+        means: (N, 3) Gaussian centres. regions: their weights in ``views`` (V), in that order.
+    """
+    ids = list(selections)
+    if not ids:
+        return None
+    members = np.stack([selections[k] for k in ids], 1).astype(np.float64)  # (N, M)
+    weights = regions.view_weights()
+    centred, shown, counted = np.zeros(len(ids)), np.zeros(len(ids)), 0
+    for v in range(min(weights.shape[0], len(views))):
+        row = weights.getrow(v)
+        if not row.nnz:
+            continue
+        seen, total = row.indices, row.data.sum()
+        cam, pose = views[v].camera, views[v].cam_from_world
+        x = means[seen] @ pose[:3, :3].T + pose[:3, 3]
+        z = np.maximum(x[:, 2], 1e-9)
+        du = (cam.fx * x[:, 0] / z + cam.cx) / (cam.width / 2) - 1
+        dv = (cam.fy * x[:, 1] / z + cam.cy) / (cam.height / 2) - 1
+        centred += row.data * np.exp(-(du**2 + dv**2) / (2 * spread**2)) * (x[:, 2] > 0) @ members[seen] / total
+        shown += row.data @ members[seen] / total
+        counted += 1
+    centred[shown < least_shown * max(counted, 1)] = -np.inf
+    return ids[int(centred.argmax())] if np.isfinite(centred.max()) else None
 
 
 @torch.no_grad()

@@ -6,12 +6,22 @@ from dataclasses import replace
 from pathlib import Path
 
 from dataset_tools.infra.errors import OptionError
+from dataset_tools.scene import View
 from gsseg.render import Backend
 from gsseg.render.contributions import Contributions, RegionWeights, contribution_matrix
 from gsseg.run.loaded import Run, load_run
 from gsseg.segment.label_options import LabelOptions
 from gsseg.segment.reassign import Segmentation, classifier_prior, reassign
 from gsseg.segment.regularize import fill_interiors, smooth_weak_labels, weak_evidence
+
+
+def masked_views(
+    run: Run, scene_dir: Path | str | None = None, *, masks: str | None = None, split: str = "train"
+) -> list[View]:
+    """The views of ``split`` that have a mask in ``masks`` (the folder, by default the one the
+    run was trained on): the views a run's contributions and region weights are computed on,
+    in their order."""
+    return [v for v in run.scene(scene_dir, masks=run.voting_masks(masks)).split(split) if v.mask_path is not None]
 
 
 def mask_contributions(
@@ -28,7 +38,7 @@ def mask_contributions(
     folder, by default the one the run was trained on; no labels where no view of ``split`` has
     a mask), with each view's weights kept apart as well when ``regions`` is asked for."""
     masks = run.voting_masks(masks)
-    views = [v for v in run.scene(scene_dir, masks=masks).split(split) if v.mask_path is not None]
+    views = masked_views(run, scene_dir, masks=masks, split=split)
     contributions = contribution_matrix(run.gaussians, views, backend=backend, regions=regions, progress=progress)
     contributions.model, contributions.masks = run.fingerprint, masks
     if contributions.regions is not None:
