@@ -119,7 +119,7 @@ def _demo_selection(
         return select(run, segmentation, scene, backend=backend, **prompt), prompt
     regions = run_regions(run, scene_dir, backend=backend)
     scene_wide = regions.covering()
-    objects = {int(o): segmentation.selection(o) for o in segmentation.objects if segmentation.selection(o).any()}
+    objects = {int(o): s for o, s in zip(segmentation.objects, segmentation.selections) if s.any()}
     if not objects:
         view = scene.split("test")[0]
         prompt = {"clicks": [Click(view.name, view.camera.width / 2, view.camera.height / 2)]}

@@ -47,8 +47,8 @@ class MaskedView:
 
 # A Gaussian's weight in a region under this (a thousandth of a pixel) is left out of RegionWeights.
 REGION_WEIGHT_FLOOR = 1e-3
-# A label or selection holding SCENE_SHARE of the blended weight of SCENE_VIEWS of the views
-# covers most of every view: it is the scene, not an object in it.
+# A label holding SCENE_SHARE of the blended weight of SCENE_VIEWS of the views covers most
+# of every view: it is the scene, not an object in it.
 SCENE_SHARE = 0.5
 SCENE_VIEWS = 0.75
 
@@ -81,14 +81,6 @@ class RegionWeights:
         wide = self.label[first][weight >= share * totals[self.view[first]]]
         counts = np.bincount(wide, minlength=256)
         return {int(k) for k in np.flatnonzero(counts >= views * max(len(seen), 1))}
-
-    def covers(self, selected: np.ndarray, share: float = SCENE_SHARE, views: float = SCENE_VIEWS) -> bool:
-        """Whether the ``selected`` (N,) bool Gaussians hold at least ``share`` of the blended
-        weight of at least ``views`` of the first layer's views, as :meth:`covering`'s labels
-        do: a selection of the scene rather than of an object in it."""
-        first, _, totals, seen = self._first_layer()
-        held = np.bincount(self.view[first], self.matrix[first] @ selected.astype(np.float64), len(totals))
-        return int((held[seen] >= share * totals[seen]).sum()) >= views * max(len(seen), 1)
 
     def view_weights(self) -> sp.csr_matrix:
         """(V, N) each Gaussian's blended weight in each view of the first layer, over all the
