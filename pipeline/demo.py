@@ -86,7 +86,7 @@ class DemoResult:
     gaussians: int  # how many Gaussians that is
     miou: float | None
     seconds: float
-    warning: str | None = None  # structure from motion's, on cameras posed on the far side
+    warning: str | None = None  # structure from motion's, on cameras posed on the far side or left out
     match: int | None = None  # the ground-truth object the edited one was matched to, where there is truth
     stages: dict[str, float] = field(default_factory=dict)  # seconds of each stage, in the order run
 

@@ -17,7 +17,13 @@ from dataset_tools.cameras import turned_frames
 from dataset_tools.image_files import read_image
 from dataset_tools.infra.locks import exclusive
 from dataset_tools.sfm import SfmConfig, run_sfm
-from dataset_tools.sfm.pipeline import _input_images, incremental_options, pixel_scale, sift_peak_threshold
+from dataset_tools.sfm.pipeline import (
+    _input_images,
+    incremental_options,
+    pixel_scale,
+    sift_peak_threshold,
+    weakly_posed,
+)
 from dataset_tools.synth import SynthConfig, generate_scene
 from eval.metrics import camera_errors, similarity_alignment
 from pipeline.demo import run_demo
@@ -83,6 +89,17 @@ def test_sift_threshold_is_colmaps_for_large_images_and_lower_for_small_ones():
     assert sift_peak_threshold(64) == pytest.approx(0.25 * 0.02 / 3)  # a quarter at most
 
 
+def test_weakly_posed_images_hold_under_a_fifth_of_the_median_share_of_3d_points():
+    """Shares of keypoints with a 3D point 0.30, 0.25, 0.35, 0.05 and 0.049: the median is 0.25
+    and a fifth of it 0.05; 0.049 is under it, 0.05 is not."""
+    names = ["a", "b", "c", "d", "e"]
+    keypoints = np.array([1000, 2000, 400, 1000, 1000])
+    triangulated = np.array([300, 500, 140, 50, 49])
+    assert weakly_posed(names, keypoints, triangulated) == ["e"]
+    assert weakly_posed(names, keypoints, keypoints) == []  # all alike: none
+    assert weakly_posed(["x"], np.array([0]), np.array([0])) == []  # no keypoints: share 0, as the median's
+
+
 def test_mapper_thresholds_are_colmaps_for_large_images_and_scaled_for_small_ones():
     def thresholds(side: int) -> list[float]:
         o = incremental_options(pixel_scale(side), seed=0, threads=1)
@@ -115,7 +132,7 @@ def test_sfm_recovers_the_cameras_of_a_real_capture_and_resumes(beer, tmp_path):
     maps 0014.jpg to the far side of the can; the first 14 photos are before it.)"""
     photos = photos_of(beer, tmp_path / "photos", 14)
     result = run_sfm(photos, tmp_path / "scene", SfmConfig(), progress=False)
-    assert result.registered == result.images == 14
+    assert result.registered == result.images == 14 and result.left_out == []
     made, truth = load_scene(result.scene), {v.name: v for v in load_scene(beer, images="images_2").views}
     assert made.views[0].camera.width > 0 and (result.scene / "images_2").is_dir()
     rot, ctr = camera_errors([v.cam_from_world for v in made.views], [truth[v.name].cam_from_world for v in made.views])

@@ -54,6 +54,9 @@ if TYPE_CHECKING:
 STEPS = ("images", "features", "matches", "mapping", "undistort")
 EXHAUSTIVE_UP_TO = 80
 MIN_REGISTERED_SHARE = 0.5
+# An image whose share of keypoints with a 3D point is under this share of the median image's
+# is posed on too little to trust (weakly_posed).
+WEAK_POSE_SHARE = 0.2
 SIFT_PEAK_THRESHOLD = 0.02 / 3  # COLMAP's default, for photos of about REFERENCE_SIDE pixels
 REFERENCE_SIDE = 1000
 MATCHERS = ("auto", "exhaustive", "sequential", "retrieval")
@@ -109,16 +112,23 @@ class SfmResult:
     seconds: float
     other_models: list[int]
     flips: list[str]  # a video's frames turned > 45 degrees from the frame before (see turned_frames)
+    left_out: list[str]  # images posed on too few points, left out of the model (see weakly_posed)
 
     def warning(self) -> str | None:
-        """One sentence on the frames posed on the far side, or None."""
-        if not self.flips:
-            return None
-        return (
-            f"{', '.join(self.flips)}: turned more than 45 degrees from the frame before, so probably posed on the "
-            "far side of the object (the scene looks alike from two sides); check these cameras, or film with "
-            "texture off the repeated surface in view (docs/sfm.md)."
-        )
+        """One sentence on the frames posed on the far side and the images left out, or None."""
+        said = []
+        if self.flips:
+            said.append(
+                f"{', '.join(self.flips)}: turned more than 45 degrees from the frame before, so probably posed on "
+                "the far side of the object (the scene looks alike from two sides); check these cameras, or film "
+                "with texture off the repeated surface in view (docs/sfm.md)."
+            )
+        if self.left_out:
+            said.append(
+                f"{', '.join(self.left_out)}: posed on too few points and left out (an object turned on a turntable "
+                "in front of a still background gives such photos; docs/sfm.md)."
+            )
+        return " ".join(said) or None
 
 
 def _scene_folders(photos: Path) -> set[Path]:
@@ -222,6 +232,19 @@ def incremental_options(scale: float, seed: int, threads: int) -> pycolmap.Incre
     ):
         setattr(owner, name, getattr(owner, name) * scale)
     return options
+
+
+def weakly_posed(names: list[str], keypoints: np.ndarray, triangulated: np.ndarray) -> list[str]:
+    """Those of the registered images ``names`` whose share of ``keypoints`` (N,) that hold a
+    3D point (``triangulated`` (N,)) is under :data:`WEAK_POSE_SHARE` of the median image's.
+    Such a pose rests on a few matches that may belong to something else: an object turned on
+    a turntable in front of a still background gives photos the mapper poses from the
+    background, on top of other photos' places (nerd_ethiopian_head: 7 of 66 photos, each at
+    10-17% of the median share, render the back of the head where the photo shows its face);
+    the photos posed right on four other captures hold at least 26% of it (docs/sfm.md)."""
+    shares = np.asarray(triangulated, float) / np.maximum(np.asarray(keypoints, float), 1)
+    floor = WEAK_POSE_SHARE * float(np.median(shares)) if len(shares) else 0.0
+    return sorted(name for name, share in zip(names, shares) if share < floor)
 
 
 def sequential_pairs(n: int, cfg: SfmConfig) -> list[tuple[int, int]]:
@@ -469,13 +492,21 @@ class _SfmJob:
                     "overlap (take them 10-20 degrees apart around the object, with texture in view)."
                 )
             best = max(sizes, key=lambda k: (sizes[k], -k))
-            registered = sizes[best]
+            model = models[best]
+            images = list(model.images.values())
+            left_out = weakly_posed(
+                [im.name for im in images], [len(im.points2D) for im in images], [im.num_points3D for im in images]
+            )
+            for image in images:
+                if image.name in left_out:
+                    model.deregister_frame(image.frame_id)
+            model.write(sparse / str(best))
+            registered = sizes[best] - len(left_out)
             if registered < max(3, MIN_REGISTERED_SHARE * len(names)):
                 raise InputError(
                     f"{self.photos}: {registered} of {len(names)} images registered; the photos need more "
                     "overlap (take them 10-20 degrees apart around the object, with texture in view)."
                 )
-            model = models[best]
             poses = {im.name: im.cam_from_world().matrix() for im in model.images.values() if im.has_pose}
             self.steps.record(
                 "mapping",
@@ -486,6 +517,7 @@ class _SfmJob:
                 points=model.num_points3D(),
                 mean_reprojection_error=model.compute_mean_reprojection_error(),
                 flips=turned_frames(poses, names) if self.video else [],
+                left_out=left_out,
             )
         return self.steps.done["mapping"]
 
@@ -531,6 +563,7 @@ class _SfmJob:
             time.perf_counter() - start,
             mapped["other_models"],
             mapped.get("flips", []),
+            mapped.get("left_out", []),
         )
 
 

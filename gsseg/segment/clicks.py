@@ -95,7 +95,8 @@ class ClickOptions:
             beside one that holds it); a round of the vote adds regions in the views where
             they hold at least this share of the selection's weight.
         evidence: weight of the views' vote (times its log-odds).
-        label_weight: weight of the label under the first click where it agrees with the vote.
+        label_weight: weight of the label under the first click where it agrees with the vote
+            (a quarter of ``evidence``: it tips only what the views leave nearly undecided).
         overlap: a later positive click's region joins the vote where it holds under this share
             of the selection's weight in its view (a part beside the object; a region the
             masks joined to the object would bring what they joined).
@@ -130,7 +131,7 @@ class ClickOptions:
     seed_share: float = 0.8
     hold_share: float = 0.1
     evidence: float = 2.0
-    label_weight: float = 2.0
+    label_weight: float = 0.5
     overlap: float = 0.05
     part_share: float = 0.5
     split_weight: float = 4.0
