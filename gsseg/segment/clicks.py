@@ -16,8 +16,10 @@ max-flow solver (PyMaxflow), with a cost per Gaussian from five kinds of evidenc
   SAM's: each view errs on its own, and the vote follows the views that agree. An object the
   3D labels joined to its support, or that no label holds, is found as long as the views hold
   it apart;
-- **the labels**: the label under the first click's seeds, in proportion to how far it agrees
-  with the views' vote (a label that swallowed the table under the object disagrees with it);
+- **the labels**: the label under the first click's seeds, a prior of the views' vote, in
+  proportion to how far it agrees with the vote (a label that swallowed the table under the
+  object disagrees with it) and worth the weight of a typical Gaussian in the views: it
+  decides for the Gaussians the views see little of, and the views for those they see much of;
 - **the colours** (:class:`ColourModel`): as GrabCut learns the colours of the object and of the
   rest from its last cut and cuts again, colour histograms of the selected Gaussians the views
   vote in firmly and of the unselected ones (:attr:`ClickOptions.appearance_rounds`); where the
@@ -95,8 +97,10 @@ class ClickOptions:
             beside one that holds it); a round of the vote adds regions in the views where
             they hold at least this share of the selection's weight.
         evidence: weight of the views' vote (times its log-odds).
-        label_weight: weight of the label under the first click where it agrees with the vote
-            (a quarter of ``evidence``: it tips only what the views leave nearly undecided).
+        label_prior: the label under the first click is a prior share of one half plus (on the
+            label) or minus (off it) this ...
+        label_strength: ... worth this many times the median Gaussian's weight in the views,
+            where the label agrees with the vote.
         overlap: a later positive click's region joins the vote where it holds under this share
             of the selection's weight in its view (a part beside the object; a region the
             masks joined to the object would bring what they joined).
@@ -131,7 +135,8 @@ class ClickOptions:
     seed_share: float = 0.8
     hold_share: float = 0.1
     evidence: float = 2.0
-    label_weight: float = 0.5
+    label_prior: float = 0.4
+    label_strength: float = 1.0
     overlap: float = 0.05
     part_share: float = 0.5
     split_weight: float = 4.0
@@ -147,6 +152,12 @@ class ClickOptions:
     appearance_firm: float = 0.6
 
     def __post_init__(self) -> None:
+        if not 0 <= self.label_prior < 0.5 or self.label_strength < 0:
+            raise OptionError(
+                "{label_prior}: give a share in [0, 0.5); {label_strength}: 0 or more.",
+                label_prior=self.label_prior,
+                label_strength=self.label_strength,
+            )
         if self.neighbours < 1 or self.iterations < 1:
             raise OptionError("{neighbours} and {iterations}: give 1 or more.", neighbours=self.neighbours)
         if self.against_colour <= 0:
@@ -300,12 +311,12 @@ class RegionVote:
 
     def shares(self, inside: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Each Gaussian's share of its weight that falls in the ``inside`` (R,) regions, over
-        the vote units holding one (N,), and whether any such unit sees it (N,)."""
+        the vote units holding one (N,), and that weight (N,) (0: no such unit sees it)."""
         units_on = (self.units.T @ inside.astype(np.float64)) > 0
         held = self.by_gaussian @ inside.astype(np.float64)
         total = self.by_gaussian @ units_on[self.unit].astype(np.float64)
         seen = total > 0
-        return np.where(seen, held / np.where(seen, total, 1.0), 0.0), seen
+        return np.where(seen, held / np.where(seen, total, 1.0), 0.0), total
 
     def apart_from(self, regions: np.ndarray, selected: np.ndarray, overlap: float) -> np.ndarray:
         """(R,) bool: those of ``regions`` that hold under ``overlap`` of the ``selected`` (N,)
@@ -317,7 +328,8 @@ class RegionVote:
 
     def vote(self, clicked: np.ndarray, options: ClickOptions) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(N,) each Gaussian's share of weight in the object's regions, starting from the
-        ``clicked`` (R,) ones, and (N,) whether it is seen where the object is, after
+        ``clicked`` (R,) ones, and (N,) the weight the share is of (0: not seen where the
+        object is), after
         :attr:`ClickOptions.iterations` rounds; and (R,) the object's regions the last round
         counted. A round adds the regions the selection (share above one half) covers for
         more than :attr:`ClickOptions.region_share`, in the vote units where they hold at
@@ -325,13 +337,13 @@ class RegionVote:
         leave the object in the background does not count it against the object."""
         inside = clicked
         for _ in range(options.iterations):
-            share, seen = self.shares(inside)
+            share, weight = self.shares(inside)
             held = self.matrix @ (share > 0.5)
             covered = (held / np.maximum(self.row_sums, 1e-12) > options.region_share) & (self.label != 0)
             holding = (self.units.T @ (held * covered)) >= options.hold_share * (self.units.T @ held)
             counted = inside
             inside = clicked | (covered & holding[self.unit])
-        return share, seen, counted
+        return share, weight, counted
 
 
 class ColourModel:
@@ -423,13 +435,9 @@ class ClickSelector:
         if not clicks or not clicks[0].positive:
             raise InputError("a selection starts with a click on the object; click on it first.")
         o = self.options
-        share, seen, voted_regions = self.views_vote(clicks, before)
-        cost = o.evidence * np.where(seen, log_odds(share), -1.0)  # > 0: the object's
-        picked = np.setdiff1d(np.unique(self.labels[clicks[0].seeds(o.seed_share)]), [0])
-        labelled = np.isin(self.labels, picked)
-        voted = share > 0.5
-        agree = (labelled & voted).sum() / max(int((labelled | voted).sum()), 1)
-        cost += o.label_weight * float(np.clip((agree - 0.5) / 0.4, 0, 1)) * np.where(labelled, 1.0, -1.0)
+        share, weight, voted_regions = self.views_vote(clicks, before)
+        labelled = self._labelled(share, weight, clicks[0])
+        cost = o.evidence * np.where(weight > 0, log_odds(labelled), -1.0)  # > 0: the object's
         positive = np.unique(np.concatenate([c.seeds(o.seed_share) for c in clicks if c.positive]))
         negative = np.unique(np.concatenate([c.seeds(o.seed_share) for c in clicks if not c.positive] or [[]]))
         negative = negative.astype(np.int64)
@@ -441,7 +449,7 @@ class ClickSelector:
             cost += o.stickiness * np.where(before, 1.0, -1.0)
         if len(negative):  # deep on a negative click's side its word outweighs all else
             side = np.clip(self.graph.split(negative, positive) / o.split_full, 0, 1)
-            side *= self._yielding(clicks, negative, voted_regions, share, seen)
+            side *= self._yielding(clicks, negative, voted_regions, share, weight > 0)
             side *= self._in_sight(clicks)
             side *= self._alike(negative, before)
             cost = (1 - side) * cost - o.split_weight * side
@@ -450,28 +458,49 @@ class ClickSelector:
             return cut
         return before | cut if clicks[-1].positive else before & cut
 
+    def _labelled(self, share: np.ndarray, weight: np.ndarray, first: ClickEvidence) -> np.ndarray:
+        """(N,) the views' ``share`` (N,) with the label under the ``first`` click's seeds as
+        its prior: a share of one half +- :attr:`ClickOptions.label_prior` (+ on the label, -
+        off it) worth :attr:`ClickOptions.label_strength` times the median Gaussian's
+        ``weight`` (N,) in the views, times how far the label agrees with the views' vote (a
+        label that swallowed the table under the object disagrees with it and says nothing).
+        A Gaussian the views see little of follows the label; one they
+        see much of, as a large hazy Gaussian around the object drawing what lies behind it,
+        follows the views."""
+        o = self.options
+        picked = np.setdiff1d(np.unique(self.labels[first.seeds(o.seed_share)]), [0])
+        labelled = np.isin(self.labels, picked)
+        voted = share > 0.5
+        agree = (labelled & voted).sum() / max(int((labelled | voted).sum()), 1)
+        trust = float(np.clip((agree - 0.5) / 0.4, 0, 1))
+        prior = 0.5 + o.label_prior * np.where(labelled, 1.0, -1.0)
+        seen = weight > 0
+        strength = trust * o.label_strength * float(np.median(weight[seen])) if seen.any() else 0.0
+        return (share * weight + strength * prior) / np.maximum(weight + strength, 1e-12)
+
     def views_vote(
         self, clicks: Sequence[ClickEvidence], before: np.ndarray | None
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The views' vote of ``clicks`` (:meth:`RegionVote.vote`): (N,) each Gaussian's share of
-        weight in the object's regions, (N,) whether a view of the object sees it, (R,) the
-        object's regions. The first click's regions start it; the regions under a later
+        weight in the object's regions, (N,) the weight it is of (0: no view of the object
+        sees it), (R,) the object's regions. The first click's regions start it; the regions under a later
         positive click that lie beside the selection ``before`` (N,) (a part the first vote
         missed) raise it where they speak and lower it nowhere: a part seen in views where the
         first click is not counts those views against the rest of the object, which the
         selection holds all the same."""
         o = self.options
         clicked = self.vote.clicked_regions(clicks[0], o.seen_share, layer_hold=o.hold_share)
-        share, seen, regions = self.vote.vote(clicked, o)
+        share, weight, regions = self.vote.vote(clicked, o)
         parts = np.zeros_like(clicked)
         for later in clicks[1:]:
             if later.positive and before is not None:
                 under = self.vote.clicked_regions(later, o.seen_share, o.part_share)
                 parts |= self.vote.apart_from(under, before, o.overlap)
         if (parts & ~clicked).any():
-            more, more_seen, more_regions = self.vote.vote(clicked | parts, o)
-            share, seen, regions = np.maximum(share, more), seen | more_seen, regions | more_regions
-        return share, seen, regions
+            more, more_weight, more_regions = self.vote.vote(clicked | parts, o)
+            weight = np.where(more > share, more_weight, weight)
+            share, regions = np.maximum(share, more), regions | more_regions
+        return share, weight, regions
 
     def _min_cut(self, cost: np.ndarray, positive: np.ndarray, negative: np.ndarray) -> np.ndarray:
         """(N,) bool: the source's side of the minimum cut of the graph's edges (times
@@ -556,5 +585,5 @@ class ClickSelector:
             if not click.positive:
                 under |= self.vote.clicked_regions(click, o.seen_share, any_label=True)
         against, told = self.vote.shares(under & ~objects)
-        hold = share - np.where(told, against, 0.0)
+        hold = share - np.where(told > 0, against, 0.0)
         return np.where(seen, np.clip(2 - (hold - hold[negative].mean()) / o.against_margin, 0, 1), 1.0)
