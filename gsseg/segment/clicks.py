@@ -436,8 +436,8 @@ class ClickSelector:
             raise InputError("a selection starts with a click on the object; click on it first.")
         o = self.options
         share, weight, voted_regions = self.views_vote(clicks, before)
-        labelled = self._labelled(share, weight, clicks[0])
-        cost = o.evidence * np.where(weight > 0, log_odds(labelled), -1.0)  # > 0: the object's
+        posterior = self._labelled(share, weight, clicks[0])
+        cost = o.evidence * np.where(weight > 0, log_odds(posterior), -1.0)  # > 0: the object's
         positive = np.unique(np.concatenate([c.seeds(o.seed_share) for c in clicks if c.positive]))
         negative = np.unique(np.concatenate([c.seeds(o.seed_share) for c in clicks if not c.positive] or [[]]))
         negative = negative.astype(np.int64)
