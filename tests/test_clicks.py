@@ -207,6 +207,18 @@ def test_the_objects_colour_carries_the_cut_over_a_split_the_views_half_make():
     )
 
 
+def test_a_clicks_seeds_pass_over_a_backdrop_gaussian_drawn_mostly_elsewhere():
+    """Weights 5, 3, 1, 1 at the click: the seeds carrying 80% are the first two; when the
+    second draws a ten-thousandth of its weight in the view at the click (a large Gaussian of
+    the backdrop), 80% of the rest's 7 is carried by the first and the third; when all draw so
+    little there, all count."""
+    weights = np.array([5.0, 3.0, 1.0, 1.0])
+    assert sorted(ClickEvidence(weights, True).seeds(0.8)) == [0, 1]
+    local = np.array([0.2, 1e-4, 0.05, 0.3])
+    assert sorted(ClickEvidence(weights, True, local=local).seeds(0.8, 0.001)) == [0, 2]
+    assert sorted(ClickEvidence(weights, True, local=np.full(4, 1e-4)).seeds(0.8, 0.001)) == [0, 1]
+
+
 def test_a_positive_click_never_takes_out_and_a_negative_click_never_adds():
     """Ten clicks at random Gaussians of the spill's scene, each for or against at random:
     every selection holds the one before it after a positive click and lies inside it after a

@@ -90,7 +90,9 @@ class ClickOptions:
         iterations: rounds of the views' vote.
         seen_share: a click is seen in a view where its Gaussians show at least this share of
             the weight they show in the view that shows them most.
-        seed_share: the seeds are the Gaussians carrying this share of the click's weight.
+        seed_share: the seeds are the Gaussians carrying this share of the click's weight ...
+        seed_local: ... of those with at least this share of their weight in the clicked view
+            at the click (:meth:`ClickEvidence.seeds`).
         hold_share: where a mask layer's regions under the first click hold, in the median
             over its views, at least this share of the click's weight, the layers that hold
             less do not vote (a pass that left the object in the background, or in slivers,
@@ -133,6 +135,7 @@ class ClickOptions:
     iterations: int = 3
     seen_share: float = 0.2
     seed_share: float = 0.8
+    seed_local: float = 0.001
     hold_share: float = 0.1
     evidence: float = 2.0
     label_prior: float = 0.4
@@ -174,6 +177,7 @@ class ClickOptions:
             "region_share",
             "seen_share",
             "seed_share",
+            "seed_local",
             "hold_share",
             "overlap",
             "part_share",
@@ -188,19 +192,27 @@ class ClickOptions:
 @dataclass(frozen=True)
 class ClickEvidence:
     """What one click saw: ``weights`` (N,) each Gaussian's blended weight at the clicked
-    pixels, whether the click is for (``positive``) or against the selection, and ``shown``
+    pixels, whether the click is for (``positive``) or against the selection, ``shown``
     (N,) in [0, 1] how much of each Gaussian the clicked view shows (its blended weight over
-    the view over what it would give unoccluded; None: a prompt without a view, a 3D
-    point)."""
+    the view over what it would give unoccluded), and ``local`` (N,) in [0, 1] the share of
+    its blended weight in the view that falls at the clicked pixels (both None: a prompt
+    without a view, a 3D point)."""
 
     weights: np.ndarray
     positive: bool
     shown: np.ndarray | None = None
+    local: np.ndarray | None = None
 
-    def seeds(self, share: float) -> np.ndarray:
-        """Indices of the Gaussians that carry ``share`` of the click's weight, heaviest first."""
-        order = np.argsort(-self.weights, kind="stable")
-        cumulative = np.cumsum(self.weights[order])
+    def seeds(self, share: float, least_local: float = 0.0) -> np.ndarray:
+        """Indices of the Gaussians that carry ``share`` of the click's weight, heaviest first,
+        of those with at least ``least_local`` of their weight in the view at the click (all
+        of them where none has): a large Gaussian of the backdrop that shows behind a thin
+        part at the click, and over much of the view elsewhere, is not what was clicked."""
+        weights = self.weights
+        if self.local is not None and (weights * (self.local >= least_local)).sum() > 0:
+            weights = weights * (self.local >= least_local)
+        order = np.argsort(-weights, kind="stable")
+        cumulative = np.cumsum(weights[order])
         return order[: int(np.searchsorted(cumulative, share * cumulative[-1])) + 1]
 
 
@@ -438,8 +450,9 @@ class ClickSelector:
         share, weight, voted_regions = self.views_vote(clicks, before)
         posterior = self._labelled(share, weight, clicks[0])
         cost = o.evidence * np.where(weight > 0, log_odds(posterior), -1.0)  # > 0: the object's
-        positive = np.unique(np.concatenate([c.seeds(o.seed_share) for c in clicks if c.positive]))
-        negative = np.unique(np.concatenate([c.seeds(o.seed_share) for c in clicks if not c.positive] or [[]]))
+        seeds = [(c.seeds(o.seed_share, o.seed_local), c.positive) for c in clicks]
+        positive = np.unique(np.concatenate([k for k, is_positive in seeds if is_positive]))
+        negative = np.unique(np.concatenate([k for k, is_positive in seeds if not is_positive] or [[]]))
         negative = negative.astype(np.int64)
         both = np.intersect1d(positive, negative)
         positive, negative = np.setdiff1d(positive, both), np.setdiff1d(negative, both)
@@ -468,7 +481,7 @@ class ClickSelector:
         see much of, as a large hazy Gaussian around the object drawing what lies behind it,
         follows the views."""
         o = self.options
-        picked = np.setdiff1d(np.unique(self.labels[first.seeds(o.seed_share)]), [0])
+        picked = np.setdiff1d(np.unique(self.labels[first.seeds(o.seed_share, o.seed_local)]), [0])
         labelled = np.isin(self.labels, picked)
         voted = share > 0.5
         agree = (labelled & voted).sum() / max(int((labelled | voted).sum()), 1)

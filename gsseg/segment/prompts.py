@@ -142,9 +142,10 @@ def click_evidence(
     backend: str | Backend = "cpu",
 ) -> ClickEvidence:
     """What a click at pixel (u, v) of a view saw: each Gaussian's blended weight alpha_i T_i
-    summed over the pixels within ``radius`` of it (a (2 radius + 1)^2 window), and how much
-    of it the view shows: its weight over the whole view over what its footprint would give
-    unoccluded, o_i 2 pi sqrt(det Sigma2D_i) (0: hidden or off screen, 1: in full view).
+    summed over the pixels within ``radius`` of it (a (2 radius + 1)^2 window), how much
+    of it the view shows (its weight over the whole view over what its footprint would give
+    unoccluded, o_i 2 pi sqrt(det Sigma2D_i); 0: hidden or off screen, 1: in full view), and
+    the share of its weight over the view that falls in the window.
 
     Raises:
         InputError: the click lies outside the view, or less than half opaque is rendered there.
@@ -168,7 +169,9 @@ def click_evidence(
             g.opacities * 2 * math.pi / torch.sqrt(proj.conics[:, 0] * proj.conics[:, 2] - proj.conics[:, 1] ** 2)
         )
         footprint = torch.where(proj.radii > 0, footprint, torch.inf).double().cpu().numpy()
-    return ClickEvidence(weights[1], positive, shown=np.clip(weights.sum(0) / footprint, 0, 1))
+    in_view = weights.sum(0)
+    local = weights[1] / np.maximum(in_view, 1e-12)
+    return ClickEvidence(weights[1], positive, shown=np.clip(in_view / footprint, 0, 1), local=local)
 
 
 def point_evidence(gaussians: Gaussians, point: np.ndarray, k: int = 20) -> ClickEvidence:
