@@ -49,7 +49,7 @@ from gsseg.render.views import render_run
 from gsseg.run.loaded import Run, load_run
 from gsseg.segment.clicks import Click
 from gsseg.segment.label_options import LabelOptions
-from gsseg.segment.prompts import framed_object
+from gsseg.segment.prompts import framed_object, object_click
 from gsseg.segment.reassign import Segmentation
 from gsseg.segment.segment_run import masked_views, run_regions, segment_run
 from gsseg.train.config import TrainConfig
@@ -111,7 +111,9 @@ def _demo_selection(
     the photos frame (:func:`gsseg.segment.prompts.framed_object`) of those that do not cover
     most of every view (the scene, not an object in it); in a close-up, where every object
     the photos show covers most of every view, of all; where the model shows no object
-    (trained too briefly), of all that hold a Gaussian; where no label holds one, what a click
+    (trained too briefly), of all that hold a Gaussian; selected as a user would, by a click
+    deep inside it in a test view (:func:`gsseg.segment.prompts.object_click`: the views
+    decide its Gaussians, its label is their prior); where no label holds one, what a click
     at the centre of the first test view selects."""
     scene = run.scene(scene_dir)
     if synth_point is not None:
@@ -131,7 +133,20 @@ def _demo_selection(
         framed = framed_object(means, objects, regions, views)
     if framed is None:
         framed = framed_object(means, objects, regions, views, least_shown=0.0)
-    return select(run, segmentation, scene, object_id=framed, backend=backend), {"object_id": framed}
+    click = object_click(run.gaussians, objects[framed], scene.split("test"), backend=backend)
+    prompt = {"clicks": [click]} if click is not None else {"object_id": framed}
+    return select(run, segmentation, scene, backend=backend, **prompt), prompt
+
+
+def _edited(selection: Selection, prompt: dict) -> str:
+    """What the demo edited, in words: an object by its ID, the object under one click, or
+    a selection's name."""
+    if selection.object_id is not None:
+        return f"object {selection.object_id}"
+    if len(prompt.get("clicks", ())) == 1:
+        click = prompt["clicks"][0]
+        return f"the object clicked in {click.view} at ({click.u:.0f}, {click.v:.0f})"
+    return selection.name
 
 
 def demo_images(scene: Path, max_side: int = DemoOptions.max_side) -> str:
@@ -341,7 +356,7 @@ def _run_demo(
     return DemoResult(
         out,
         report / "report.html",
-        selection.name if selection.object_id is None else f"object {selection.object_id}",
+        _edited(selection, prompt),
         int(selection.mask.sum()),
         miou,
         time.perf_counter() - start,

@@ -14,7 +14,6 @@ import pytest
 import scipy.sparse as sp
 import torch
 from helpers import script
-from scipy import ndimage
 
 from dataset_tools.cameras import CameraPose, PinholeCamera
 from dataset_tools.image_files import encode_png
@@ -24,10 +23,9 @@ from dataset_tools.scene import load_scene
 from gsseg.model.gaussians import gaussians_from_points
 from gsseg.model.ply import read_ply
 from gsseg.render.contributions import RegionWeights
-from gsseg.render.pixel_labels import segment_pixels
 from gsseg.run.loaded import load_run
 from gsseg.segment.clicks import ClickEvidence, ClickOptions, ClickSelector, ColourModel, RegionVote
-from gsseg.segment.prompts import click_evidence, framed_object
+from gsseg.segment.prompts import click_evidence, framed_object, object_click
 from gsseg.segment.segment_run import segment_run
 from gsseg.segment.served import complete_selection
 
@@ -363,19 +361,12 @@ def test_a_negative_click_on_a_floater_leaves_the_objects_side_of_its_own_colour
 
 
 def _clickable(run, labels: np.ndarray, objects: list[int]) -> dict[int, tuple[str, float, float]]:
-    """For each object, a training view and the pixel deepest inside it there."""
-    found = {}
-    for view in run.scene().split("train"):
-        ids = segment_pixels(
-            run.gaussians, labels, view.camera, torch.as_tensor(view.cam_from_world, dtype=torch.float32), backend="cpu"
-        )
-        for obj in objects:
-            depth = ndimage.distance_transform_edt(ids == obj)
-            if obj not in found and depth.max() > 3:
-                row, col = np.unravel_index(depth.argmax(), depth.shape)
-                found[obj] = (view.stem, col + 0.5, row + 0.5)
-    assert set(found) == set(objects)
-    return found
+    """For each object, the click a user would make on it (:func:`object_click`): a training
+    view and the pixel deepest inside it there."""
+    views = run.scene().split("train")
+    clicks = {obj: object_click(run.gaussians, labels == obj, views) for obj in objects}
+    assert all(c is not None for c in clicks.values())
+    return {obj: (run.scene().view(c.view).stem, c.u, c.v) for obj, c in clicks.items()}
 
 
 def _edit(run_dir: Path, *args: str) -> np.ndarray:

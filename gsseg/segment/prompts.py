@@ -7,15 +7,18 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 import torch
+from scipy import ndimage
 from scipy.spatial import cKDTree
 
 from dataset_tools.cameras import CameraPose, PinholeCamera
 from dataset_tools.infra.errors import InputError
+from dataset_tools.scene import View
 from gsseg.model.gaussians import Gaussians
 from gsseg.render import Backend, get_backend, render
 from gsseg.render.contributions import RegionWeights
+from gsseg.render.pixel_labels import segment_pixels
 from gsseg.render.projection import project_gaussians
-from gsseg.segment.clicks import ClickEvidence
+from gsseg.segment.clicks import Click, ClickEvidence
 
 
 def object_at_point(means: np.ndarray, labels: np.ndarray, point: np.ndarray, k: int = 20) -> int:
@@ -99,6 +102,24 @@ def framed_object(
 
 
 @torch.no_grad()
+def object_click(
+    gaussians: Gaussians, selected: np.ndarray, views: Sequence[View], *, backend: str | Backend = "cpu"
+) -> Click | None:
+    """The click a user would make on the ``selected`` (N,) Gaussians: the pixel deepest
+    inside the region where they hold the most blended weight, in whichever of ``views``
+    that region lies deepest; None where no view shows them."""
+    backend = get_backend(backend)
+    best, depth_best = None, 0.0
+    for view in views:
+        pose = torch.as_tensor(view.cam_from_world, dtype=torch.float32, device=backend.device)
+        region = segment_pixels(gaussians, selected.astype(np.uint8), view.camera, pose, backend=backend) == 1
+        depth = ndimage.distance_transform_edt(np.pad(region, 1))[1:-1, 1:-1]
+        if depth.max() > depth_best:
+            row, col = np.unravel_index(depth.argmax(), depth.shape)
+            best, depth_best = Click(view.name, float(col) + 0.5, float(row) + 0.5), float(depth.max())
+    return best
+
+
 def point_from_click(
     gaussians: Gaussians,
     camera: PinholeCamera,
