@@ -51,7 +51,7 @@ import numpy as np
 import torch
 
 from benchmarks import record
-from benchmarks.real_scenes import deepest_pixel, interactive, people_masks, posed_scene
+from benchmarks.real_scenes import interactive, people_masks, posed_scene
 from dataset_tools.cameras import PinholeCamera
 from dataset_tools.image_files import encode_png, read_mask
 from dataset_tools.infra.atomic import write_bytes_atomic
@@ -64,7 +64,7 @@ from gsseg.model.gaussians import Gaussians, gaussians_from_points
 from gsseg.render import get_backend, render
 from gsseg.run.loaded import Run, load_run
 from gsseg.segment.clicks import ClickSelector
-from gsseg.segment.prompts import click_evidence
+from gsseg.segment.prompts import click_evidence, deepest_pixel
 from gsseg.segment.segment_run import label_gaussians, mask_contributions, mask_regions, segment_run
 from gsseg.train.config import TrainConfig
 from gsseg.train.trainer import train

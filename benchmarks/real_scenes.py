@@ -59,7 +59,7 @@ from gsseg.render.contributions import MaskedView, contribution_matrix
 from gsseg.render.pixel_labels import segment_pixels
 from gsseg.run.loaded import Run, load_run
 from gsseg.segment.clicks import ClickEvidence, ClickSelector
-from gsseg.segment.prompts import click_evidence
+from gsseg.segment.prompts import click_evidence, deepest_pixel
 from gsseg.segment.segment_run import run_regions, segment_run
 from gsseg.segment.served import complete_selection
 from gsseg.train.config import TrainConfig
@@ -104,13 +104,6 @@ def rendered_selection(run: Run, selected: np.ndarray, view: View, backend: str 
     pose = torch.as_tensor(view.cam_from_world, dtype=torch.float32, device=backend.device)
     labels = selected.astype(np.uint8)
     return segment_pixels(run.gaussians_on(backend.device), labels, view.camera, pose, backend=backend) == 1
-
-
-def deepest_pixel(region: np.ndarray) -> tuple[float, float]:
-    """(u, v) of the pixel of ``region`` farthest from its border."""
-    depth = ndimage.distance_transform_edt(np.pad(region, 1))[1:-1, 1:-1]
-    row, col = np.unravel_index(depth.argmax(), depth.shape)
-    return col + 0.5, row + 0.5
 
 
 class Clicker:

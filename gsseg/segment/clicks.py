@@ -341,12 +341,11 @@ class RegionVote:
     def vote(self, clicked: np.ndarray, options: ClickOptions) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(N,) each Gaussian's share of weight in the object's regions, starting from the
         ``clicked`` (R,) ones, and (N,) the weight the share is of (0: not seen where the
-        object is), after
-        :attr:`ClickOptions.iterations` rounds; and (R,) the object's regions the last round
-        counted. A round adds the regions the selection (share above one half) covers for
-        more than :attr:`ClickOptions.region_share`, in the vote units where they hold at
-        least :attr:`ClickOptions.hold_share` of the selection's weight: a view whose masks
-        leave the object in the background does not count it against the object."""
+        object is), after :attr:`ClickOptions.iterations` rounds; and (R,) the object's regions
+        the last round counted. A round adds the regions the selection (share above one half)
+        covers for more than :attr:`ClickOptions.region_share`, in the vote units where they
+        hold at least :attr:`ClickOptions.hold_share` of the selection's weight: a view whose
+        masks leave the object in the background does not count it against the object."""
         inside = clicked
         for _ in range(options.iterations):
             share, weight = self.shares(inside)
@@ -477,9 +476,8 @@ class ClickSelector:
         off it) worth :attr:`ClickOptions.label_strength` times the median Gaussian's
         ``weight`` (N,) in the views, times how far the label agrees with the views' vote (a
         label that swallowed the table under the object disagrees with it and says nothing).
-        A Gaussian the views see little of follows the label; one they
-        see much of, as a large hazy Gaussian around the object drawing what lies behind it,
-        follows the views."""
+        A Gaussian the views see little of follows the label; one they see much of, as a large
+        hazy Gaussian around the object drawing what lies behind it, follows the views."""
         o = self.options
         picked = np.setdiff1d(np.unique(self.labels[first.seeds(o.seed_share, o.seed_local)]), [0])
         labelled = np.isin(self.labels, picked)
@@ -496,11 +494,11 @@ class ClickSelector:
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The views' vote of ``clicks`` (:meth:`RegionVote.vote`): (N,) each Gaussian's share of
         weight in the object's regions, (N,) the weight it is of (0: no view of the object
-        sees it), (R,) the object's regions. The first click's regions start it; the regions under a later
-        positive click that lie beside the selection ``before`` (N,) (a part the first vote
-        missed) raise it where they speak and lower it nowhere: a part seen in views where the
-        first click is not counts those views against the rest of the object, which the
-        selection holds all the same."""
+        sees it), (R,) the object's regions. The first click's regions start it; the regions
+        under a later positive click that lie beside the selection ``before`` (N,) (a part the
+        first vote missed) raise it where they speak and lower it nowhere: a part seen in views
+        where the first click is not counts those views against the rest of the object, which
+        the selection holds all the same."""
         o = self.options
         clicked = self.vote.clicked_regions(clicks[0], o.seen_share, layer_hold=o.hold_share)
         share, weight, regions = self.vote.vote(clicked, o)

@@ -101,25 +101,31 @@ def framed_object(
     return ids[int(centred.argmax())] if np.isfinite(centred.max()) else None
 
 
-@torch.no_grad()
+def deepest_pixel(region: np.ndarray) -> tuple[float, float]:
+    """(u, v) of the pixel of ``region`` (H, W) bool farthest from its border (pixel centres)."""
+    depth = ndimage.distance_transform_edt(np.pad(region, 1))[1:-1, 1:-1]
+    row, col = np.unravel_index(depth.argmax(), depth.shape)
+    return float(col) + 0.5, float(row) + 0.5
+
+
 def object_click(
     gaussians: Gaussians, selected: np.ndarray, views: Sequence[View], *, backend: str | Backend = "cpu"
 ) -> Click | None:
     """The click a user would make on the ``selected`` (N,) Gaussians: the pixel deepest
-    inside the region where they hold the most blended weight, in whichever of ``views``
-    that region lies deepest; None where no view shows them."""
+    inside the region where they hold the most blended weight (:func:`deepest_pixel`), in
+    whichever of ``views`` that region lies deepest; None where no view shows them."""
     backend = get_backend(backend)
     best, depth_best = None, 0.0
     for view in views:
         pose = torch.as_tensor(view.cam_from_world, dtype=torch.float32, device=backend.device)
         region = segment_pixels(gaussians, selected.astype(np.uint8), view.camera, pose, backend=backend) == 1
-        depth = ndimage.distance_transform_edt(np.pad(region, 1))[1:-1, 1:-1]
-        if depth.max() > depth_best:
-            row, col = np.unravel_index(depth.argmax(), depth.shape)
-            best, depth_best = Click(view.name, float(col) + 0.5, float(row) + 0.5), float(depth.max())
+        depth = float(ndimage.distance_transform_edt(np.pad(region, 1)).max())
+        if depth > depth_best:
+            best, depth_best = Click(view.name, *deepest_pixel(region)), depth
     return best
 
 
+@torch.no_grad()
 def point_from_click(
     gaussians: Gaussians,
     camera: PinholeCamera,
