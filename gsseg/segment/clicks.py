@@ -447,9 +447,9 @@ class ClickSelector:
             raise InputError("a selection starts with a click on the object; click on it first.")
         o = self.options
         share, weight, voted_regions = self.views_vote(clicks, before)
-        posterior = self._labelled(share, weight, clicks[0])
-        cost = o.evidence * np.where(weight > 0, log_odds(posterior), -1.0)  # > 0: the object's
         seeds = [(c.seeds(o.seed_share, o.seed_local), c.positive) for c in clicks]
+        posterior = self._labelled(share, weight, seeds[0][0])
+        cost = o.evidence * np.where(weight > 0, log_odds(posterior), -1.0)  # > 0: the object's
         positive = np.unique(np.concatenate([k for k, is_positive in seeds if is_positive]))
         negative = np.unique(np.concatenate([k for k, is_positive in seeds if not is_positive] or [[]]))
         negative = negative.astype(np.int64)
@@ -470,16 +470,17 @@ class ClickSelector:
             return cut
         return before | cut if clicks[-1].positive else before & cut
 
-    def _labelled(self, share: np.ndarray, weight: np.ndarray, first: ClickEvidence) -> np.ndarray:
-        """(N,) the views' ``share`` (N,) with the label under the ``first`` click's seeds as
-        its prior: a share of one half +- :attr:`ClickOptions.label_prior` (+ on the label, -
-        off it) worth :attr:`ClickOptions.label_strength` times the median Gaussian's
-        ``weight`` (N,) in the views, times how far the label agrees with the views' vote (a
-        label that swallowed the table under the object disagrees with it and says nothing).
-        A Gaussian the views see little of follows the label; one they see much of, as a large
-        hazy Gaussian around the object drawing what lies behind it, follows the views."""
+    def _labelled(self, share: np.ndarray, weight: np.ndarray, first_seeds: np.ndarray) -> np.ndarray:
+        """(N,) the views' ``share`` (N,) with the label under the first click's seeds
+        (``first_seeds``, indices) as its prior: a share of one half
+        +- :attr:`ClickOptions.label_prior` (+ on the label, - off it) worth
+        :attr:`ClickOptions.label_strength` times the median Gaussian's ``weight`` (N,) in the
+        views, times how far the label agrees with the views' vote (a label that swallowed the
+        table under the object disagrees with it and says nothing). A Gaussian the views see
+        little of follows the label; one they see much of, as a large hazy Gaussian around
+        the object drawing what lies behind it, follows the views."""
         o = self.options
-        picked = np.setdiff1d(np.unique(self.labels[first.seeds(o.seed_share, o.seed_local)]), [0])
+        picked = np.setdiff1d(np.unique(self.labels[first_seeds]), [0])
         labelled = np.isin(self.labels, picked)
         voted = share > 0.5
         agree = (labelled & voted).sum() / max(int((labelled | voted).sum()), 1)
