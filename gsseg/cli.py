@@ -71,6 +71,12 @@ def cli() -> None:
 )
 @field_option(
     TrainConfig,
+    "opacity_reg",
+    type=float,
+    help="Weight of the mean opacity in the loss: Gaussians that add little fade and are pruned; 0: off.",
+)
+@field_option(
+    TrainConfig,
     "knn_reg",
     type=float,
     help="Weight of Gaussian Grouping's 3D identity term (nearest Gaussians agree on their object); 0: off.",

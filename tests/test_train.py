@@ -14,6 +14,7 @@ from helpers import GEOMETRY, random_gaussians
 from dataset_tools.image_files import read_mask
 from dataset_tools.infra.errors import InputError
 from dataset_tools.scene import load_scene
+from gsseg.model.gaussians import Gaussians, gaussians_from_points
 from gsseg.model.ply import read_ply
 from gsseg.render.views import render_run
 from gsseg.train import trainer as trainer_module
@@ -126,6 +127,53 @@ def test_masks_train_the_features_alone_unless_asked(small_scene, tmp_path):
     assert all(torch.equal(getattr(runs["default"], k), getattr(runs["colour"], k)) for k in GEOMETRY)
     assert not torch.equal(runs["default"].obj_feat, runs["colour"].obj_feat)
     assert len(runs["coupled"]) != len(runs["colour"]) or not torch.equal(runs["coupled"].means, runs["colour"].means)
+
+
+def _outside_every_view(means: np.ndarray, views) -> np.ndarray:
+    """(N,) bool: the points ``means`` (N, 3) whose centre lies behind every camera or more
+    than an image's width outside its image, which no training pixel can draw."""
+    outside = np.ones(len(means), bool)
+    for view in views:
+        pc = means @ view.cam_from_world[:, :3].T + view.cam_from_world[:, 3]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            u = pc[:, 0] / pc[:, 2] * view.camera.fx + view.camera.cx
+            v = pc[:, 1] / pc[:, 2] * view.camera.fy + view.camera.cy
+        W, H = view.camera.width, view.camera.height
+        near = (pc[:, 2] > 0) & (u > -W) & (u < 2 * W) & (v > -H) & (v < 2 * H)
+        outside &= ~near
+    return outside
+
+
+@pytest.mark.parametrize("weight", [0.0, 0.05])
+def test_the_opacity_term_fades_what_no_view_draws(small_scene, tmp_path, monkeypatch, weight):
+    """Gaussians no training view draws get no photometric gradient: without the opacity term
+    they keep their initial opacity; with it they fade."""
+    views = load_scene(small_scene.root).split("train")
+    centres = np.stack([v.center for v in views])
+    rng = np.random.default_rng(0)
+    far = centres.mean(0) + rng.normal(size=(1000, 3)) * 10 * np.ptp(centres, 0).max()
+    spot = far[_outside_every_view(far, views)][0]  # a cluster of small Gaussians there, drawn by no view
+    hidden = spot + rng.normal(size=(200, 3)) * 1e-3 * np.ptp(centres, 0).max()
+    assert _outside_every_view(hidden, views).all()
+    initial = trainer_module._initial_gaussians
+
+    def with_hidden(scene, cfg):
+        grey = np.full((len(hidden), 3), 128, np.uint8)
+        return Gaussians.concat(
+            initial(scene, cfg), gaussians_from_points(hidden, grey, initial_opacity=cfg.initial_opacity)
+        )
+
+    monkeypatch.setattr(trainer_module, "_initial_gaussians", with_hidden)
+    cfg = TrainConfig(iters=40, backend="cpu", gamma_obj=0.0, opacity_reg=weight)
+    run = train(small_scene.root, tmp_path / "run", cfg, progress=False).run
+    g = read_ply(run / "gaussians.ply")
+    unseen = torch.as_tensor(_outside_every_view(g.means.double().numpy(), views))
+    assert unseen.sum() == len(hidden)  # none pruned: they stay above the threshold in 40 steps
+    opacity = g.opacities[unseen]
+    if weight == 0:
+        assert torch.allclose(opacity, torch.full_like(opacity, cfg.initial_opacity))
+    else:
+        assert opacity.max() < 0.5 * cfg.initial_opacity
 
 
 @pytest.mark.slow

@@ -109,6 +109,7 @@ class TrainConfig:
     percent_dense: float = 0.01
     prune_opacity: float = 0.005
     initial_opacity: float = 0.1
+    opacity_reg: float = 0.01  # weight of the mean opacity in the loss (3DGS-MCMC's L1 term); 0: off
     random_init_points: int = 20_000
     max_gaussians: int | None = None  # densification stops at this count; None: the schedule's cap
     knn_reg: float = 0.0  # weight of Gaussian Grouping's 3D identity term; 0: off
@@ -137,6 +138,8 @@ class TrainConfig:
             raise OptionError("{max_gaussians}: give 1 or more.", max_gaussians=self.max_gaussians)
         if not math.isfinite(self.gamma_obj) or self.gamma_obj < 0:
             raise OptionError("{gamma_obj}: give a finite weight of 0 or more.", gamma_obj=self.gamma_obj)
+        if not math.isfinite(self.opacity_reg) or self.opacity_reg < 0:
+            raise OptionError("{opacity_reg}: give a finite weight of 0 or more.", opacity_reg=self.opacity_reg)
         if not math.isfinite(self.knn_reg) or self.knn_reg < 0:
             raise OptionError("{knn_reg}: give a finite weight of 0 or more.", knn_reg=self.knn_reg)
 
@@ -179,4 +182,5 @@ class TrainConfig:
         data.setdefault("environment_profile", False)  # runs from before the profile existed
         data.setdefault("geometry_from_masks", True)  # runs from before the option: the loss shaped geometry
         data.setdefault("environment_smoothing", 0.0)  # runs from before the option
+        data.setdefault("opacity_reg", 0.0)  # runs from before the option
         return cls(**data)

@@ -325,6 +325,8 @@ def _loss_and_backward(
     else:
         obj = torch.zeros((), device=rgb_loss.device)
     loss = rgb_loss + cfg.gamma_obj * obj
+    if cfg.opacity_reg > 0:
+        loss = loss + cfg.opacity_reg * state.gaussians.gaussians.opacities.mean()
     if cfg.environment_smoothing > 0 and state.environment is not None:
         loss = loss + cfg.environment_smoothing * state.environment.profile_variation()
     if cfg.knn_reg > 0:
