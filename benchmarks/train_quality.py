@@ -7,7 +7,7 @@ also trained with ``--geometry-from-masks`` beside it (the object loss also shap
 geometry). Prints and writes JSON.
 
     python -m benchmarks.train_quality [--beer ../shared/data/beer] [--backends cpu,gsplat]
-        [--gpu-schedule] [--train-seeds 0,1,2] [--no-environment-profile] [--coupled] [--iters N]
+        [--gpu-schedule] [--train-seeds 0,1,2] [--no-environment-profile] [--opacity-reg W] [--coupled] [--iters N]
         [--out FILE]
 
 Held-out PSNR moves by a few tenths of a dB between training runs that differ only in their
@@ -75,6 +75,9 @@ def main() -> None:
         help="Weight of the elevation profile's total variation.",
     )
     parser.add_argument(
+        "--opacity-reg", type=float, default=TrainConfig.opacity_reg, help="Weight of the mean opacity in the loss."
+    )
+    parser.add_argument(
         "--coupled", action="store_true", help="Also train each orbit run with the object loss shaping the geometry."
     )
     parser.add_argument("--tag", default="", help="Suffix of the default JSON file name.")
@@ -84,7 +87,11 @@ def main() -> None:
         args.backends.split(",") if args.backends else ["cpu"] + (["gsplat"] if BACKENDS["gsplat"].available() else [])
     )
 
-    environment = {"environment_profile": args.profile, "environment_smoothing": args.environment_smoothing}
+    environment = {
+        "environment_profile": args.profile,
+        "environment_smoothing": args.environment_smoothing,
+        "opacity_reg": args.opacity_reg,
+    }
     results = {}
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(tmp)
