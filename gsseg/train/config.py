@@ -109,7 +109,7 @@ class TrainConfig:
     percent_dense: float = 0.01
     prune_opacity: float = 0.005
     initial_opacity: float = 0.1
-    opacity_reg: float = 0.01  # weight of the mean opacity in the loss (3DGS-MCMC's L1 term); 0: off
+    opacity_reg: float = 0.002  # weight of the mean opacity in the loss (3DGS-MCMC's L1 term); 0: off
     random_init_points: int = 20_000
     max_gaussians: int | None = None  # densification stops at this count; None: the schedule's cap
     knn_reg: float = 0.0  # weight of Gaussian Grouping's 3D identity term; 0: off
