@@ -87,7 +87,7 @@ def main() -> None:
         args.backends.split(",") if args.backends else ["cpu"] + (["gsplat"] if BACKENDS["gsplat"].available() else [])
     )
 
-    environment = {
+    options = {
         "environment_profile": args.profile,
         "environment_smoothing": args.environment_smoothing,
         "opacity_reg": args.opacity_reg,
@@ -100,7 +100,7 @@ def main() -> None:
             runs = []
             for seed in train_seeds:
                 name = f"orbit_{backend}" + (f"_seed{seed}" if seed else "")
-                cfg = TrainConfig(iters=args.iters, masks=GT_MASKS, backend=backend, seed=seed, **environment)
+                cfg = TrainConfig(iters=args.iters, masks=GT_MASKS, backend=backend, seed=seed, **options)
                 runs.append(results.setdefault(name, train_and_score(synth, work / name, cfg)))
                 if args.coupled:
                     coupled = replace(cfg, geometry_from_masks=True)
@@ -112,11 +112,11 @@ def main() -> None:
                     for stat, fn in (("mean", lambda xs: sum(xs) / len(xs)), ("min", min), ("max", max))
                 }
         if args.gpu_schedule:
-            cfg = TrainConfig(schedule="gpu", masks=GT_MASKS, backend="gsplat", **environment)
+            cfg = TrainConfig(schedule="gpu", masks=GT_MASKS, backend="gsplat", **options)
             results["orbit_gsplat_gpu_schedule"] = train_and_score(synth, work / "orbit_gpu", cfg)
         if args.beer:
             for backend in backends:
-                cfg = TrainConfig(iters=args.iters, backend=backend, images="images_4", masks=None, **environment)
+                cfg = TrainConfig(iters=args.iters, backend=backend, images="images_4", masks=None, **options)
                 results[f"beer_{backend}"] = train_and_score(args.beer, work / f"beer_{backend}", cfg)
     results = {"runs": results, "setup": {k: str(v) if isinstance(v, Path) else v for k, v in vars(args).items()}}
     print(report(results)[1])

@@ -101,13 +101,24 @@ def framed_object(
     return ids[int(centred.argmax())] if np.isfinite(centred.max()) else None
 
 
-def deepest_pixel(region: np.ndarray) -> tuple[float, float]:
-    """(u, v) of the pixel of ``region`` (H, W) bool farthest from its border (pixel centres)."""
-    depth = ndimage.distance_transform_edt(np.pad(region, 1))[1:-1, 1:-1]
-    row, col = np.unravel_index(depth.argmax(), depth.shape)
+def _border_distance(region: np.ndarray) -> np.ndarray:
+    """(H, W) each pixel's distance to the nearest pixel outside ``region`` (H, W) bool (the
+    image's border counts as outside)."""
+    return ndimage.distance_transform_edt(np.pad(region, 1))[1:-1, 1:-1]
+
+
+def _deepest(distance: np.ndarray) -> tuple[float, float]:
+    """(u, v) of the pixel centre where ``distance`` (H, W) is largest."""
+    row, col = np.unravel_index(distance.argmax(), distance.shape)
     return float(col) + 0.5, float(row) + 0.5
 
 
+def deepest_pixel(region: np.ndarray) -> tuple[float, float]:
+    """(u, v) of the pixel of ``region`` (H, W) bool farthest from its border (pixel centres)."""
+    return _deepest(_border_distance(region))
+
+
+@torch.no_grad()
 def object_click(
     gaussians: Gaussians, selected: np.ndarray, views: Sequence[View], *, backend: str | Backend = "cpu"
 ) -> Click | None:
@@ -119,13 +130,12 @@ def object_click(
     for view in views:
         pose = torch.as_tensor(view.cam_from_world, dtype=torch.float32, device=backend.device)
         region = segment_pixels(gaussians, selected.astype(np.uint8), view.camera, pose, backend=backend) == 1
-        depth = float(ndimage.distance_transform_edt(np.pad(region, 1)).max())
-        if depth > depth_best:
-            best, depth_best = Click(view.name, *deepest_pixel(region)), depth
+        distance = _border_distance(region)
+        if distance.max() > depth_best:
+            best, depth_best = Click(view.name, *_deepest(distance)), float(distance.max())
     return best
 
 
-@torch.no_grad()
 def point_from_click(
     gaussians: Gaussians,
     camera: PinholeCamera,
