@@ -24,28 +24,34 @@ def _blobs(centres: np.ndarray, scale: float, opacity: float, colour: float) -> 
     }
 
 
-def test_a_patch_that_covers_the_object_in_every_view_goes_with_it():
-    """A ball of 400 opaque Gaussians (the selection), a patch of 40 on its face towards the
-    cameras (unselected: they win their own pixels in every view, as the gold highlights on a
-    bronze head's crown do) and a wall of 400 behind it, seen from five cameras within 25
-    degrees of the patch's direction. The patch lies inside the ball's silhouette in every
-    view: it served the object alone and joins the selection, and its part of the ghost
-    share goes; the wall, seen around the ball, stays."""
+def test_a_haze_over_the_object_goes_with_it_what_stands_before_it_stays():
+    """A ball of 400 opaque Gaussians (the selection) seen from five cameras within 25
+    degrees of its top, a wall of 400 behind it, and two unselected patches of 40 over the
+    ball's top: a faint haze on its surface, which the ball outweighs wherever it shows (it
+    served the ball alone, and goes with it), and an opaque patch 0.4 in front of it, which
+    wins its own pixels (another thing standing before the ball: it stays, as the wall
+    does)."""
     rng = np.random.default_rng(0)
     ball = rng.normal(size=(400, 3))
     ball = 0.5 * ball / np.linalg.norm(ball, axis=1, keepdims=True)
-    cap = rng.normal(size=(40, 3)) * [0.08, 0.08, 0.0] + [0.0, 0.0, 0.55]
+    haze = rng.normal(size=(40, 3)) * [0.07, 0.07, 0.0] + [0.15, 0.0, 0.55]
+    front = rng.normal(size=(40, 3)) * [0.03, 0.03, 0.0] + [-0.3, 0.0, 0.9]
     wall = np.c_[rng.uniform(-2, 2, (400, 2)), np.full(400, -1.5)]
-    parts = [_blobs(ball, 0.08, 0.99, 0.5), _blobs(cap, 0.05, 0.99, 1.5), _blobs(wall, 0.15, 0.99, -1.0)]
+    parts = [
+        _blobs(ball, 0.08, 0.99, 0.5),
+        _blobs(haze, 0.05, 0.03, 1.5),
+        _blobs(front, 0.05, 0.99, 1.5),
+        _blobs(wall, 0.15, 0.99, -1.0),
+    ]
     g = Gaussians(**{k: torch.cat([p[k] for p in parts]) for k in parts[0]})
-    selected = np.r_[np.ones(400, bool), np.zeros(440, bool)]
+    selected = np.r_[np.ones(400, bool), np.zeros(480, bool)]
     camera = PinholeCamera(64, 64, 60.0, 60.0, 32.0, 32.0)
-    views = []
     tilt = np.radians(25)
+    views = []
     for a in np.radians([0, 72, 144, 216, 288]):
         eye = 4.0 * np.array([np.sin(tilt) * np.cos(a), np.sin(tilt) * np.sin(a), np.cos(tilt)])
         views.append(CameraPose(camera, look_at(eye, np.zeros(3))))
     done = complete_selection(g, selected, views)
-    assert done.mask[400:440].all() and not done.mask[440:].any()
-    assert done.added == 40
-    assert done.ghost_after < 0.25 * done.ghost_before  # what remains: the wall through the ball's soft rim
+    assert done.mask[400:440].all() and done.added == 40
+    assert not done.mask[440:].any()
+    assert done.ghost_after < done.ghost_before

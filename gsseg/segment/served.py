@@ -4,14 +4,10 @@ The labels, and the clicks, decide each Gaussian from where its weight falls in 
 some that only ever drew the object carry another label all the same (a floater in front of
 it, its rim that the vote gave to what lies behind). Removed without them the object leaves a
 ghost: a dark face over the bush where a statue's head was. Measured in the training views:
-each view's silhouette of the selection is where the selection, rendered alone, is opaque
-(accumulated alpha at least 0.5, :func:`gsseg.render.pixel_labels.segment_pixels`); a
-Gaussian outside the selection whose weight, summed over the views, falls inside those
-silhouettes for at least :data:`SERVED_SHARE` of it served the object alone, and goes with
-it. The silhouette of the selection alone, not of where the selection wins the blend, takes
-in what covers the object from in front: a cluster of unselected Gaussians (the gold
-highlights on a bronze head's crown) wins its own pixels, which a silhouette of the winners
-would leave out, and so would the Gaussians themselves.
+each view's silhouette of the selection is where the selected Gaussians hold most of the
+blended weight (:func:`gsseg.render.pixel_labels.segment_pixels`); a Gaussian outside the
+selection whose weight, summed over the views, falls inside those silhouettes for at least
+:data:`SERVED_SHARE` of it served the object alone, and goes with it.
 """
 
 from __future__ import annotations
@@ -49,11 +45,10 @@ def complete_selection(
     their masks are not read)."""
     backend = get_backend(backend)
     g = gaussians.detach().to(backend.device)
-    alone, ones = g.select(torch.as_tensor(selected, device=backend.device)), np.ones(int(selected.sum()), np.uint8)
     silhouettes = []
     for view in views:
         pose = torch.as_tensor(view.cam_from_world, dtype=torch.float32, device=backend.device)
-        shown = segment_pixels(alone, ones, view.camera, pose, backend=backend) == 1
+        shown = segment_pixels(g, selected.astype(np.uint8), view.camera, pose, backend=backend) == 1
         silhouettes.append(MaskedView(view.camera, view.cam_from_world, shown.astype(np.uint8)))
     weights = contribution_matrix(g, silhouettes, backend=backend, progress=False)
     total = weights.weights.sum(0).numpy().astype(np.float64)
