@@ -16,8 +16,8 @@ max-flow solver (PyMaxflow), with a cost per Gaussian from five kinds of evidenc
   SAM's: each view errs on its own, and the vote follows the views that agree. An object the
   3D labels joined to its support, or that no label holds, is found as long as the views hold
   it apart;
-- **the labels**: the labels under the positive clicks' seeds, a prior of the views' vote, in
-  proportion to how far they agree with the vote (a label that swallowed the table under the
+- **the labels**: the label under the first click's seeds, a prior of the views' vote, in
+  proportion to how far it agrees with the vote (a label that swallowed the table under the
   object disagrees with it) and worth the weight of a typical Gaussian in the views: it
   decides for the Gaussians the views see little of, and the views for those they see much of;
 - **the colours** (:class:`ColourModel`): as GrabCut learns the colours of the object and of the
@@ -44,11 +44,9 @@ max-flow solver (PyMaxflow), with a cost per Gaussian from five kinds of evidenc
 The seeds are hard constraints; the source's side of the cut is the selection (parts apart
 in space, several objects under one mask, stay together where the views join them). A later
 positive click adds its seeds, what the cut joins to them, and the regions under it that lie
-beside the selection (a part the first click's vote missed), which raise the vote where they
-speak, counted over the views that hold them, and lower it nowhere
-(:meth:`ClickSelector.views_vote`); its label joins the prior (a highlight on a bronze head
-that the masks hold apart in most views comes with it); a region the masks joined to the
-selection (a statue's head and the bush behind it) it leaves out of the vote.
+beside the selection (a part the first click's vote missed), which raise the vote and lower
+it nowhere (:meth:`ClickSelector.views_vote`); a region the masks joined to the selection (a
+statue's head and the bush behind it) it leaves out of the vote.
 """
 
 from __future__ import annotations
@@ -450,9 +448,9 @@ class ClickSelector:
         o = self.options
         share, weight, voted_regions = self.views_vote(clicks, before)
         seeds = [(c.seeds(o.seed_share, o.seed_local), c.positive) for c in clicks]
-        positive = np.unique(np.concatenate([k for k, is_positive in seeds if is_positive]))
-        posterior = self._labelled(share, weight, positive)
+        posterior = self._labelled(share, weight, seeds[0][0])
         cost = o.evidence * np.where(weight > 0, log_odds(posterior), -1.0)  # > 0: the object's
+        positive = np.unique(np.concatenate([k for k, is_positive in seeds if is_positive]))
         negative = np.unique(np.concatenate([k for k, is_positive in seeds if not is_positive] or [[]]))
         negative = negative.astype(np.int64)
         both = np.intersect1d(positive, negative)
@@ -472,9 +470,9 @@ class ClickSelector:
             return cut
         return before | cut if clicks[-1].positive else before & cut
 
-    def _labelled(self, share: np.ndarray, weight: np.ndarray, seeds: np.ndarray) -> np.ndarray:
-        """(N,) the views' ``share`` (N,) with the labels under the positive clicks' ``seeds``
-        (indices) as its prior: a share of one half
+    def _labelled(self, share: np.ndarray, weight: np.ndarray, first_seeds: np.ndarray) -> np.ndarray:
+        """(N,) the views' ``share`` (N,) with the label under the first click's seeds
+        (``first_seeds``, indices) as its prior: a share of one half
         +- :attr:`ClickOptions.label_prior` (+ on the label, - off it) worth
         :attr:`ClickOptions.label_strength` times the median Gaussian's ``weight`` (N,) in the
         views, times how far the label agrees with the views' vote (a label that swallowed the
@@ -482,7 +480,7 @@ class ClickSelector:
         little of follows the label; one they see much of, as a large hazy Gaussian around
         the object drawing what lies behind it, follows the views."""
         o = self.options
-        picked = np.setdiff1d(np.unique(self.labels[seeds]), [0])
+        picked = np.setdiff1d(np.unique(self.labels[first_seeds]), [0])
         labelled = np.isin(self.labels, picked)
         voted = share > 0.5
         agree = (labelled & voted).sum() / max(int((labelled | voted).sum()), 1)
@@ -501,10 +499,7 @@ class ClickSelector:
         under a later positive click that lie beside the selection ``before`` (N,) (a part the
         first vote missed) raise it where they speak and lower it nowhere: a part seen in views
         where the first click is not counts those views against the rest of the object, which
-        the selection holds all the same. A Gaussian's share in the parts alone is counted over
-        the views that hold a part: a part the masks hold apart only in the views near the
-        click (a highlight that the others give to the sky) is not outvoted by the views of
-        the object that say nothing of it."""
+        the selection holds all the same."""
         o = self.options
         clicked = self.vote.clicked_regions(clicks[0], o.seen_share, layer_hold=o.hold_share)
         share, weight, regions = self.vote.vote(clicked, o)
@@ -515,8 +510,6 @@ class ClickSelector:
                 parts |= self.vote.apart_from(under, before, o.overlap)
         if (parts & ~clicked).any():
             more, more_weight, more_regions = self.vote.vote(clicked | parts, o)
-            own, own_weight = self.vote.shares(parts)
-            more_weight, more = np.where(own > more, own_weight, more_weight), np.maximum(more, own)
             weight = np.where(more > share, more_weight, weight)
             share, regions = np.maximum(share, more), regions | more_regions
         return share, weight, regions
