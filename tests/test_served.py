@@ -11,17 +11,18 @@ from gsseg.model.gaussians import Gaussians
 from gsseg.segment.served import complete_selection
 
 
-def _blobs(centres: np.ndarray, scale: float, opacity: float, colour: float) -> dict[str, torch.Tensor]:
+def _blobs(centres: np.ndarray, scale: float, opacity: float, colour: float) -> Gaussians:
+    """Round Gaussians at ``centres`` (P, 3), all of one size, opacity and grey."""
     n = len(centres)
-    return {
-        "means": torch.as_tensor(centres, dtype=torch.float32),
-        "log_scales": torch.full((n, 3), float(np.log(scale))),
-        "quats": torch.tensor([[1.0, 0, 0, 0]]).repeat(n, 1),
-        "opacity_logits": torch.full((n,), float(np.log(opacity / (1 - opacity)))),
-        "sh_dc": torch.full((n, 3), colour),
-        "sh_rest": torch.zeros(n, 15, 3),
-        "obj_feat": torch.zeros(n, 16),
-    }
+    return Gaussians(
+        means=torch.as_tensor(centres, dtype=torch.float32),
+        log_scales=torch.full((n, 3), float(np.log(scale))),
+        quats=torch.tensor([[1.0, 0, 0, 0]]).repeat(n, 1),
+        opacity_logits=torch.full((n,), float(np.log(opacity / (1 - opacity)))),
+        sh_dc=torch.full((n, 3), colour),
+        sh_rest=torch.zeros(n, 15, 3),
+        obj_feat=torch.zeros(n, 16),
+    )
 
 
 def test_a_haze_over_the_object_goes_with_it_what_stands_before_it_stays():
@@ -37,13 +38,12 @@ def test_a_haze_over_the_object_goes_with_it_what_stands_before_it_stays():
     haze = rng.normal(size=(40, 3)) * [0.07, 0.07, 0.0] + [0.15, 0.0, 0.55]
     front = rng.normal(size=(40, 3)) * [0.03, 0.03, 0.0] + [-0.3, 0.0, 0.9]
     wall = np.c_[rng.uniform(-2, 2, (400, 2)), np.full(400, -1.5)]
-    parts = [
+    g = Gaussians.concat(
         _blobs(ball, 0.08, 0.99, 0.5),
         _blobs(haze, 0.05, 0.03, 1.5),
         _blobs(front, 0.05, 0.99, 1.5),
         _blobs(wall, 0.15, 0.99, -1.0),
-    ]
-    g = Gaussians(**{k: torch.cat([p[k] for p in parts]) for k in parts[0]})
+    )
     selected = np.r_[np.ones(400, bool), np.zeros(480, bool)]
     camera = PinholeCamera(64, 64, 60.0, 60.0, 32.0, 32.0)
     tilt = np.radians(25)
