@@ -131,8 +131,9 @@ def object_click(
         pose = torch.as_tensor(view.cam_from_world, dtype=torch.float32, device=backend.device)
         region = segment_pixels(gaussians, selected.astype(np.uint8), view.camera, pose, backend=backend) == 1
         distance = _border_distance(region)
-        if distance.max() > depth_best:
-            best, depth_best = Click(view.name, *_deepest(distance)), float(distance.max())
+        depth = float(distance.max())
+        if depth > depth_best:
+            best, depth_best = Click(view.name, *_deepest(distance)), depth
     return best
 
 
