@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import cv2
@@ -44,6 +45,7 @@ import torch
 from tqdm import tqdm
 
 from dataset_tools.cameras import PinholeCamera
+from dataset_tools.infra.engine import task_cpus
 from gsseg.model.environment import Environment, background_image
 from gsseg.model.gaussians import Gaussians, gaussians_from_points
 from gsseg.render import Backend, get_backend, render, surface_depth, to_uint8
@@ -272,7 +274,10 @@ def fill_removal(
     holes = [s for s in shown if s.unseen.any()]
     if not holes:
         return Filled(kept.to(gaussians.means.device), 0, share, time.perf_counter() - start)
-    targets = {s.index: inpaint(s.rgb, s.unseen) for s in holes}
+    with ThreadPoolExecutor(task_cpus()) as pool:  # OpenCV's inpainting runs on one core, without the GIL
+        targets = dict(
+            zip([s.index for s in holes], pool.map(inpaint, [s.rgb for s in holes], [s.unseen for s in holes]))
+        )
     seeds = _seed(_spread(holes, options.views), targets, views, seen_by, kept.obj_feat.shape[1], options)
     crops = [_crop(s, targets.get(s.index, s.rgb), views[s.index], kept, environment, options, backend) for s in shown]
     fill = _fit(seeds.to(backend.device), crops, sh_degree, extent, options, backend, progress)
@@ -396,10 +401,11 @@ def _crop(
     y0, y1 = max(int(ys.min()) - options.margin, 0), min(int(ys.max()) + options.margin + 1, H)
     camera = crop_camera(view.camera, x0, y0, x1, y1)
     pose = torch.as_tensor(view.cam_from_world, dtype=torch.float32, device=backend.device)
-    with torch.no_grad():
+    with torch.no_grad():  # the environment is frozen too
         drawn = render(kept, camera, pose, sh_degree=0, with_features=False, backend=backend).radii > 0
+        background = background_image(environment, camera, pose)
     pixels = torch.as_tensor(target[y0:y1, x0:x1], dtype=torch.float32, device=backend.device) / 255
-    return _Crop(camera, pose, pixels, background_image(environment, camera, pose), kept.select(drawn))
+    return _Crop(camera, pose, pixels, background, kept.select(drawn))
 
 
 def _fit(

@@ -24,7 +24,7 @@ from dataset_tools.depth_maps import read_depth
 from dataset_tools.image_files import encode_png, read_mask
 from dataset_tools.infra.atomic import atomic_directory, write_bytes_atomic
 from dataset_tools.infra.checked_files import read_checked, write_checked
-from dataset_tools.infra.engine import Engine
+from dataset_tools.infra.engine import Engine, task_cpus
 from dataset_tools.infra.errors import InputError, OptionError, OutputExists
 from dataset_tools.infra.locks import exclusive_folder
 from dataset_tools.infra.names import plain_name
@@ -149,6 +149,7 @@ def _segments(
         propose_view,
         [(images[k], scene.views[k], paths[k], depths[k], heights[k]) for k in todo],
         local_state=proposer,
+        threads=task_cpus() if proposer.threadable else 1,
         desc=f"proposing ({cfg.proposer})",
         progress=progress,
     )

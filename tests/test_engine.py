@@ -90,3 +90,18 @@ def test_one_scene_has_its_views_proposed_by_ray_workers_as_here(ray_engine, sma
             [(view.load_image(), view, None, None, None)],
             progress=False,
         )
+
+
+def test_local_threads_propose_the_views_as_one_thread_does_in_order(small_scene):
+    proposer = make_proposer(BuildConfig())
+    assert proposer.threadable
+    jobs = [(v.load_image(), v, None, None, None) for v in load_scene(small_scene.root).views]
+    one, two = (
+        Engine().map_stateful(None, propose_view, jobs, local_state=proposer, threads=n, progress=False) for n in (1, 2)
+    )
+    assert len(one) == len(jobs) and all((a == b).all() for a, b in zip(one, two))
+    assert len({a.tobytes() for a in one}) > 1  # the views differ, so the order is checked
+    with pytest.raises(InputError, match="'../up': give a plain folder name"):
+        Engine().map_stateful(
+            None, lambda _, x: CHECK_NAME(x), ["a", "../up", "b"], local_state=0, threads=2, progress=False
+        )

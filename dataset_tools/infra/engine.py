@@ -1,4 +1,4 @@
-"""Where independent pieces of work run: here, one after another (``local``), or as tasks on
+"""Where independent pieces of work run: here, one after another or on threads (``local``), or as tasks on
 a Ray cluster (``ray``, the optional ``ray`` extra): a local one started for the command, or
 the cluster at ``--address``.
 
@@ -13,7 +13,9 @@ from __future__ import annotations
 import os
 import socket
 from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
+from functools import partial
 from typing import Any
 
 from tqdm import tqdm
@@ -64,17 +66,23 @@ class Engine:
         items: Sequence[Any],
         *,
         local_state: Any = None,
+        threads: int = 1,
         desc: str = "items",
         progress: bool = True,
     ) -> list[Any]:
         """``[fn(state, x) for x in items]``, in order, where each worker makes ``state = setup()``
-        once: here one state (``local_state`` when given: one already made); on Ray one actor
-        per task slot of the cluster (its CPUs over the CPUs of a task, at most one per item),
-        the items spread over them. ``setup`` and ``fn`` must be importable by the workers, as
-        for :meth:`map`."""
+        once: here one state (``local_state`` when given: one already made), shared by
+        ``threads`` threads (more than one only for an ``fn`` that is safe to call at once and
+        spends its time outside the GIL); on Ray one actor per task slot of the cluster (its
+        CPUs over the CPUs of a task, at most one per item), the items spread over them.
+        ``setup`` and ``fn`` must be importable by the workers, as for :meth:`map`."""
         if self.name == "local" or not items:
             state = setup() if local_state is None else local_state
-            return [fn(state, x) for x in tqdm(items, desc=desc, unit="item", disable=not progress, leave=False)]
+            bar = partial(tqdm, total=len(items), desc=desc, unit="item", disable=not progress, leave=False)
+            if threads <= 1:
+                return [fn(state, x) for x in bar(items)]
+            with ThreadPoolExecutor(threads) as pool:
+                return list(bar(pool.map(partial(fn, state), items)))
         ray = _init_ray(self.address)
         resources = self._resources()
         slots = int(ray.cluster_resources().get("CPU", 1)) // resources["num_cpus"]

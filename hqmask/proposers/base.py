@@ -32,6 +32,9 @@ class Proposer(Protocol):
     #: Folder name of the per-view proposal cache (it names everything the proposals depend
     #: on), or None for proposers not worth caching.
     cache_name: str | None
+    #: Whether ``propose`` runs on one core, mostly outside the GIL, and may be called from
+    #: several threads at once: a local build then proposes as many views at once as it has CPUs.
+    threadable: bool
 
     def propose(
         self, image: np.ndarray, view: View, depth: np.ndarray | None = None, height: Heights | None = None

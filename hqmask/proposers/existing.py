@@ -20,6 +20,7 @@ class ExistingMasks:
     """Proposals read from a mask folder of the scene: one proposal per ID of the view's map."""
 
     cache_name = None
+    threadable = False  # reading a map is quick
 
     def propose(
         self, image: np.ndarray, view: View, depth: np.ndarray | None = None, height: Heights | None = None

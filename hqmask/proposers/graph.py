@@ -158,6 +158,7 @@ class GraphProposer:
     standing_height: float = 0.25
     contact_height: float = 0.1
     cache_name = "graph"
+    threadable = True
 
     def propose(
         self, image: np.ndarray, view: View, depth: np.ndarray | None = None, height: Heights | None = None

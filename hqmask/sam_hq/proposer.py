@@ -17,6 +17,7 @@ class SamHQProposer:
         self.generator = generator
         points = generator.config.points_per_side
         self.cache_name = f"sam-hq-{generator.model.fingerprint}-p{points}"
+        self.threadable = False  # ONNX Runtime already runs on every core
 
     def propose(
         self, image: np.ndarray, view: View, depth: np.ndarray | None = None, height: Heights | None = None
