@@ -171,56 +171,105 @@ def edit_run(
     ``gaussians.ply``, ``renders/<view>.png`` of the scene's ``split`` views, ``video.mp4`` of
     those renders, and ``edit.json``. ``fill``: a removal fills what no training view saw
     behind the object (:mod:`gsseg.fill`)."""
+    return edit_runs(
+        run_dir,
+        {op: color},
+        names=None if name is None else {op: name},
+        point=point,
+        clicks=clicks,
+        object_id=object_id,
+        scene_dir=scene_dir,
+        split=split,
+        k=k,
+        fps=fps,
+        fill=fill,
+        backend=backend,
+        overwrite=overwrite,
+        other_scene=other_scene,
+        progress=progress,
+    )[0]
+
+
+def edit_runs(
+    run_dir: Path | str,
+    ops: dict[str, tuple[int, int, int] | None],
+    *,
+    names: dict[str, str] | None = None,
+    point=None,
+    clicks: list[Click] | tuple[Click, ...] = (),
+    object_id: int | None = None,
+    scene_dir: Path | str | None = None,
+    split: str = "test",
+    k: int = 20,
+    fps: int = 8,
+    fill: bool = True,
+    backend: str | Backend = "auto",
+    overwrite: bool = False,
+    other_scene: bool = False,
+    progress: bool = True,
+) -> list[Path]:
+    """:func:`edit_run` of each op of ``ops`` (op: its colour, None but for a recolour) on one
+    selection, made once; ``names``: the folder name of an op (default: ``<op>_<selection>``).
+    Returns the edit folders in the order of ``ops``."""
     check_prompts(point, clicks, object_id)
-    if name is not None:
-        plain_name(name, "name")
-    check_edit(op, color)
-    if color is not None and not all(0 <= c <= 255 for c in color):
-        raise OptionError("{color}: give three values in 0..255.", color=tuple(color))
+    names = names or {}
+    for op, color in ops.items():
+        check_edit(op, color)
+        if color is not None and not all(0 <= c <= 255 for c in color):
+            raise OptionError("{color}: give three values in 0..255.", color=tuple(color))
+        if op in names:
+            plain_name(names[op], "name")
     run = load_run(run_dir, other_scene=other_scene)
     segmentation = run.labels()
     backend = get_backend(backend)
     scene = run.scene(scene_dir)
     chosen = select(run, segmentation, scene, point=point, clicks=clicks, object_id=object_id, k=k, backend=backend)
-    rgb = tuple(c / 255 for c in color) if color is not None else None
-    mask, served = chosen.mask, None
-    if op in COMPLETED_OPS:
-        served = complete_selection(run.gaussians, mask, scene.split("train"), backend=backend)
-        mask = served.mask
-    filled = None
-    if op == "remove" and fill:
-        filled = fill_run_removal(run, mask, scene.split("train"), backend=backend, progress=progress)
-        edited = filled.gaussians
-    else:
-        edited = apply_edit(run.gaussians, mask, op, rgb)
+    served = None
+    if any(op in COMPLETED_OPS for op in ops):
+        served = complete_selection(run.gaussians, chosen.mask, scene.split("train"), backend=backend)
     record = {
-        "op": op,
         "object_id": chosen.object_id,
         "point": None if point is None else np.asarray(point).tolist(),
         "clicks": [{"view": c.view, "u": c.u, "v": c.v, "positive": c.positive} for c in clicks],
-        "color": color,
         "selected_gaussians": int(chosen.mask.sum()),
         "labels": segmentation.settings(),
-        **(
-            {}
-            if served is None
-            else {"served_alone": served.added, "ghost_share": [served.ghost_before, served.ghost_after]}
-        ),
-        **({} if op != "remove" else {"removal_fill": None if filled is None else filled.record()}),
     }
-    return write_edit(
-        run,
-        edited,
-        run.folder.edit(name or f"{op}_{chosen.name}"),
-        record,
-        scene=scene,
-        background=edit_background([op]),
-        split=split,
-        fps=fps,
-        backend=backend,
-        overwrite=overwrite,
-        progress=progress,
-    )
+    written = []
+    for op, color in ops.items():
+        mask = served.mask if op in COMPLETED_OPS else chosen.mask
+        filled = None
+        if op == "remove" and fill:
+            filled = fill_run_removal(run, mask, scene.split("train"), backend=backend, progress=progress)
+            edited = filled.gaussians
+        else:
+            edited = apply_edit(run.gaussians, mask, op, None if color is None else tuple(c / 255 for c in color))
+        op_record = {
+            "op": op,
+            **record,
+            "color": color,
+            **(
+                {"served_alone": served.added, "ghost_share": [served.ghost_before, served.ghost_after]}
+                if op in COMPLETED_OPS
+                else {}
+            ),
+            **({} if op != "remove" else {"removal_fill": None if filled is None else filled.record()}),
+        }
+        written.append(
+            write_edit(
+                run,
+                edited,
+                run.folder.edit(names.get(op) or f"{op}_{chosen.name}"),
+                op_record,
+                scene=scene,
+                background=edit_background([op]),
+                split=split,
+                fps=fps,
+                backend=backend,
+                overwrite=overwrite,
+                progress=progress,
+            )
+        )
+    return written
 
 
 def write_edit(

@@ -42,7 +42,7 @@ from dataset_tools.scene import GT_MASKS, linked_scene
 from dataset_tools.sfm import run_sfm
 from dataset_tools.synth import SynthConfig, generate_scene
 from eval.report import report_run
-from gsseg.edits import Selection, edit_run, select
+from gsseg.edits import Selection, edit_runs, select
 from gsseg.model.ply import read_ply
 from gsseg.render import Backend, get_backend
 from gsseg.render.views import render_run
@@ -106,7 +106,7 @@ class _StageClock:
 def _demo_selection(
     scene_dir: Path, run: Run, segmentation: Segmentation, synth_point: np.ndarray | None, backend: Backend
 ) -> tuple[Selection, dict]:
-    """What the demo edits, and the prompt that selects it (``edit_run``'s keywords): the
+    """What the demo edits, and the prompt that selects it (``edit_runs``'s keywords): the
     synthetic scene's first object, by a 3D point at its centre; in a user's scene the object
     the photos frame (:func:`gsseg.segment.prompts.framed_object`) of those that do not cover
     most of every view (the scene, not an object in it); in a close-up, where every object
@@ -334,10 +334,8 @@ def _run_demo(
     stages.done("segmentation")
     run = load_run(run_dir)
     selection, prompt = _demo_selection(scene_dir, run, segmentation, synth_point, backend)
-    edits = {
-        op: edit_run(run_dir, op, color=color, scene_dir=scene_dir, backend=backend, progress=progress, **prompt)
-        for op, color in (("remove", None), ("extract", None), ("recolor", (255, 40, 200)))
-    }
+    ops = {"remove": None, "extract": None, "recolor": (255, 40, 200)}
+    edits = dict(zip(ops, edit_runs(run_dir, ops, scene_dir=scene_dir, backend=backend, progress=progress, **prompt)))
     stages.done("edits")
     report = out / "report"
     with torch.no_grad():

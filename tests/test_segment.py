@@ -10,7 +10,7 @@ import torch
 
 from dataset_tools.cameras import PinholeCamera
 from dataset_tools.infra.errors import InputError
-from gsseg.edits import apply_edit
+from gsseg.edits import apply_edit, edit_runs
 from gsseg.model.gaussians import Gaussians
 from gsseg.model.ply import read_ply
 from gsseg.render import BACKENDS, render
@@ -204,6 +204,24 @@ def test_segment_edit_and_render_segments_from_the_command_line(trained, small_s
     frames = sorted((run / "edits" / "gone" / "renders").glob("*.png"))
     assert len(frames) == len(scene.split("train")) and (run / "edits" / "gone" / "video.mp4").stat().st_size > 0
     assert read_image(frames[0]).shape == (96, 96, 3)
+
+    # Several edits of one selection, made once: each folder as its own edit writes it.
+    both = edit_runs(
+        run,
+        {"remove": None, "recolor": (255, 0, 0)},
+        names={"remove": "gone2"},
+        point=point,
+        split="train",
+        fill=False,
+        progress=False,
+    )
+    assert [p.name for p in both] == ["gone2", "recolor_2"]
+    assert (both[0] / "gaussians.ply").read_bytes() == (run / "edits" / "gone" / "gaussians.ply").read_bytes()
+    record = json.loads((both[0] / "edit.json").read_text())
+    assert record.pop("point") == pytest.approx(edit.pop("point")) and record == edit  # the CLI's point is rounded
+    recoloured = read_ply(both[1] / "gaussians.ply").sh_dc
+    changed = (recoloured != read_ply(run / "gaussians.ply").sh_dc).any(-1).numpy()
+    assert changed.any() and not (changed & ~seg.selection(2)).any()
 
     r = subprocess.run([gsseg, "edit", str(run), "--object-id", "42", "--op", "remove"], capture_output=True, text=True)
     assert r.returncode == 2 and "object 42 is not among" in r.stderr and "Traceback" not in r.stderr

@@ -79,7 +79,7 @@ class SfmConfig:
     overlap: int = 10  # sequential matching: each image with its next ``overlap``
     keyframes: int = 30  # sequential matching: keyframes matched exhaustively among themselves
     neighbours: int = 20  # retrieval matching: each image with this many most alike
-    deterministic: bool = True  # SIFT, matching and mapping on one thread: the same photos and seed, the same model
+    deterministic: bool = True  # SIFT and mapping on one thread: the same photos and seed, the same model
     seed: int = 0  # of the two-view verification's RANSAC and of the mapper
 
     def check(self) -> None:
@@ -354,9 +354,10 @@ class _SfmJob:
 
     @property
     def threads(self) -> int:
-        # On several threads COLMAP's CPU SIFT gives slightly different keypoints from run to run,
-        # its matcher writes the verified pairs in another order, and its bundle adjustment (Ceres)
-        # rounds differently: one thread gives the same model again.
+        # On several threads COLMAP's CPU SIFT gives slightly different keypoints from run to run
+        # and its bundle adjustment (Ceres) rounds differently: one thread gives the same model
+        # again. Matching runs on every core: each pair is matched and verified on its own, with
+        # the RANSAC seeded, into tables keyed by the pair (docs/sfm.md).
         return 1 if self.cfg.deterministic else -1
 
     @property
@@ -444,7 +445,7 @@ class _SfmJob:
         if self.steps.finished("matches", options):
             return matcher
         _rebuild_database_without_matches(pycolmap, self.database)
-        matching = pycolmap.FeatureMatchingOptions(use_gpu=False, num_threads=self.threads)
+        matching = pycolmap.FeatureMatchingOptions(use_gpu=False, num_threads=-1)  # the same matches on any count
         verification = pycolmap.TwoViewGeometryOptions()
         verification.ransac.random_seed = cfg.seed
         if matcher == "exhaustive":
