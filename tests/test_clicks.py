@@ -247,6 +247,41 @@ def test_a_positive_click_adds_a_part_no_label_holds_and_keeps_what_was_selected
     assert np.array_equal(both, selector.select([_click(n, a), _click(n, b)]))
 
 
+def test_a_positive_click_adds_a_part_the_masks_hold_apart_and_nothing_far_off():
+    """A red ball with a pale cap on its top and a blue wall behind: three views hold the cap
+    as a region of its own, three under the background with the wall (a highlight on a
+    bronze head, where the sky's reflection joins the sky). The first click takes the ball
+    alone; a click on the cap adds all of it, where the views' vote alone adds its five
+    seeds, and nothing of the wall."""
+    rng = np.random.default_rng(0)
+    ball = rng.normal(0, 0.3, (200, 3))
+    cap = rng.normal(0, 0.08, (30, 3)) + [0, 0, 0.35]
+    wall = np.c_[rng.uniform(-2, 2, 200), np.full(200, 3.0), rng.uniform(-2, 2, 200)]
+    rgb = np.repeat(np.array([[200, 30, 30], [230, 230, 220], [30, 30, 200]]), [200, 30, 200], axis=0)
+    rgb = np.clip(rgb + rng.normal(0, 8, rgb.shape), 0, 255).astype(np.uint8)  # colours vary, as fitted ones do
+    g = gaussians_from_points(np.concatenate([ball, cap, wall]), rgb, initial_opacity=0.9)
+    a, c, b = np.arange(200), np.arange(200, 230), np.arange(230, 430)
+    n = len(g)
+    both_kinds = _regions(n, [a, c], views=3)
+    background = _regions(n, [a], views=3)
+    regions = RegionWeights(
+        sp.vstack([both_kinds.matrix, background.matrix]).tocsr(),
+        np.concatenate([both_kinds.view, background.view + 3]),
+        np.concatenate([both_kinds.label, background.label]),
+        np.zeros(len(both_kinds.view) + len(background.view), np.uint8),
+        ("m",),
+    )
+    labels = np.zeros(n, np.uint8)
+    labels[a] = 1
+    selector = ClickSelector(g, labels, regions)
+    first = selector.select([_click(n, a)])
+    assert first[a].all() and not first[c].any() and not first[b].any()
+    after = selector.cut([_click(n, a), _click(n, c)], first)
+    assert after[a].all() and after[c].all() and not after[b].any()
+    no_growth = ClickSelector(g, labels, regions, ClickOptions(part_reach=0.0))
+    assert no_growth.cut([_click(n, a), _click(n, c)], first)[c].sum() <= 5
+
+
 def test_a_part_raises_the_views_vote_and_lowers_it_nowhere():
     """Three views show A alone as an object (B under the background), three show B alone (A
     under the background): the first click on A is seen in the first three, and A's share is

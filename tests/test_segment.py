@@ -218,7 +218,10 @@ def test_segment_edit_and_render_segments_from_the_command_line(trained, small_s
     assert [p.name for p in both] == ["gone2", "recolor_2"]
     assert (both[0] / "gaussians.ply").read_bytes() == (run / "edits" / "gone" / "gaussians.ply").read_bytes()
     record = json.loads((both[0] / "edit.json").read_text())
-    assert record.pop("point") == pytest.approx(edit.pop("point")) and record == edit  # the CLI's point is rounded
+    # The CLI's point is rounded, and its process sums the ghost share on another thread count.
+    for rounded in ("point", "ghost_share"):
+        assert record.pop(rounded) == pytest.approx(edit.pop(rounded), rel=1e-6)
+    assert record == edit
     recoloured = read_ply(both[1] / "gaussians.ply").sh_dc
     changed = (recoloured != read_ply(run / "gaussians.ply").sh_dc).any(-1).numpy()
     assert changed.any() and not (changed & ~seg.selection(2)).any()

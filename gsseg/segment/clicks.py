@@ -39,7 +39,13 @@ max-flow solver (PyMaxflow), with a cost per Gaussian from five kinds of evidenc
   its view shows (:meth:`ClickSelector._in_sight`: the back of the head stays), and only
   what looks more like the clicked part than like the selection
   (:meth:`ClickSelector._alike`: a green floater beside a bronze head goes, the head's side
-  next to it stays).
+  next to it stays);
+- **a later positive click**, the same mirrored (:meth:`ClickSelector._grown`): over the
+  Gaussians nearer, along the graph, to its seeds that lie beside the selection than to those
+  the views hold off the object, the click's word replaces the rest, where its view shows
+  them and they look like the clicked part: a highlight on a bronze head that the masks hold
+  as a region of its own comes in whole; a click on something off the selection's surface
+  grows nothing.
 
 The seeds are hard constraints; the source's side of the cut is the selection (parts apart
 in space, several objects under one mask, stay together where the views join them). A later
@@ -108,9 +114,17 @@ class ClickOptions:
             masks joined to the object would bring what they joined).
         part_share: ... and where it holds this share of the click's weight in that view (the
             click lies on it, not beside it).
-        split_weight: weight of a negative click over the Gaussians on its side.
+        split_weight: weight of a negative click over the Gaussians on its side, and of a
+            later positive click over its part's (:meth:`ClickSelector._grown`).
         split_full: how far on a negative click's side (:meth:`GaussianGraph.split`) its word
-            replaces all else (0.5: three times as near to it as to a positive click).
+            replaces all else (0.5: three times as near to it as to a positive click); the
+            same for a later positive click's part.
+        part_reach: a later positive click grows a part from its seeds that lie within this
+            many times the Gaussians' median spacing of a selected one (a part beside it).
+        off_share: ... up to the Gaussians the views hold off the object (unselected, with
+            under this share of their weight in the object's regions, ...
+        off_weight: ... or under one half of a weight at least this many times the median
+            Gaussian's: large hazy ones seen much) or a negative click's seeds.
         against_margin: on a negative click's side, a Gaussian the views hold to the object
             by twice this share more firmly than the clicked part keeps its evidence
             (:meth:`ClickSelector._yielding`).
@@ -144,6 +158,9 @@ class ClickOptions:
     part_share: float = 0.5
     split_weight: float = 4.0
     split_full: float = 0.5
+    part_reach: float = 3.0
+    off_share: float = 0.05
+    off_weight: float = 16.0
     against_margin: float = 0.2
     shown_share: float = 0.1
     against_colour: float = 1.0
@@ -219,13 +236,15 @@ class ClickEvidence:
 @dataclass(frozen=True)
 class GaussianGraph:
     """Each Gaussian joined to its nearest ones: edges ``a`` -> ``b`` (E,), their ``affinity``
-    (E,) in (0, 1] (like colour and feature, near), and their ``length`` (E,) along which a
-    negative click reaches (distance, colour and feature differences, each over its median)."""
+    (E,) in (0, 1] (like colour and feature, near), their ``length`` (E,) along which a
+    click's side reaches (distance, colour and feature differences, each over its median), and
+    the Gaussians' median ``spacing``."""
 
     a: np.ndarray
     b: np.ndarray
     affinity: np.ndarray
     length: sp.csr_matrix
+    spacing: float  # the median distance between a Gaussian and its nearest neighbour
 
     @classmethod
     def of(cls, gaussians: Gaussians, neighbours: int) -> GaussianGraph:
@@ -233,10 +252,11 @@ class GaussianGraph:
         n, k = len(means), min(neighbours, len(means) - 1)
         if k < 1:
             empty = np.zeros(0, np.int64)
-            return cls(empty, empty, np.zeros(0), sp.csr_matrix((n, n)))
+            return cls(empty, empty, np.zeros(0), sp.csr_matrix((n, n)), 0.0)
         colours = gaussians.base_colours.detach().cpu().numpy()
         features = gaussians.obj_feat.detach().cpu().numpy().astype(np.float64)
         dist, nbr = cKDTree(means).query(means, k=k + 1)
+        spacing = float(np.median(dist[:, 1]))
         a, b = np.repeat(np.arange(n), k), nbr[:, 1:].ravel()
         lo, hi = np.minimum(a, b), np.maximum(a, b)
         _, first = np.unique(lo * n + hi, return_index=True)  # each undirected edge once
@@ -249,7 +269,7 @@ class GaussianGraph:
         c = scaled(np.linalg.norm(colours[a] - colours[b], axis=1))
         f = scaled(np.linalg.norm(features[a] - features[b], axis=1))
         length = sp.coo_matrix((d + 2 * (c + f) + 1e-9, (a, b)), shape=(n, n)).tocsr()
-        return cls(a, b, np.exp(-(c**2 + f**2) / 4) / (1 + d), length)
+        return cls(a, b, np.exp(-(c**2 + f**2) / 4) / (1 + d), length, spacing)
 
     def split(self, negative: np.ndarray, positive: np.ndarray) -> np.ndarray:
         """(N,) in [0, 1]: how far each Gaussian lies on the side of the ``negative`` seeds,
@@ -419,6 +439,7 @@ class ClickSelector:
             )
         self.options = options
         self.labels = np.asarray(labels)
+        self.means = gaussians.means.detach().cpu().numpy().astype(np.float64)
         self.graph = GaussianGraph.of(gaussians, options.neighbours)
         self.vote = RegionVote(regions)
         self.colours = ColourModel(
@@ -459,11 +480,15 @@ class ClickSelector:
             cost += o.appearance_weight * self._appearance(cost, share, positive)
         if before is not None:
             cost += o.stickiness * np.where(before, 1.0, -1.0)
+            if clicks[-1].positive:  # deep in a later positive click's part its word outweighs all else
+                side = self._grown(clicks[-1], np.setdiff1d(seeds[-1][0], negative), negative, share, weight, before)
+                cost = (1 - side) * cost + o.split_weight * side
         if len(negative):  # deep on a negative click's side its word outweighs all else
             side = np.clip(self.graph.split(negative, positive) / o.split_full, 0, 1)
             side *= self._yielding(clicks, negative, voted_regions, share, weight > 0)
             side *= self._in_sight(clicks)
-            side *= self._alike(negative, before)
+            if before is not None:
+                side *= self._alike(negative, before)
             cost = (1 - side) * cost - o.split_weight * side
         cut = self._min_cut(cost, positive, negative)
         if before is None:
@@ -546,19 +571,57 @@ class ClickSelector:
             term = self.colours.ratio(selected & (share >= o.appearance_firm), ~selected)
         return term
 
-    def _alike(self, negative: np.ndarray, before: np.ndarray | None) -> np.ndarray:
-        """(N,) in [0, 1]: how far each Gaussian lies within a negative click's reach, by its
-        colour: fully where it is at least as likely under the colours of the click's
-        ``negative`` (S,) seeds as under those of the selection ``before`` (N,), none where it is
-        :attr:`ClickOptions.against_colour` log-units likelier under the selection's, linearly
-        between. A floater beside a head goes, the head's own side next to it, of the head's
-        colours, stays; where the clicked part looks like the object, the graph alone decides."""
-        if before is None:
-            return np.ones(len(self.labels))
-        seeds = np.zeros(len(self.labels), bool)
-        seeds[negative] = True
-        ratio = self.colours.ratio(seeds, before & ~seeds)
+    def _alike(self, seeds: np.ndarray, others: np.ndarray) -> np.ndarray:
+        """(N,) in [0, 1]: how far each Gaussian looks like a click's ``seeds`` (S,) rather
+        than like the ``others`` (N,) bool: fully where it is at least as likely under the
+        seeds' colours as under the others', none where it is
+        :attr:`ClickOptions.against_colour` log-units likelier under the others', linearly
+        between. For a negative click the others are the selection: a floater beside a head
+        goes, the head's own side next to it, of the head's colours, stays; where the clicked
+        part looks like the object, the graph alone decides."""
+        mask = np.zeros(len(self.labels), bool)
+        mask[seeds] = True
+        ratio = self.colours.ratio(mask, others & ~mask)
         return np.clip(1 + ratio / self.options.against_colour, 0, 1)
+
+    def _grown(
+        self,
+        click: ClickEvidence,
+        seeds: np.ndarray,
+        negative: np.ndarray,
+        share: np.ndarray,
+        weight: np.ndarray,
+        before: np.ndarray,
+    ) -> np.ndarray:
+        """(N,) in [0, 1]: how far each Gaussian lies in the part a later positive ``click``
+        adds, as a negative click's side mirrored: over the graph, nearer to its ``seeds`` (S,)
+        that lie beside the selection ``before`` (N,) (within :attr:`ClickOptions.part_reach`
+        spacings of a selected Gaussian) than to the Gaussians the views hold off the object
+        (unselected, seen, with a ``share`` (N,) of their ``weight`` (N,) in the object's
+        regions under :attr:`ClickOptions.off_share`) and the ``negative`` (S',) seeds; shown
+        by the click's view and alike in colour to the seeds rather than to the rest of the
+        unselected Gaussians. A highlight on a bronze head that the masks hold as a region of
+        its own, and the views therefore vote off the head, comes in whole with a click on
+        it; a click on what lies off the selection's surface grows nothing."""
+        o = self.options
+        seeds = seeds[~before[seeds]]  # what the click adds, not what it lands on of the selection
+        if not before.any() or not len(seeds):
+            return np.zeros(len(self.labels))
+        beside = cKDTree(self.means[before]).query(self.means[seeds])[0]
+        seeds = seeds[beside <= o.part_reach * self.graph.spacing]
+        if not len(seeds):
+            return np.zeros(len(self.labels))
+        seen = weight > 0
+        heavy = weight >= o.off_weight * float(np.median(weight[seen])) if seen.any() else seen
+        off = np.flatnonzero(~before & seen & ((share < o.off_share) | heavy & (share < 0.5)))
+        side = np.clip(self.graph.split(seeds, np.setdiff1d(np.union1d(off, negative), seeds)) / o.split_full, 0, 1)
+        return side * self._shown_by(click) * self._alike(seeds, ~before)
+
+    def _shown_by(self, click: ClickEvidence) -> np.ndarray:
+        """(N,) in [0, 1]: how much of each Gaussian the ``click``'s view shows, in shares of
+        :attr:`ClickOptions.shown_share` (all of each Gaussian for a click without a view)."""
+        shown = np.ones(len(self.labels)) if click.shown is None else click.shown
+        return np.clip(shown / self.options.shown_share, 0, 1)
 
     def _in_sight(self, clicks: Sequence[ClickEvidence]) -> np.ndarray:
         """(N,) in [0, 1]: how far each Gaussian lies within a negative click's reach, by how
@@ -569,8 +632,7 @@ class ClickSelector:
         reach = np.zeros(len(self.labels))
         for click in clicks:
             if not click.positive:
-                shown = np.ones(len(self.labels)) if click.shown is None else click.shown
-                reach = np.maximum(reach, np.clip(shown / self.options.shown_share, 0, 1))
+                reach = np.maximum(reach, self._shown_by(click))
         return reach
 
     def _yielding(
