@@ -4,7 +4,7 @@ A click is the set of Gaussians seen at the clicked pixel, each with its blended
 (:func:`gsseg.segment.prompts.click_evidence`); the Gaussians that carry most of that weight are
 its seeds. The selection is a cut over a graph of the Gaussians (each joined to its nearest
 neighbours; an edge is strong between Gaussians of like colour and object feature) made by a
-max-flow solver (PyMaxflow), with a cost per Gaussian from five kinds of evidence:
+max-flow solver (PyMaxflow), with a cost per Gaussian from six kinds of evidence:
 
 - **the views** (the first positive click): in every training view where the click's Gaussians
   are seen, the mask region they fall in (of each mask layer: the masks that voted and the
