@@ -598,7 +598,8 @@ class ClickSelector:
         that lie beside the selection ``before`` (N,) (within :attr:`ClickOptions.part_reach`
         spacings of a selected Gaussian) than to the Gaussians the views hold off the object
         (unselected, seen, with a ``share`` (N,) of their ``weight`` (N,) in the object's
-        regions under :attr:`ClickOptions.off_share`) and the ``negative`` (S',) seeds; shown
+        regions under :attr:`ClickOptions.off_share`, or under one half at a weight of at least
+        :attr:`ClickOptions.off_weight` times the median) and the ``negative`` (S',) seeds; shown
         by the click's view and alike in colour to the seeds rather than to the rest of the
         unselected Gaussians. A highlight on a bronze head that the masks hold as a region of
         its own, and the views therefore vote off the head, comes in whole with a click on
