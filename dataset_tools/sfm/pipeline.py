@@ -27,8 +27,10 @@ from __future__ import annotations
 import hashlib
 import itertools
 import json
+import multiprocessing
 import shutil
 import time
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from types import ModuleType
@@ -307,9 +309,12 @@ class _Steps:
 def run_sfm(
     photos: Path | str, out: Path | str, cfg: SfmConfig = SfmConfig(), *, overwrite: bool = False, progress: bool = True
 ) -> SfmResult:
-    """Make a scene folder at ``out`` from a folder of photos or a video file ``photos``."""
-    pycolmap = load_pycolmap()  # after the image libraries: importing it first breaks PNG writes
+    """Make a scene folder at ``out`` from a folder of photos or a video file ``photos``.
 
+    The steps run in a fresh process (started with ``spawn``): COLMAP keeps state between
+    models in a process, and a second model made in one that had made others has come out
+    different (docs/sfm.md). A script that calls this needs the ``if __name__ == "__main__":``
+    guard that ``multiprocessing`` asks of every spawning script."""
     cfg.check()
     photos, out = Path(photos), Path(out)
     if not photos.exists():
@@ -325,11 +330,14 @@ def run_sfm(
             file=out,
             overwrite=True,
         )
+    found = None if video else _input_images(photos)
+    _check_free_space(photos, out, cfg.frames if video else len(found))
     work = out / ".sfm"
     new_out, new_work = not out.exists(), not work.exists()
     try:
         with exclusive(work / "lock", out, "this scene"):
-            return _SfmJob(pycolmap, photos, out, work, video, cfg, _Steps(work), progress).run(overwrite)
+            with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as fresh:
+                return fresh.submit(_run_job, photos, out, work, video, found, cfg, progress, overwrite).result()
     except InputError:  # a refusal leaves nothing behind; an interruption keeps the finished steps
         if new_work:
             shutil.rmtree(work, ignore_errors=True)
@@ -338,16 +346,32 @@ def run_sfm(
         raise
 
 
+def _run_job(
+    photos: Path,
+    out: Path,
+    work: Path,
+    video: bool,
+    found: list[str] | None,
+    cfg: SfmConfig,
+    progress: bool,
+    overwrite: bool,
+) -> SfmResult:
+    """:func:`run_sfm`'s steps, in the fresh process; the caller holds the lock on ``work``."""
+    pycolmap = load_pycolmap()  # after the image libraries: importing it first breaks PNG writes
+    return _SfmJob(pycolmap, photos, out, work, video, found, cfg, _Steps(work), progress).run(overwrite)
+
+
 @dataclass
 class _SfmJob:
-    """One call of :func:`run_sfm`, holding the lock on ``work``: a method per step, each
-    skipped when ``steps`` records it finished with the same options."""
+    """One call of :func:`run_sfm`: a method per step, each skipped when ``steps`` records it
+    finished with the same options."""
 
     pycolmap: ModuleType
     photos: Path
     out: Path
     work: Path
     video: bool
+    found: list[str] | None  # the photos (None for a video)
     cfg: SfmConfig
     steps: _Steps
     progress: bool
@@ -370,19 +394,17 @@ class _SfmJob:
 
     def images(self) -> tuple[list[str], list[tuple[int, int]]]:
         """The photos as they are, or a video's frames: their names and distinct sizes."""
-        found = None if self.video else _input_images(self.photos)
-        _check_free_space(self.photos, self.out, self.cfg.frames if self.video else len(found))
         options = {
             "source": str(self.photos.resolve()),
             "frames": self.cfg.frames if self.video else None,
-            "content": content_digest([self.photos] if self.video else [self.photos / n for n in found]),
+            "content": content_digest([self.photos] if self.video else [self.photos / n for n in self.found]),
         }
         if not self.steps.finished("images", options):
             shutil.rmtree(self.work / "frames", ignore_errors=True)
             names = (
                 sample_frames(self.photos, self.image_dir, self.cfg.frames, progress=self.progress)
                 if self.video
-                else found
+                else self.found
             )
             self.steps.record("images", options, names=names, sizes=_image_sizes(self.image_dir, names))
         done = self.steps.done["images"]
