@@ -15,6 +15,10 @@ selection (docs/evaluation.md):
 - **the masks**: per view the IoU of the mask ID that best covers the person's mask, of the
   union of the IDs mostly inside it, and how often the best ID is the same one; for the
   masks of colour alone and for those cut at the depth jumps.
+- **the clicks alone**: the same ten clicks where the masks say nothing (each view one region,
+  one label, object features of zero: what weight-free masks give on a capture they read as
+  one region, a plant and the wall behind it), so that the clicks carve the object alone
+  (:meth:`gsseg.segment.clicks.ClickSelector._carved`);
 - **the options**: the single-click mIoU under ``gsseg segment``'s defaults as well;
 - **the ceiling**: the mIoU of the Gaussians whose weight falls mostly inside the people's
   masks over the views, what any selection of the model can reach;
@@ -42,7 +46,7 @@ import argparse
 import json
 import shutil
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -58,7 +62,7 @@ from dataset_tools.sfm import run_sfm
 from eval.metrics import binary_scores
 from eval.report import markdown_table
 from gsseg.render import Backend, get_backend
-from gsseg.render.contributions import MaskedView, contribution_matrix
+from gsseg.render.contributions import MaskedView, RegionWeights, contribution_matrix
 from gsseg.render.pixel_labels import segment_pixels
 from gsseg.run.loaded import Run, load_run
 from gsseg.segment.clicks import ClickEvidence, ClickSelector
@@ -109,14 +113,42 @@ def rendered_selection(run: Run, selected: np.ndarray, view: View, backend: str 
     return segment_pixels(run.gaussians_on(backend.device), labels, view.camera, pose, backend=backend) == 1
 
 
-class Clicker:
-    """Selections of a segmented run by clicks in one view (the rule of ``gsseg edit --click``),
-    scored in the others."""
+def clicks_alone(run: Run, regions: RegionWeights) -> ClickSelector:
+    """The click rule of ``run`` with nothing from the masks: each view of the first mask layer
+    of ``regions`` one region, every Gaussian one label, and object features of zero (they were
+    learned from the masks)."""
+    weights = regions.view_weights()
+    views = np.flatnonzero(weights.getnnz(axis=1))
+    one = RegionWeights(
+        weights[views].astype(np.float32),
+        views.astype(np.int32),
+        np.ones(len(views), np.uint8),
+        np.zeros(len(views), np.uint8),
+        regions.layers[:1],
+        regions.model,
+    )
+    blank = replace(run.gaussians, obj_feat=torch.zeros_like(run.gaussians.obj_feat))
+    return ClickSelector(blank, np.ones(len(blank), np.uint8), one)
 
-    def __init__(self, run: Run, views: list[View], truth: dict[str, np.ndarray], backend: str | Backend = "cpu"):
+
+class Clicker:
+    """Selections of a segmented run by clicks in one view (the rule of ``gsseg edit --click``;
+    with nothing from the masks where ``alone``, :func:`clicks_alone`), scored in the others."""
+
+    def __init__(
+        self,
+        run: Run,
+        views: list[View],
+        truth: dict[str, np.ndarray],
+        backend: str | Backend = "cpu",
+        alone: bool = False,
+    ):
         self.run, self.first, self.others, self.truth = run, views[0], views[1:], truth
         self.backend = get_backend(backend)
-        self.selector = ClickSelector(run.gaussians, run.labels().labels, run_regions(run, backend=self.backend))
+        regions = run_regions(run, backend=self.backend)
+        self.selector = (
+            clicks_alone(run, regions) if alone else ClickSelector(run.gaussians, run.labels().labels, regions)
+        )
         self.clicks: list[ClickEvidence] = []
         self.selected = np.zeros(len(run.gaussians), bool)
 
@@ -164,11 +196,12 @@ def interactive(
     max_clicks: int = MAX_CLICKS,
     backend: str | Backend = "cpu",
     past_target: bool = False,
+    alone: bool = False,
 ) -> dict:
     """The single-click scores and the clicks to reach :data:`TARGET` (NoC@90), up to
     ``max_clicks`` (all ``max_clicks`` where ``past_target``: how later clicks behave),
-    rendered on ``backend``."""
-    clicker = Clicker(run, views, truth, backend)
+    rendered on ``backend``; with nothing from the masks where ``alone`` (:class:`Clicker`)."""
+    clicker = Clicker(run, views, truth, backend, alone)
     u, v = deepest_pixel(truth[views[0].name])
     clicker.click(u, v, True)
     miou, macc = clicker.scores()
@@ -308,6 +341,7 @@ def run_scene(
     run = load_run(run_dir)
     clicks = interactive(run, views, truth, past_target=past_target)
     times["clicks_s"] = time.perf_counter() - start
+    alone = interactive(run, views, truth, past_target=True, alone=True)
     obj = TrueObject.of(run, views, truth)
     return {
         "scene": name,
@@ -318,6 +352,7 @@ def run_scene(
         "gaussians": len(run.gaussians),
         "iters": run.config.timing.iters,
         **clicks,
+        "clicks_alone": {k: alone[k] for k in ("miou_by_clicks", "noc90", "largest_fall")},
         "ceiling_miou": obj.ceiling(run, views, truth),
         "object_left": removal_left(run, views, truth, obj),
         "single_click_miou_default_options": default_options,
@@ -365,9 +400,19 @@ def report(r: dict) -> tuple[str, str]:
         [f"{x['scene']}: one click mIoU {x['single_click_miou']:.3f}, NoC@90 {noc(x)}" for x in posed]
         + [f"{x['scene']}: not posed by sfm" for x in refused]
     )
+    if any("clicks_alone" in x for x in posed):
+        headline += "; the clicks alone, mIoU after the 10th: " + ", ".join(
+            f"{x['scene']} {x['clicks_alone']['miou_by_clicks'][-1]:.3f}" for x in posed if "clicks_alone" in x
+        )
 
     def masks(m: dict) -> str:
         return f"{m['best_id_iou']:.2f} / {m['union_iou']:.2f} / {m['consistency']:.2f}"
+
+    def alone(x: dict) -> str:
+        if "clicks_alone" not in x:
+            return "n/a"
+        a = x["clicks_alone"]
+        return f"{' '.join(f'{m:.2f}' for m in a['miou_by_clicks'])}; NoC@90 {noc(a)}; fall {a['largest_fall']:.3f}"
 
     stages = ("sfm_s", "masks_s", "train_s", "depth_masks_s", "segment_s", "clicks_s")
     rows = [
@@ -385,6 +430,7 @@ def report(r: dict) -> tuple[str, str]:
             noc(x),
             " ".join(f"{m:.2f}" for m in x["miou_by_clicks"]),
             f"{x['largest_fall']:.3f}" if "largest_fall" in x else "n/a",
+            alone(x),
             masks(x["masks"]),
             masks(x["depth_masks"]),
             " / ".join(f"{x[k]:.0f}" for k in stages),
@@ -406,6 +452,7 @@ def report(r: dict) -> tuple[str, str]:
             "NoC@90",
             "mIoU after each click",
             "largest fall after a click",
+            "the clicks alone (masks that say nothing): mIoU after each click; NoC@90; largest fall",
             "masks of colour: best ID / union / consistency",
             "masks at depth jumps: the same",
             "seconds: sfm / masks / train / depth masks / segment / clicks",

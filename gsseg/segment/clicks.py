@@ -47,6 +47,12 @@ max-flow solver (PyMaxflow), with a cost per Gaussian from six kinds of evidence
   as a region of its own comes in whole; a click on something off the selection's surface
   grows nothing.
 
+Where the views' vote of the first click holds the scene (masks that read the object and its
+surroundings as one region: :meth:`RegionVote.holds_the_scene`), neither the views nor the
+labels say where the object ends, and from the first negative click on the clicks carve it
+alone (:meth:`ClickSelector._carved`): the graph's geodesic split between the positive and
+negative seeds, colour models learned from the cut, and each click changing only its own cell.
+
 The seeds are hard constraints; the source's side of the cut is the selection (parts apart
 in space, several objects under one mask, stay together where the views join them). A later
 positive click adds its seeds, what the cut joins to them, and the regions under it that lie
@@ -70,7 +76,7 @@ from skimage.color import rgb2lab
 
 from dataset_tools.infra.errors import InputError, OptionError
 from gsseg.model.gaussians import Gaussians
-from gsseg.render.contributions import RegionWeights
+from gsseg.render.contributions import SCENE_SHARE, SCENE_VIEWS, RegionWeights
 
 HARD = 1e9  # the capacity that pins a seed to its side of the cut
 
@@ -134,6 +140,8 @@ class ClickOptions:
             log-units likelier under the selection's colours than under the clicked part's
             (:meth:`ClickSelector._alike`).
         stickiness: weight of the selection before the click.
+        carve_stickiness: the same where the clicks carve the object alone
+            (:meth:`ClickSelector._carved`).
         smoothness: weight of the graph's edges.
         appearance_rounds: rounds of the colour models (:class:`ColourModel`), each learned from
             the cut before it (0: none).
@@ -165,6 +173,7 @@ class ClickOptions:
     shown_share: float = 0.1
     against_colour: float = 1.0
     stickiness: float = 3.0
+    carve_stickiness: float = 0.75
     smoothness: float = 1.0
     appearance_rounds: int = 2
     appearance_weight: float = 1.0
@@ -271,19 +280,19 @@ class GaussianGraph:
         length = sp.coo_matrix((d + 2 * (c + f) + 1e-9, (a, b)), shape=(n, n)).tocsr()
         return cls(a, b, np.exp(-(c**2 + f**2) / 4) / (1 + d), length, spacing)
 
+    def distances(self, sources: np.ndarray) -> np.ndarray:
+        """(N,) each Gaussian's distance along the graph to the nearest of ``sources`` (S,)
+        (inf where none is reached, or there is none)."""
+        if not len(sources):
+            return np.full(self.length.shape[0], np.inf)
+        return dijkstra(self.length, directed=False, indices=sources, min_only=True)
+
     def split(self, negative: np.ndarray, positive: np.ndarray) -> np.ndarray:
         """(N,) in [0, 1]: how far each Gaussian lies on the side of the ``negative`` seeds,
         (d+ - d-) / (d+ + d-) with d+ and d- its distances along the graph to the nearest
         positive and negative seed; 0 where it is nearer a positive one, 1 where no positive
         one is reached."""
-        n = self.length.shape[0]
-
-        def reach(sources: np.ndarray) -> np.ndarray:
-            if not len(sources):
-                return np.full(n, np.inf)
-            return dijkstra(self.length, directed=False, indices=sources, min_only=True)
-
-        far, near = reach(positive), reach(negative)
+        far, near = self.distances(positive), self.distances(negative)
         side = near < far
         with np.errstate(invalid="ignore"):
             ratio = np.where(np.isinf(far), 1.0, (far - near) / np.maximum(far + near, 1e-12))
@@ -357,6 +366,20 @@ class RegionVote:
         held = self.matrix @ selected.astype(np.float64)
         per_unit = self.units.T @ held
         return regions & (held < overlap * per_unit[self.unit])
+
+    def holds_the_scene(self, share: np.ndarray, click: ClickEvidence, seen_share: float) -> bool:
+        """Whether the Gaussians a vote holds (``share`` (N,) above one half) cover most of every
+        view: :data:`~gsseg.render.contributions.SCENE_SHARE` of the blended weight in
+        :data:`~gsseg.render.contributions.SCENE_VIEWS` of the vote units where ``click`` is
+        seen (its weight there at least ``seen_share`` of its largest). Masks that hold the
+        object and its surroundings as one region give such a vote: it says nothing of where
+        the object ends."""
+        held = self.units.T @ (self.matrix @ (share > 0.5).astype(np.float64))
+        total = self.units.T @ self.row_sums
+        clicked = self.units.T @ (self.matrix @ click.weights)
+        seen = clicked >= seen_share * max(float(clicked.max(initial=0)), 1e-12)
+        wide = held >= SCENE_SHARE * np.maximum(total, 1e-12)
+        return bool(seen.any()) and (wide & seen).sum() >= SCENE_VIEWS * seen.sum()
 
     def vote(self, clicked: np.ndarray, options: ClickOptions) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(N,) each Gaussian's share of weight in the object's regions, starting from the
@@ -469,15 +492,17 @@ class ClickSelector:
         o = self.options
         share, weight, voted_regions = self.views_vote(clicks, before)
         seeds = [(c.seeds(o.seed_share, o.seed_local), c.positive) for c in clicks]
-        posterior = self._labelled(share, weight, seeds[0][0])
-        cost = o.evidence * np.where(weight > 0, log_odds(posterior), -1.0)  # > 0: the object's
         positive = np.unique(np.concatenate([k for k, is_positive in seeds if is_positive]))
         negative = np.unique(np.concatenate([k for k, is_positive in seeds if not is_positive] or [[]]))
         negative = negative.astype(np.int64)
         both = np.intersect1d(positive, negative)
         positive, negative = np.setdiff1d(positive, both), np.setdiff1d(negative, both)
+        if before is not None and len(negative) and self.vote.holds_the_scene(share, clicks[0], o.seen_share):
+            return self._carved(clicks[-1].positive, np.setdiff1d(seeds[-1][0], both), positive, negative, before)
+        posterior = self._labelled(share, weight, seeds[0][0])
+        cost = o.evidence * np.where(weight > 0, log_odds(posterior), -1.0)  # > 0: the object's
         if o.appearance_rounds:
-            cost += o.appearance_weight * self._appearance(cost, share, positive)
+            cost += o.appearance_weight * self._appearance(cost, positive, share >= o.appearance_firm)
         if before is not None:
             cost += o.stickiness * np.where(before, 1.0, -1.0)
             if clicks[-1].positive:  # deep in a later positive click's part its word outweighs all else
@@ -555,21 +580,50 @@ class ClickSelector:
         graph.maxflow()
         return ~graph.get_grid_segments(nodes)
 
-    def _appearance(self, cost: np.ndarray, share: np.ndarray, positive: np.ndarray) -> np.ndarray:
+    def _appearance(
+        self, cost: np.ndarray, positive: np.ndarray, firm: np.ndarray, negative: np.ndarray | None = None
+    ) -> np.ndarray:
         """(N,) the colour term of the cost, as GrabCut iterates its colour models: cut with
-        the views' and labels' ``cost`` (N,) and the colour term so far, learn the object's
-        colours from the selected Gaussians the views vote in firmly (``share`` (N,) at least
-        :attr:`ClickOptions.appearance_firm`) and the rest's from the unselected, again for
-        :attr:`ClickOptions.appearance_rounds`. Where the masks split an object (a head whose
-        back the views give to the table), its colour carries the cut over the split; where
-        the views are sure, they outweigh it."""
+        ``cost`` (N,) and the colour term so far (the ``positive`` and ``negative`` seeds
+        pinned), learn the object's colours from the selected Gaussians that are ``firm`` (N,)
+        (those the views vote in firmly: at least :attr:`ClickOptions.appearance_firm`) and the
+        rest's from the unselected, again for :attr:`ClickOptions.appearance_rounds`. Where the
+        masks split an object (a head whose back the views give to the table), its colour
+        carries the cut over the split; where the views are sure, they outweigh it."""
         o = self.options
         term = np.zeros_like(cost)
-        none = np.zeros(0, np.int64)
+        negative = np.zeros(0, np.int64) if negative is None else negative
         for _ in range(o.appearance_rounds):
-            selected = self._min_cut(cost + o.appearance_weight * term, positive, none)
-            term = self.colours.ratio(selected & (share >= o.appearance_firm), ~selected)
+            selected = self._min_cut(cost + o.appearance_weight * term, positive, negative)
+            term = self.colours.ratio(selected & firm, ~selected)
         return term
+
+    def _carved(
+        self, positive_click: bool, clicked: np.ndarray, positive: np.ndarray, negative: np.ndarray, before: np.ndarray
+    ) -> np.ndarray:
+        """(N,) bool: the selection after a click where the views' vote holds the scene
+        (:meth:`RegionVote.holds_the_scene`), carved by the clicks alone, as seeded geodesic
+        segmentation and GrabCut do without masks: each Gaussian is the object's in proportion
+        to how much nearer, along the graph, it lies to a ``positive`` seed than to a
+        ``negative`` one ((d- - d+) / (d- + d+), times :attr:`ClickOptions.split_weight`), with
+        colour models learned from the cut (:meth:`_appearance`) and the selection ``before``
+        (N,) weighing :attr:`ClickOptions.carve_stickiness`. The click (for the object where
+        ``positive_click``; its seeds ``clicked`` (S,)) changes only its own cell: the Gaussians
+        nearer to its seeds than to any other click's. So a click on the wall behind a plant
+        takes the wall off, and a later click on the plant brings back none of it."""
+        o = self.options
+        to_positive, to_negative = self.graph.distances(positive), self.graph.distances(negative)
+        with np.errstate(invalid="ignore"):
+            nearer = (to_negative - to_positive) / np.maximum(to_negative + to_positive, 1e-12)
+        nearer = np.where(np.isinf(to_negative), 1.0, np.where(np.isinf(to_positive), -1.0, nearer))
+        cost = o.split_weight * nearer + o.carve_stickiness * np.where(before, 1.0, -1.0)
+        if o.appearance_rounds:
+            cost += o.appearance_weight * self._appearance(cost, positive, np.ones(len(cost), bool), negative)
+        cut = self._min_cut(cost, positive, negative)
+        cell = self.graph.distances(clicked) < self.graph.distances(
+            np.setdiff1d(np.union1d(positive, negative), clicked)
+        )
+        return before | (cut & cell) if positive_click else before & (cut | ~cell)
 
     def _alike(self, seeds: np.ndarray, others: np.ndarray) -> np.ndarray:
         """(N,) in [0, 1]: how far each Gaussian looks like a click's ``seeds`` (S,) rather
