@@ -86,7 +86,7 @@ class DemoResult:
     gaussians: int  # how many Gaussians that is
     miou: float | None
     seconds: float
-    warning: str | None = None  # structure from motion's, on cameras posed on the far side or left out
+    warning: str | None = None  # SfM's (cameras posed on the far side or left out); an edit over most of every view
     match: int | None = None  # the ground-truth object the edited one was matched to, where there is truth
     stages: dict[str, float] = field(default_factory=dict)  # seconds of each stage, in the order run
 
@@ -105,8 +105,9 @@ class _StageClock:
 
 def _demo_selection(
     scene_dir: Path, run: Run, segmentation: Segmentation, synth_point: np.ndarray | None, backend: Backend
-) -> tuple[Selection, dict]:
-    """What the demo edits, and the prompt that selects it (``edit_runs``'s keywords): the
+) -> tuple[Selection, dict, str | None]:
+    """What the demo edits, the prompt that selects it (``edit_runs``'s keywords) and a warning
+    where it is a label that covers most of every view (None elsewhere): the
     synthetic scene's first object, by a 3D point at its centre; in a user's scene the object
     the photos frame (:func:`gsseg.segment.prompts.framed_object`) of those that do not cover
     most of every view (the scene, not an object in it); in a close-up, where every object
@@ -118,14 +119,14 @@ def _demo_selection(
     scene = run.scene(scene_dir)
     if synth_point is not None:
         prompt = {"point": np.asarray(synth_point, np.float64)}
-        return select(run, segmentation, scene, backend=backend, **prompt), prompt
+        return select(run, segmentation, scene, backend=backend, **prompt), prompt, None
     regions = run_regions(run, scene_dir, backend=backend)
     scene_wide = regions.covering()
     objects = {int(o): s for o, s in zip(segmentation.objects, segmentation.selections) if s.any()}
     if not objects:
         view = scene.split("test")[0]
         prompt = {"clicks": [Click(view.name, view.camera.width / 2, view.camera.height / 2)]}
-        return select(run, segmentation, scene, backend=backend, **prompt), prompt
+        return select(run, segmentation, scene, backend=backend, **prompt), prompt, None
     views = masked_views(run, scene_dir, masks=regions.layers[0])
     means = run.gaussians.means.numpy().astype(np.float64)
     framed = framed_object(means, {k: s for k, s in objects.items() if k not in scene_wide}, regions, views)
@@ -135,7 +136,14 @@ def _demo_selection(
         framed = framed_object(means, objects, regions, views, least_shown=0.0)
     click = object_click(run.gaussians, objects[framed], scene.split("test"), backend=backend)
     prompt = {"clicks": [click]} if click is not None else {"object_id": framed}
-    return select(run, segmentation, scene, backend=backend, **prompt), prompt
+    wide = None
+    if framed in scene_wide:
+        wide = (
+            f"object {framed} covers most of every view: the photos are a close-up of it, or the masks "
+            "joined it to what surrounds it; then select it in `gsseg view`, where shift-clicks on the "
+            "surroundings carve it out (docs/segmentation.md, Clicks)."
+        )
+    return select(run, segmentation, scene, backend=backend, **prompt), prompt, wide
 
 
 def _edited(selection: Selection, prompt: dict) -> str:
@@ -333,7 +341,8 @@ def _run_demo(
     )
     stages.done("segmentation")
     run = load_run(run_dir)
-    selection, prompt = _demo_selection(scene_dir, run, segmentation, synth_point, backend)
+    selection, prompt, wide = _demo_selection(scene_dir, run, segmentation, synth_point, backend)
+    warning = " ".join(w for w in (warning, wide) if w) or None
     ops = {"remove": None, "extract": None, "recolor": (255, 40, 200)}
     edits = dict(zip(ops, edit_runs(run_dir, ops, scene_dir=scene_dir, backend=backend, progress=progress, **prompt)))
     stages.done("edits")
