@@ -151,43 +151,17 @@ def edit_run(
     run_dir: Path | str,
     op: str,
     *,
-    point=None,
-    clicks: list[Click] | tuple[Click, ...] = (),
-    object_id: int | None = None,
     color: tuple[int, int, int] | None = None,
     name: str | None = None,
-    scene_dir: Path | str | None = None,
-    split: str = "test",
-    k: int = 20,
-    fps: int = 8,
-    fill: bool = True,
-    backend: str | Backend = "auto",
-    overwrite: bool = False,
-    other_scene: bool = False,
-    progress: bool = True,
+    **options,
 ) -> Path:
     """Select Gaussians (:func:`select`), with those that served the selection alone for a
     removal or an extraction (:mod:`gsseg.segment.served`), apply ``op`` and write ``RUN/edits/NAME/``:
     ``gaussians.ply``, ``renders/<view>.png`` of the scene's ``split`` views, ``video.mp4`` of
     those renders, and ``edit.json``. ``fill``: a removal fills what no training view saw
-    behind the object (:mod:`gsseg.fill`)."""
-    return edit_runs(
-        run_dir,
-        {op: color},
-        names=None if name is None else {op: name},
-        point=point,
-        clicks=clicks,
-        object_id=object_id,
-        scene_dir=scene_dir,
-        split=split,
-        k=k,
-        fps=fps,
-        fill=fill,
-        backend=backend,
-        overwrite=overwrite,
-        other_scene=other_scene,
-        progress=progress,
-    )[0]
+    behind the object (:mod:`gsseg.fill`). ``options``: the prompt and the rest of
+    :func:`edit_runs`' keywords, whose defaults are the defaults here."""
+    return edit_runs(run_dir, {op: color}, names=None if name is None else {op: name}, **options)[0]
 
 
 def edit_runs(

@@ -311,9 +311,9 @@ def run_sfm(
 ) -> SfmResult:
     """Make a scene folder at ``out`` from a folder of photos or a video file ``photos``.
 
-    The steps run in a fresh process (started with ``spawn``): COLMAP keeps state between
-    models in a process, and a second model made in one that had made others has come out
-    different (docs/sfm.md). A script that calls this needs the ``if __name__ == "__main__":``
+    The steps run in a fresh process (started with ``spawn``): a model made in a process that
+    had made others has come out different (docs/sfm.md), most likely from state COLMAP keeps
+    from one model to the next. A script that calls this needs the ``if __name__ == "__main__":``
     guard that ``multiprocessing`` asks of every spawning script."""
     cfg.check()
     photos, out = Path(photos), Path(out)
