@@ -14,7 +14,7 @@ from gsseg.edits import apply_edit, edit_runs
 from gsseg.model.gaussians import Gaussians
 from gsseg.model.ply import read_ply
 from gsseg.render import BACKENDS, render
-from gsseg.render.contributions import Contributions, MaskedView, contribution_matrix
+from gsseg.render.contributions import REGION_WEIGHT_FLOOR, Contributions, MaskedView, contribution_matrix
 from gsseg.run.folder import RunFolder
 from gsseg.segment.label_options import LabelOptions
 from gsseg.segment.prompts import object_at_point
@@ -78,6 +78,15 @@ def test_contribution_matrix_equals_hand_computed_alpha_t_sums(backend):
     got = contribution_matrix(g, [MaskedView(cam, pose, mask)] * 2, backend=backend, progress=False)
     assert got.labels.tolist() == [0, 3, 7]
     np.testing.assert_allclose(got.weights.numpy(), 2 * expected, rtol=1e-4, atol=1e-6)
+    # Each view's own sums, a row per label it shows, without the weights under the floor.
+    one_label = np.full_like(mask, 3)
+    views = [MaskedView(cam, pose, mask), MaskedView(cam, pose, one_label)]
+    regions = contribution_matrix(g, views, backend=backend, regions=True, progress=False).regions
+    assert regions.view.tolist() == [0, 0, 0, 1] and regions.label.tolist() == [0, 3, 7, 3]
+    rows = np.vstack([expected, weights.reshape(2, -1).sum(1)])
+    np.testing.assert_allclose(
+        regions.matrix.toarray(), np.where(rows >= REGION_WEIGHT_FLOOR, rows, 0.0), rtol=1e-4, atol=1e-6
+    )
 
 
 def _contributions(weights, labels=(0, 1, 2)) -> Contributions:

@@ -116,8 +116,9 @@ class Backend:
         rows: np.ndarray,
         n_rows: int,
     ) -> torch.Tensor:
-        """(n_rows, N) float32 on the CPU: each Gaussian's alpha_i T_i summed over the pixels
-        whose ``rows`` entry (an (H, W) int array) is r; pixels with row -1 count nowhere.
+        """(n_rows, N) float32 on the backend's device: each Gaussian's alpha_i T_i summed over
+        the pixels whose ``rows`` entry (an (H, W) int array) is r; pixels with row -1 count
+        nowhere.
 
         By default the gradient of sum_p <rendered values, one_hot(rows(p))> with respect to
         per-Gaussian values, which is exactly those sums: one n_rows-channel render and its
@@ -127,7 +128,7 @@ class Backend:
         raster = self.rasterize(means, quats, scales, opacities, probe, cam_from_world, camera)
         row = torch.as_tensor(rows, device=means.device, dtype=torch.int64)[..., None]  # (H, W, 1)
         (raster.image.gather(-1, row.clamp_min(0)) * (row >= 0)).sum().backward()
-        return probe.grad.T.cpu()
+        return probe.grad.T
 
     def __repr__(self) -> str:
         return f"<{self.name} backend on {self.device}>"

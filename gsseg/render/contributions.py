@@ -141,8 +141,9 @@ def contribution_matrix(
     each view's sums apart (:class:`RegionWeights`, one layer, its views numbered as given).
 
     ``cpu`` accumulates in a numba forward pass; ``torch`` and ``gsplat`` obtain the same sums
-    as a gradient, on the backend's device. Memory: (K, N) float32 plus one such buffer per
-    CPU thread, and one mask at a time (masks are read twice: once for the label set, once
+    as a gradient, on the backend's device. Memory: (K, N) float32 on the backend's device
+    and one such buffer per CPU thread; of each view's weights only those kept in the regions
+    leave the device; one mask at a time (masks are read twice: once for the label set, once
     to accumulate).
     """
     backend = get_backend(backend)
@@ -150,7 +151,7 @@ def contribution_matrix(
     rows = np.full(256, -1, np.int64)
     rows[labels] = np.arange(len(labels))
     g = gaussians.detach().to(backend.device)
-    total = torch.zeros(len(labels), len(g))
+    total = torch.zeros(len(labels), len(g), device=backend.device)
     blocks, view_of, label_of = [], [], []
     for k, view in enumerate(tqdm(views, desc="contributions", unit="view", disable=not progress, leave=False)):
         pose = torch.as_tensor(view.cam_from_world, dtype=torch.float32, device=backend.device)
@@ -159,9 +160,8 @@ def contribution_matrix(
         )
         total += weights
         if regions:
-            seen = np.flatnonzero(weights.sum(1).numpy() > 0)
-            block = weights.numpy()[seen]
-            blocks.append(sp.csr_matrix(np.where(block >= REGION_WEIGHT_FLOOR, block, 0.0).astype(np.float32)))
+            seen, block = _held_rows(weights)
+            blocks.append(block)
             view_of.append(np.full(len(seen), k, np.int32))
             label_of.append(labels[seen].astype(np.uint8))
     kept = None
@@ -173,4 +173,19 @@ def contribution_matrix(
             np.zeros(sum(len(v) for v in view_of), np.uint8),
             ("",),
         )
-    return Contributions(labels=labels.astype(np.uint8), weights=total, regions=kept)
+    return Contributions(labels=labels.astype(np.uint8), weights=total.cpu(), regions=kept)
+
+
+def _held_rows(weights: torch.Tensor) -> tuple[np.ndarray, sp.csr_matrix]:
+    """The rows of (K, N) ``weights`` (on any device) that hold any weight, (S,) int64, and
+    those rows as an (S, N) float32 CSR matrix without the weights under
+    :data:`REGION_WEIGHT_FLOOR`. Only the kept entries leave the device."""
+    seen = torch.nonzero(weights.sum(1) > 0).ravel()
+    position = torch.full((len(weights),), -1, dtype=torch.int64, device=weights.device)
+    position[seen] = torch.arange(len(seen), device=weights.device)
+    row, col = torch.nonzero(weights >= REGION_WEIGHT_FLOOR, as_tuple=True)
+    values = weights[row, col]
+    matrix = sp.csr_matrix(
+        (values.cpu().numpy(), (position[row].cpu().numpy(), col.cpu().numpy())), shape=(len(seen), weights.shape[1])
+    )
+    return seen.cpu().numpy(), matrix

@@ -197,7 +197,9 @@ def click_evidence(
     window = rows[max(0, row - radius) : row + radius + 1, max(0, col - radius) : col + radius + 1]
     window[:] = 1
     pose = torch.as_tensor(cam_from_world, dtype=torch.float32, device=backend.device)
-    weights = backend.contributions(g.means, g.quats, g.scales, g.opacities, pose, camera, rows, 2).double().numpy()
+    weights = (
+        backend.contributions(g.means, g.quats, g.scales, g.opacities, pose, camera, rows, 2).double().cpu().numpy()
+    )
     alpha = weights[1].sum() / window.size
     if alpha < 0.5:
         raise InputError(f"nothing opaque is rendered at ({u}, {v}) (alpha {alpha:.2f}); click on an object.")
