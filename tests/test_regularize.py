@@ -4,12 +4,14 @@ interior filling, on hand-made point sets with known answers."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 import torch
+from scipy.spatial import cKDTree
 
 from gsseg.render.contributions import Contributions
 from gsseg.run.folder import RunFolder
 from gsseg.segment.reassign import Segmentation
-from gsseg.segment.regularize import fill_interiors, smooth_weak_labels, weak_evidence
+from gsseg.segment.regularize import DIRECTIONS, _enclosed, fill_interiors, smooth_weak_labels, weak_evidence
 
 
 def _segmentation(labels: np.ndarray) -> Segmentation:
@@ -93,3 +95,19 @@ def test_fill_never_takes_another_objects_gaussians():
     out = fill_interiors(_segmentation(labels), means).labels
     assert (out[len(shell) : len(shell) + len(inner)] == 2).all()
     assert (out[len(shell) + len(inner) :] == 1).mean() > 0.9
+
+
+@pytest.mark.parametrize("share", [0.5, 0.85, 1.0])
+def test_enclosed_points_with_early_exits_match_every_probe_marched(share):
+    """The early exits change no answer: every point against all 14 x 8 probes at once."""
+    rng = np.random.default_rng(3)
+    shell = _sphere(3000, 1.0, rng) * rng.uniform(0.9, 1.0, (3000, 1))
+    shell = shell[shell[:, 2] < 0.6]  # an open top: points inside see out along some directions
+    points = rng.uniform(-1.3, 1.3, (4000, 3))
+    tree, step, steps = cKDTree(shell), 0.25, 8
+    ts = step * np.arange(1, steps + 1)
+    probes = points[:, None, None, :] + ts[None, None, :, None] * DIRECTIONS[None, :, None, :]
+    distance, _ = tree.query(probes.reshape(-1, 3), distance_upper_bound=step)
+    expected = np.isfinite(distance).reshape(len(points), len(DIRECTIONS), steps).any(2).mean(1) >= share
+    assert 0 < expected.sum() < len(points)
+    np.testing.assert_array_equal(_enclosed(points, tree, step, steps, share), expected)

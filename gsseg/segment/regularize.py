@@ -30,6 +30,7 @@ DIRECTIONS = np.array(
     float,
 )
 DIRECTIONS /= np.linalg.norm(DIRECTIONS, axis=1, keepdims=True)
+VOTE_CHUNK = 1 << 16  # weak Gaussians voted on at a time: (VOTE_CHUNK, 256) float64, 128 MiB
 
 
 def weak_evidence(contributions: Contributions, *, min_share: float = 0.05, margin: float = 0.2) -> np.ndarray:
@@ -66,16 +67,14 @@ def smooth_weak_labels(
     targets = np.flatnonzero(weak)
     if not len(strong) or not len(targets):
         return replace(segmentation, smooth=k)
-    _, nearest = cKDTree(means[strong]).query(means[targets], k=min(k, len(strong)))
+    _, nearest = cKDTree(means[strong]).query(means[targets], k=min(k, len(strong)), workers=-1)
     nearest = strong[np.atleast_2d(nearest.T).T]  # (T, k) indices into all Gaussians
     labels = segmentation.labels.copy()
-    votes = np.zeros((len(targets), 256))
-    np.add.at(
-        votes,
-        (np.repeat(np.arange(len(targets)), nearest.shape[1]), labels[nearest].ravel()),
-        opacities[nearest].ravel(),
-    )
-    labels[targets] = votes.argmax(1)
+    for start in range(0, len(targets), VOTE_CHUNK):  # (chunk, 256) votes at a time
+        near = nearest[start : start + VOTE_CHUNK]
+        rows = np.repeat(np.arange(len(near)), near.shape[1])
+        votes = np.bincount(rows * 256 + labels[near].ravel(), opacities[near].ravel(), minlength=len(near) * 256)
+        labels[targets[start : start + VOTE_CHUNK]] = votes.reshape(len(near), 256).argmax(1)
     return _relabelled(segmentation, labels, smooth=k)
 
 
@@ -105,11 +104,28 @@ def fill_interiors(
         candidates = np.flatnonzero(inside_box)
         if not len(candidates) or size == 0:
             continue
-        tree = cKDTree(means[own])
-        ts = step * np.arange(1, steps + 1)
-        probes = means[candidates][:, None, None, :] + ts[None, None, :, None] * DIRECTIONS[None, :, None, :]
-        distance, _ = tree.query(probes.reshape(-1, 3), distance_upper_bound=step)
-        met = np.isfinite(distance).reshape(len(candidates), len(DIRECTIONS), steps).any(2)
-        enclosed = met.mean(1) >= share
+        enclosed = _enclosed(means[candidates], cKDTree(means[own]), step, steps, share)
         labels[candidates[enclosed]] = obj
     return _relabelled(segmentation, labels, fill=True)
+
+
+def _enclosed(points: np.ndarray, tree: cKDTree, step: float, steps: int, share: float) -> np.ndarray:
+    """(P,) bool: which of the (P, 3) ``points`` meet the object held in ``tree`` along at least
+    ``share`` of the :data:`DIRECTIONS`; a direction meets it when one of ``steps`` points
+    marched along it, ``step`` apart, lies within ``step`` of one of its Gaussians. A point
+    drops out as soon as the directions left cannot bring it to ``share``, and a direction as
+    soon as it meets the object, so that most of the queries go to the points that may be
+    enclosed."""
+    met = np.zeros(len(points), np.int64)
+    alive = np.arange(len(points))
+    for d, direction in enumerate(DIRECTIONS):
+        marching = alive
+        for k in range(1, steps + 1):
+            distance, _ = tree.query(points[marching] + k * step * direction, distance_upper_bound=step, workers=-1)
+            hit = np.isfinite(distance)
+            met[marching[hit]] += 1
+            marching = marching[~hit]
+        alive = alive[(met[alive] + len(DIRECTIONS) - d - 1) / len(DIRECTIONS) >= share]
+    out = np.zeros(len(points), bool)
+    out[alive] = met[alive] / len(DIRECTIONS) >= share
+    return out
