@@ -5,7 +5,10 @@
 # those of `python -m benchmarks.gpu_check run`; the exit code is its (3: the training stopped
 # at --deadline; run the same command again to continue).
 #
-#   bash benchmarks/gpu_check.sh --scene gpu_scenes/statue --deadline 480 --out $OUT/gpu_check.json
+#   bash benchmarks/gpu_check.sh --scene gpu_scenes/statue --deadline 480 --work $OUT/gpu_check --out $OUT/gpu_check.json
+#
+# With --work under $OUT the stages finished so far (stages.json) come back even when the call
+# outruns its limit; the run folder itself is too large to.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 if [ ! -d /tmp/site/gsplat ]; then
