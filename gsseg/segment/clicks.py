@@ -264,7 +264,7 @@ class GaussianGraph:
             return cls(empty, empty, np.zeros(0), sp.csr_matrix((n, n)), 0.0)
         colours = gaussians.base_colours.detach().cpu().numpy()
         features = gaussians.obj_feat.detach().cpu().numpy().astype(np.float64)
-        dist, nbr = cKDTree(means).query(means, k=k + 1)
+        dist, nbr = cKDTree(means).query(means, k=k + 1, workers=-1)
         spacing = float(np.median(dist[:, 1]))
         a, b = np.repeat(np.arange(n), k), nbr[:, 1:].ravel()
         lo, hi = np.minimum(a, b), np.maximum(a, b)
