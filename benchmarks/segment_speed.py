@@ -2,7 +2,10 @@
 ``cpu``, and on ``gsplat`` where a GPU is present);
 (2) reassignment of N = 1M Gaussians over 64 labels in both modes, and the binary mode
 against a faithful per-label Python loop in the style of the seed authors' code, on the
-same inputs (selections must agree). Prints and writes JSON.
+same inputs (selections must agree);
+(3) the 3D regularisations of ``gsseg segment --smooth 16 --fill-interiors`` on N points: 16
+hollow spheres labelled as objects, with background points inside them (which the fill must
+give to their sphere) and around them (which it must not). Prints and writes JSON.
 
     python -m benchmarks.segment_speed [--out segment_speed.json] [--gaussians 1000000] [--labels 64]
 """
@@ -22,7 +25,8 @@ from eval.report import markdown_table
 from gsseg.render import BACKENDS, get_backend, render
 from gsseg.render.contributions import Contributions, MaskedView, contribution_matrix
 from gsseg.segment.label_options import LabelOptions
-from gsseg.segment.reassign import reassign
+from gsseg.segment.reassign import Segmentation, reassign
+from gsseg.segment.regularize import fill_interiors, smooth_weak_labels
 
 
 def seed_style_binary(
@@ -80,6 +84,58 @@ def contribution_vs_rgb(backend: str) -> dict:
     }
 
 
+def hollow_spheres(n: int, objects: int = 16, seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(n, 3) points: ``objects`` spheres of radius 0.5 in a 12 x 12 x 2 box, their shells
+    (half the points, labelled 1..objects), points inside them (a tenth, labelled 0) and
+    around them (the rest, labelled 0, outside every sphere); (n,) uint8 labels; (n,) the
+    sphere each point lies inside, -1 for none."""
+    rng = np.random.default_rng(seed)
+    centres = np.c_[rng.uniform(1, 11, (objects, 2)), np.ones(objects)]
+    shell_n, inside_n = n // 2, n // 10
+    which = rng.integers(0, objects, shell_n)
+    direction = rng.normal(size=(shell_n, 3))
+    shell = centres[which] + 0.5 * direction / np.linalg.norm(direction, axis=1, keepdims=True)
+    shell += rng.normal(0, 0.005, shell.shape)
+    held = rng.integers(0, objects, inside_n)
+    ball = rng.normal(size=(inside_n, 3))
+    ball *= (0.4 * rng.random(inside_n) ** (1 / 3) / np.linalg.norm(ball, axis=1))[:, None]
+    around = rng.uniform([0, 0, 0], [12, 12, 2], (2 * (n - shell_n - inside_n), 3))
+    far = np.linalg.norm(around[:, None] - centres[None], axis=2).min(1) > 0.6
+    around = around[far][: n - shell_n - inside_n]
+    points = np.concatenate([shell, centres[held] + ball, around])
+    labels = np.concatenate([which + 1, np.zeros(len(ball) + len(around), int)]).astype(np.uint8)
+    inside = np.concatenate([np.full(shell_n, -1), held, np.full(len(around), -1)])
+    return points, labels, inside
+
+
+def regularisations(n: int) -> dict:
+    """:func:`smooth_weak_labels` (k = 16, 40% of the points weak) and :func:`fill_interiors`
+    on :func:`hollow_spheres`; the share of the inner points the fill gives to their sphere,
+    and of the points around the spheres it gives to any."""
+    points, labels, inside = hollow_spheres(n)
+    objects = np.unique(labels[labels > 0])
+    segmentation = Segmentation(
+        labels=labels,
+        objects=objects,
+        selections=labels[None] == objects[:, None],
+        method="prior",
+        mode="multi",
+        gamma_p=0.2,
+    )
+    rng = np.random.default_rng(1)
+    weak, opacities = rng.random(len(points)) < 0.4, rng.random(len(points))
+    t_smooth, _ = timed(lambda: smooth_weak_labels(segmentation, points, opacities, weak, k=16), repeats=1)
+    t_fill, filled = timed(lambda: fill_interiors(segmentation, points), repeats=1)
+    held = inside >= 0
+    return {
+        "gaussians": len(points),
+        "smooth_s": t_smooth,
+        "fill_s": t_fill,
+        "inner_filled": float((filled.labels[held] == inside[held] + 1).mean()),
+        "around_taken": float((filled.labels[(labels == 0) & ~held] > 0).mean()),
+    }
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", default=None, help="JSON file (default: benchmarks/results/segment_speed.json).")
@@ -113,6 +169,7 @@ def main() -> None:
         "loop_over_binary": t_loop / t_binary,
         "binary_equals_loop": agree,
     }
+    out["regularisations"] = regularisations(n)
     print(json.dumps(out, indent=2))
     record.save("segment_speed", out, out=args.out)
 
@@ -147,6 +204,16 @@ def report(r: dict) -> tuple[str, str]:
             f"same selections: {a['binary_equals_loop']}",
         ),
     ]
+    if "regularisations" in r:
+        g = r["regularisations"]
+        rows += [
+            (f"smoothing of weak labels, {g['gaussians']:,} Gaussians, k = 16", f"{g['smooth_s']:.1f} s"),
+            (
+                "filling of interiors, 16 hollow spheres",
+                f"{g['fill_s']:.1f} s; inner points given to their sphere {100 * g['inner_filled']:.1f}%, "
+                f"points around them taken {100 * g['around_taken']:.2f}%",
+            ),
+        ]
     return headline, markdown_table(["what", "result"], [list(row) for row in rows])
 
 
