@@ -23,8 +23,9 @@ views: a scene folder small enough to travel to a GPU machine, with the people's
    selection of the same click, each backend's region weights and click throughout (IoU of
    the selected Gaussians).
 
-Every stage's result is kept in ``--work`` as it finishes and the training resumes from its
-checkpoint, so the same command continues where a stopped one ended; ``--deadline`` seconds
+Every stage's result is kept in ``--work`` as it finishes, and from the training on written to
+``--out`` too (a command stopped later leaves what it measured), and the training resumes from
+its checkpoint, so the same command continues where a stopped one ended; ``--deadline`` seconds
 after the start the training stops at a step, writes its checkpoint and the command exits 3
 (run it again to go on). Prints and writes JSON.
 
@@ -97,11 +98,13 @@ def prepare(real: Path, capture: str, work: Path, out: Path) -> Path:
 
 
 class Stages:
-    """The results of the stages finished so far, kept in ``work/stages.json``."""
+    """The results of the stages finished so far, kept in ``work/stages.json`` and handed to
+    ``kept`` (all of them) each time one is added."""
 
-    def __init__(self, work: Path):
+    def __init__(self, work: Path, kept=None):
         self.path = work / "stages.json"
         self.done: dict = json.loads(self.path.read_text()) if self.path.is_file() else {}
+        self.kept = kept
 
     def run(self, name: str, stage) -> dict:
         """The result of ``stage()`` with its seconds, computed once."""
@@ -114,6 +117,8 @@ class Stages:
     def keep(self, name: str, value) -> None:
         self.done[name] = value
         write_bytes_atomic(self.path, json.dumps(self.done, indent=2).encode())
+        if self.kept is not None:
+            self.kept(self.done)
 
 
 def stop_at(deadline: float | None) -> threading.Timer | None:
@@ -285,7 +290,15 @@ def run_check(args: argparse.Namespace) -> int:
     deadline = args.deadline
     work, scene, backend = args.work, args.scene, args.backend
     work.mkdir(parents=True, exist_ok=True)
-    stages = Stages(work)
+
+    def results(done: dict) -> dict:
+        return {"capture": scene.name, "backend": backend, **{k: v for k, v in done.items() if k != "train_parts"}}
+
+    def save(done: dict) -> None:  # from the training on, each stage's result is in --out at once
+        if "train" in done:
+            record.save("gpu_check", results(done), tag=args.tag, out=args.out)
+
+    stages = Stages(work, kept=save)
     run_dir = work / "run"
     images = demo_images(scene)
     compiling = warm_cpu_kernels_aside() if "parity" not in stages.done else None
@@ -321,13 +334,7 @@ def run_check(args: argparse.Namespace) -> int:
     if compiling is not None:
         compiling.wait()
     stages.run("parity", lambda: parity(run, scene, backend, click, views[0]))
-    results = {
-        "capture": args.scene.name,
-        "backend": backend,
-        **{k: v for k, v in stages.done.items() if k != "train_parts"},
-    }
-    print(json.dumps(results, indent=2))
-    record.save("gpu_check", results, tag=args.tag, out=args.out)
+    print(json.dumps(results(stages.done), indent=2))
     return 0
 
 

@@ -7,10 +7,10 @@
 # the exit code is its (3: the training stopped at --deadline; run the same command again to
 # continue).
 #
-#   bash benchmarks/gpu_check.sh --scene gpu_scenes/statue --deadline 480 --work $OUT/gpu_check --out $OUT/gpu_check.json
+#   bash benchmarks/gpu_check.sh --scene gpu_scenes/statue --deadline 480 --out $OUT/gpu_check.json
 #
-# With --work under $OUT the stages finished so far (stages.json) come back even when the call
-# outruns its limit; the run folder itself is too large to.
+# --out is written after every stage from the training on: what a call that outruns its limit
+# measured comes back all the same.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 if [ ! -d /tmp/site/gsplat ]; then
