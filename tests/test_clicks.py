@@ -330,6 +330,32 @@ def test_a_positive_click_adds_a_part_the_masks_hold_apart_and_nothing_far_off()
     assert no_growth.cut([_click(n, a), _click(n, c)], first)[c].sum() <= 5
 
 
+def test_a_later_positive_click_does_not_pin_a_large_hazy_gaussian():
+    """A large hazy Gaussian H beside A, drawn in every view over A and over the background
+    alike with 20 times A's weight each: a later positive click that lands on H alone adds
+    nothing (it would bring the blur H draws beside A); where no Gaussian counts as hazy, the
+    same click pins H and adds it."""
+    g, a, b = _two_blobs()
+    xyz = np.concatenate([g.means.numpy(), [[0.8, 0.0, 0.0]]])
+    rgb = np.concatenate([np.tile([200, 30, 30], (200, 1)), np.tile([30, 30, 200], (200, 1)), [[120, 120, 120]]])
+    g = gaussians_from_points(xyz, rgb.astype(np.uint8), initial_opacity=0.9)
+    n, hazy = len(g), 400
+    regions = _regions(n, [a])
+    matrix = regions.matrix.tolil()
+    matrix[:, hazy] = 20.0  # in A's region and in the background of every view
+    regions = replace(regions, matrix=matrix.tocsr())
+    labels = np.zeros(n, np.uint8)
+    labels[a] = 1
+    first_only = [_click(n, a)]
+    on_hazy = ClickEvidence(np.eye(n)[hazy], True)
+    for options, pinned in ((ClickOptions(), False), (ClickOptions(off_weight=1e9), True)):
+        selector = ClickSelector(g, labels, regions, options)
+        first = selector.select(first_only)
+        assert first[a].all() and not first[b].any() and not first[hazy]
+        after = selector.cut([*first_only, on_hazy], first)
+        assert after[hazy] == pinned and after[a].all() and not after[b].any()
+
+
 def test_a_part_raises_the_views_vote_and_lowers_it_nowhere():
     """Three views show A alone as an object (B under the background), three show B alone (A
     under the background): the first click on A is seen in the first three, and A's share is
