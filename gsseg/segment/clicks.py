@@ -496,7 +496,7 @@ class ClickSelector:
         share, weight, voted_regions = self.views_vote(clicks, before)
         hazy = self._hazy(weight)
         seeds = [(c.seeds(o.seed_share, o.seed_local), c.positive) for c in clicks]
-        seeds = [(k[~hazy[k]] if i and on else k, on) for i, (k, on) in enumerate(seeds)]  # (:meth:`_hazy`)
+        seeds = [(k[~hazy[k]] if i and on else k, on) for i, (k, on) in enumerate(seeds)]  # later positive: no haze
         positive = np.unique(np.concatenate([k for k, is_positive in seeds if is_positive]))
         negative = np.unique(np.concatenate([k for k, is_positive in seeds if not is_positive] or [[]]))
         negative = negative.astype(np.int64)
