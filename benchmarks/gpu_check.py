@@ -46,6 +46,7 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -101,7 +102,7 @@ class Stages:
     """The results of the stages finished so far, kept in ``work/stages.json`` and handed to
     ``kept`` (all of them) each time one is added."""
 
-    def __init__(self, work: Path, kept=None):
+    def __init__(self, work: Path, kept: Callable[[dict], None] | None = None):
         self.path = work / "stages.json"
         self.done: dict = json.loads(self.path.read_text()) if self.path.is_file() else {}
         self.kept = kept
