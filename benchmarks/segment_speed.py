@@ -113,15 +113,7 @@ def regularisations(n: int) -> dict:
     on :func:`hollow_spheres`; the share of the inner points the fill gives to their sphere,
     and of the points around the spheres it gives to any."""
     points, labels, inside = hollow_spheres(n)
-    objects = np.unique(labels[labels > 0])
-    segmentation = Segmentation(
-        labels=labels,
-        objects=objects,
-        selections=labels[None] == objects[:, None],
-        method="prior",
-        mode="multi",
-        gamma_p=0.2,
-    )
+    segmentation = Segmentation.of_labels(labels, "prior", gamma_p=0.2)
     rng = np.random.default_rng(1)
     weak, opacities = rng.random(len(points)) < 0.4, rng.random(len(points))
     t_smooth, _ = timed(lambda: smooth_weak_labels(segmentation, points, opacities, weak, k=16), repeats=1)

@@ -161,7 +161,7 @@ def edit_run(
     those renders, and ``edit.json``. ``fill``: a removal fills what no training view saw
     behind the object (:mod:`gsseg.fill`). ``options``: the prompt and the rest of
     :func:`edit_runs`' keywords, whose defaults are the defaults here."""
-    return edit_runs(run_dir, {op: color}, names=None if name is None else {op: name}, **options)[0]
+    return edit_runs(run_dir, {op: color}, names=None if name is None else {op: name}, **options)[1][0]
 
 
 def edit_runs(
@@ -181,10 +181,10 @@ def edit_runs(
     overwrite: bool = False,
     other_scene: bool = False,
     progress: bool = True,
-) -> list[Path]:
+) -> tuple[Selection, list[Path]]:
     """:func:`edit_run` of each op of ``ops`` (op: its colour, None but for a recolour) on one
     selection, made once; ``names``: the folder name of an op (default: ``<op>_<selection>``).
-    Returns the edit folders in the order of ``ops``."""
+    Returns the selection and the edit folders in the order of ``ops``."""
     check_prompts(point, clicks, object_id)
     names = names or {}
     for op, color in ops.items():
@@ -243,7 +243,7 @@ def edit_runs(
                 progress=progress,
             )
         )
-    return written
+    return chosen, written
 
 
 def write_edit(

@@ -42,7 +42,7 @@ from dataset_tools.scene import GT_MASKS, linked_scene
 from dataset_tools.sfm import run_sfm
 from dataset_tools.synth import SynthConfig, generate_scene
 from eval.report import report_run
-from gsseg.edits import Selection, edit_runs, select
+from gsseg.edits import Selection, edit_runs
 from gsseg.model.ply import read_ply
 from gsseg.render import Backend, get_backend
 from gsseg.render.views import render_run
@@ -103,11 +103,11 @@ class _StageClock:
         self.seconds[stage], self._last = now - self._last, now
 
 
-def _demo_selection(
+def _demo_prompt(
     scene_dir: Path, run: Run, segmentation: Segmentation, synth_point: np.ndarray | None, backend: Backend
-) -> tuple[Selection, dict, str | None]:
-    """What the demo edits, the prompt that selects it (``edit_runs``'s keywords) and a warning
-    where it is a label that covers most of every view (None elsewhere): the
+) -> tuple[dict, str | None]:
+    """The prompt of what the demo edits (``edit_runs``'s keywords) and a warning where it is a
+    label that covers most of every view (None elsewhere): the
     synthetic scene's first object, by a 3D point at its centre; in a user's scene the object
     the photos frame (:func:`gsseg.segment.prompts.framed_object`) of those that do not cover
     most of every view (the scene, not an object in it); in a close-up, where every object
@@ -118,15 +118,13 @@ def _demo_selection(
     at the centre of the first test view selects."""
     scene = run.scene(scene_dir)
     if synth_point is not None:
-        prompt = {"point": np.asarray(synth_point, np.float64)}
-        return select(run, segmentation, scene, backend=backend, **prompt), prompt, None
+        return {"point": np.asarray(synth_point, np.float64)}, None
     regions = run_regions(run, scene_dir, backend=backend)
     scene_wide = regions.covering()
     objects = {int(o): s for o, s in zip(segmentation.objects, segmentation.selections) if s.any()}
     if not objects:
         view = scene.split("test")[0]
-        prompt = {"clicks": [Click(view.name, view.camera.width / 2, view.camera.height / 2)]}
-        return select(run, segmentation, scene, backend=backend, **prompt), prompt, None
+        return {"clicks": [Click(view.name, view.camera.width / 2, view.camera.height / 2)]}, None
     views = masked_views(run, scene_dir, masks=regions.layers[0])
     means = run.gaussians.means.numpy().astype(np.float64)
     framed = framed_object(means, {k: s for k, s in objects.items() if k not in scene_wide}, regions, views)
@@ -143,7 +141,7 @@ def _demo_selection(
             "joined it to what surrounds it; then select it in `gsseg view`, where shift-clicks on the "
             "surroundings carve it out (docs/segmentation.md, Clicks)."
         )
-    return select(run, segmentation, scene, backend=backend, **prompt), prompt, wide
+    return prompt, wide
 
 
 def _edited(selection: Selection, prompt: dict) -> str:
@@ -341,10 +339,11 @@ def _run_demo(
     )
     stages.done("segmentation")
     run = load_run(run_dir)
-    selection, prompt, wide = _demo_selection(scene_dir, run, segmentation, synth_point, backend)
+    prompt, wide = _demo_prompt(scene_dir, run, segmentation, synth_point, backend)
     warning = " ".join(w for w in (warning, wide) if w) or None
     ops = {"remove": None, "extract": None, "recolor": (255, 40, 200)}
-    edits = dict(zip(ops, edit_runs(run_dir, ops, scene_dir=scene_dir, backend=backend, progress=progress, **prompt)))
+    selection, folders = edit_runs(run_dir, ops, scene_dir=scene_dir, backend=backend, progress=progress, **prompt)
+    edits = dict(zip(ops, folders))
     stages.done("edits")
     report = out / "report"
     with torch.no_grad():

@@ -511,7 +511,7 @@ def _joined_labels(segmented: Path, tmp_path: Path):
     a, b = (int(o) for o in np.argsort(-counts[1:])[:2] + 1)
     merged = np.where(seg.labels == b, a, seg.labels).astype(np.uint8)
     objects = np.array([o for o in seg.objects if o != b], np.uint8)
-    run.folder.write_labels(replace(seg, labels=merged, objects=objects, selections=merged[None] == objects[:, None]))
+    run.folder.write_labels(seg.relabelled(merged, objects=objects))
     return run_dir, run, seg, a, b
 
 

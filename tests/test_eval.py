@@ -110,14 +110,7 @@ def two_walls() -> tuple[Gaussians, Segmentation, HandView]:
         obj_feat=torch.zeros(n, 16),
     )
     labels = np.array([1] * len(front) + [2] * len(back), np.uint8)
-    seg = Segmentation(
-        labels=labels,
-        objects=np.array([1, 2], np.uint8),
-        selections=np.stack([labels == 1, labels == 2]),
-        method="hand",
-        mode="multi",
-        gamma_p=0.0,
-    )
+    seg = Segmentation.of_labels(labels, "hand")
     view = HandView("v", PinholeCamera(64, 48, 50.0, 50.0, 32.0, 24.0), np.eye(4)[:3])
     return g, seg, view
 

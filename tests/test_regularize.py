@@ -15,16 +15,7 @@ from gsseg.segment.regularize import DIRECTIONS, _enclosed, fill_interiors, smoo
 
 
 def _segmentation(labels: np.ndarray) -> Segmentation:
-    labels = labels.astype(np.uint8)
-    objects = np.unique(labels[labels > 0])
-    return Segmentation(
-        labels=labels,
-        objects=objects,
-        selections=labels[None] == objects[:, None],
-        method="prior",
-        mode="multi",
-        gamma_p=0.2,
-    )
+    return Segmentation.of_labels(labels, "prior", gamma_p=0.2)
 
 
 def _sphere(n: int, radius: float, rng: np.random.Generator) -> np.ndarray:

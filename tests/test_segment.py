@@ -215,7 +215,7 @@ def test_segment_edit_and_render_segments_from_the_command_line(trained, small_s
     assert read_image(frames[0]).shape == (96, 96, 3)
 
     # Several edits of one selection, made once: each folder as its own edit writes it.
-    both = edit_runs(
+    chosen, both = edit_runs(
         run,
         {"remove": None, "recolor": (255, 0, 0)},
         names={"remove": "gone2"},
@@ -224,7 +224,7 @@ def test_segment_edit_and_render_segments_from_the_command_line(trained, small_s
         fill=False,
         progress=False,
     )
-    assert [p.name for p in both] == ["gone2", "recolor_2"]
+    assert [p.name for p in both] == ["gone2", "recolor_2"] and chosen.object_id == 2
     assert (both[0] / "gaussians.ply").read_bytes() == (run / "edits" / "gone" / "gaussians.ply").read_bytes()
     record = json.loads((both[0] / "edit.json").read_text())
     # The CLI's point is rounded, and its process sums the ghost share on another thread count.

@@ -320,6 +320,7 @@ class RegionVote:
         self.units = sp.csr_matrix(
             (np.ones(len(self.unit)), (np.arange(len(self.unit)), self.unit)), shape=(len(self.unit), self.n_units)
         )
+        self.unit_totals = self.units.T @ self.row_sums  # (U,) all the weight each unit shows
 
     def clicked_regions(
         self,
@@ -378,10 +379,9 @@ class RegionVote:
         object and its surroundings as one region give such a vote: it says nothing of where
         the object ends."""
         held = self.units.T @ (self.matrix @ (share > 0.5).astype(np.float64))
-        total = self.units.T @ self.row_sums
         clicked = self.units.T @ (self.matrix @ click.weights)
         seen = clicked >= seen_share * max(float(clicked.max(initial=0)), 1e-12)
-        wide = held >= SCENE_SHARE * np.maximum(total, 1e-12)
+        wide = held >= SCENE_SHARE * np.maximum(self.unit_totals, 1e-12)
         return bool(seen.any()) and (wide & seen).sum() >= SCENE_VIEWS * seen.sum()
 
     def vote(self, clicked: np.ndarray, options: ClickOptions) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -511,7 +511,8 @@ class ClickSelector:
         if before is not None:
             cost += o.stickiness * np.where(before, 1.0, -1.0)
             if clicks[-1].positive:  # deep in a later positive click's part its word outweighs all else
-                side = self._grown(clicks[-1], np.setdiff1d(seeds[-1][0], negative), negative, share, weight, before)
+                added = np.setdiff1d(seeds[-1][0], negative)
+                side = self._grown(clicks[-1], added, negative, share, weight, hazy, before)
                 cost = (1 - side) * cost + o.split_weight * side
         if len(negative):  # deep on a negative click's side its word outweighs all else
             side = np.clip(self.graph.split(negative, positive) / o.split_full, 0, 1)
@@ -650,6 +651,7 @@ class ClickSelector:
         negative: np.ndarray,
         share: np.ndarray,
         weight: np.ndarray,
+        hazy: np.ndarray,
         before: np.ndarray,
     ) -> np.ndarray:
         """(N,) in [0, 1]: how far each Gaussian lies in the part a later positive ``click``
@@ -657,8 +659,9 @@ class ClickSelector:
         that lie beside the selection ``before`` (N,) (within :attr:`ClickOptions.part_reach`
         spacings of a selected Gaussian) than to the Gaussians the views hold off the object
         (unselected, seen, with a ``share`` (N,) of their ``weight`` (N,) in the object's
-        regions under :attr:`ClickOptions.off_share`, or under one half at a weight of at least
-        :attr:`ClickOptions.off_weight` times the median) and the ``negative`` (S',) seeds; shown
+        regions under :attr:`ClickOptions.off_share`, or under one half where ``hazy`` (N,):
+        :meth:`_hazy`)
+        and the ``negative`` (S',) seeds; shown
         by the click's view and alike in colour to the seeds rather than to the rest of the
         unselected Gaussians. A highlight on a bronze head that the masks hold as a region of
         its own, and the views therefore vote off the head, comes in whole with a click on
@@ -672,7 +675,7 @@ class ClickSelector:
         if not len(seeds):
             return np.zeros(len(self.labels))
         seen = weight > 0
-        off = np.flatnonzero(~before & seen & ((share < o.off_share) | self._hazy(weight) & (share < 0.5)))
+        off = np.flatnonzero(~before & seen & ((share < o.off_share) | hazy & (share < 0.5)))
         side = np.clip(self.graph.split(seeds, np.setdiff1d(np.union1d(off, negative), seeds)) / o.split_full, 0, 1)
         return side * self._shown_by(click) * self._alike(seeds, ~before)
 

@@ -46,6 +46,21 @@ class Segmentation:
     smooth: int = 0
     fill: bool = False
 
+    @classmethod
+    def of_labels(cls, labels: np.ndarray, method: str, mode: str = "multi", gamma_p: float = 0.0) -> Segmentation:
+        """The segmentation whose objects are the labels other than 0 in ``labels`` (N,), each
+        selecting the Gaussians that carry it (labels made elsewhere: by hand, by a test)."""
+        labels = np.asarray(labels).astype(np.uint8)
+        objects = np.unique(labels[labels > 0])
+        return cls(labels, objects, labels[None, :] == objects[:, None], method, mode, gamma_p)
+
+    def relabelled(self, labels: np.ndarray, **changes) -> Segmentation:
+        """A copy with new (N,) ``labels``, the selections made from them, and ``changes`` to
+        the other fields (``objects`` among them)."""
+        objects = changes.pop("objects", self.objects)
+        labels = np.asarray(labels).astype(np.uint8)
+        return replace(self, labels=labels, objects=objects, selections=labels[None, :] == objects[:, None], **changes)
+
     def selection(self, obj: int) -> np.ndarray:
         """(N,) bool Gaussians of object ``obj``."""
         hit = np.flatnonzero(self.objects == obj)

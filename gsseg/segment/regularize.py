@@ -46,17 +46,6 @@ def weak_evidence(contributions: Contributions, *, min_share: float = 0.05, marg
     return ((total < min_share * median) | (gap < margin)).numpy()
 
 
-def _relabelled(segmentation: Segmentation, labels: np.ndarray, **applied) -> Segmentation:
-    """``segmentation`` with new (N,) ``labels``, its selections made from them, and the
-    regularisation ``applied`` recorded."""
-    return replace(
-        segmentation,
-        labels=labels.astype(np.uint8),
-        selections=labels[None, :] == segmentation.objects[:, None],
-        **applied,
-    )
-
-
 def smooth_weak_labels(
     segmentation: Segmentation, means: np.ndarray, opacities: np.ndarray, weak: np.ndarray, k: int = 16
 ) -> Segmentation:
@@ -75,7 +64,7 @@ def smooth_weak_labels(
         rows = np.repeat(np.arange(len(near)), near.shape[1])
         votes = np.bincount(rows * 256 + labels[near].ravel(), opacities[near].ravel(), minlength=len(near) * 256)
         labels[targets[start : start + VOTE_CHUNK]] = votes.reshape(len(near), 256).argmax(1)
-    return _relabelled(segmentation, labels, smooth=k)
+    return segmentation.relabelled(labels, smooth=k)
 
 
 def fill_interiors(
@@ -106,7 +95,7 @@ def fill_interiors(
             continue
         enclosed = _enclosed(means[candidates], cKDTree(means[own]), step, steps, share)
         labels[candidates[enclosed]] = obj
-    return _relabelled(segmentation, labels, fill=True)
+    return segmentation.relabelled(labels, fill=True)
 
 
 def _enclosed(points: np.ndarray, tree: cKDTree, step: float, steps: int, share: float) -> np.ndarray:
