@@ -57,6 +57,7 @@ from gsseg.train.trainer import train
 from hqmask.build import BuildConfig, build_masks
 from pipeline.demo_options import (
     EMBEDDED_ITERS,
+    FULL_RUN_VIEWS,
     GAUSSIANS_PER_POINT,
     MAX_SCENE_ITERS,
     MIN_SCENE_GAUSSIANS,
@@ -65,6 +66,7 @@ from pipeline.demo_options import (
     DemoOptions,
     capture_gaussians,
     capture_iters,
+    capture_pixels,
 )
 
 # Masks are proposed at 256x256, where the graph proposer separates these objects well;
@@ -187,9 +189,10 @@ def demo_training(scene_dir: Path, images: str, options: DemoOptions) -> DemoTra
     """The demo's training on the views of ``scene_dir/images``: ``options.iters`` and
     ``options.max_gaussians`` where given; on the embedded scene :data:`EMBEDDED_ITERS` steps
     and :data:`MIN_SCENE_GAUSSIANS`; else the capture's
-    (:func:`pipeline.demo_options.capture_iters` of the first view's size,
-    :func:`pipeline.demo_options.capture_gaussians` of its SfM points)."""
+    (:func:`pipeline.demo_options.capture_iters` of the first view's size and the photos of
+    its SfM model, :func:`pipeline.demo_options.capture_gaussians` of its points)."""
     reasons = []
+    model = read_model(scene_dir / "sparse" / "0") if options.scene is not None else None
     if options.iters is not None:
         iters = options.iters
         reasons.append("steps as asked")
@@ -199,9 +202,14 @@ def demo_training(scene_dir: Path, images: str, options: DemoOptions) -> DemoTra
     else:
         first = _first_image(scene_dir / images)
         width, height = image_size(first) if first is not None else (0, 0)
-        iters = capture_iters(width * height)
+        views = len(model.images)
+        iters = capture_iters(width * height, views)
+        pixels = capture_pixels(views)
+        shrunk = (
+            f", {FULL_RUN_VIEWS}/{views} of {RUN_PIXELS / 1e6:.0f} for {views} photos," if pixels < RUN_PIXELS else ""
+        )
         reasons.append(
-            f"{RUN_PIXELS / 1e6:.0f} million pixels in all at {width}x{height} a view, "
+            f"{pixels / 1e6:.0f} million pixels in all{shrunk} at {width}x{height} a view, "
             f"{MIN_SCENE_ITERS}-{MAX_SCENE_ITERS} steps"
         )
     if options.max_gaussians is not None:
@@ -210,16 +218,11 @@ def demo_training(scene_dir: Path, images: str, options: DemoOptions) -> DemoTra
     elif options.scene is None:
         cap = MIN_SCENE_GAUSSIANS
     else:
-        points = sfm_point_count(scene_dir)
+        points = len(model.xyz)
         cap = capture_gaussians(points)
         reasons.append(f"{points:,} SfM points, room to grow them {GAUSSIANS_PER_POINT}x")
     why = "; ".join(reasons)
     return DemoTraining(iters, cap, f"training {iters} steps, at most {cap:,} Gaussians ({why})")
-
-
-def sfm_point_count(scene_dir: Path) -> int:
-    """The number of points of the SfM model ``scene_dir/sparse/0``."""
-    return len(read_model(scene_dir / "sparse" / "0").xyz)
 
 
 def masks_at_depth_jumps(

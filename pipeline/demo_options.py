@@ -17,6 +17,12 @@ EMBEDDED_ITERS = 1_500
 RUN_PIXELS = 2_000 * 424 * 424
 MIN_SCENE_ITERS = 1_000
 MAX_SCENE_ITERS = 2_000
+# The stages around the training (structure from motion, masks, the removal's fill) take
+# about 3.5 s a photo on 2 cores (the statue's 29 photos 1.4 min, the head's 66 4.4, the
+# bear's 96 5.7), so past FULL_RUN_VIEWS photos the run's pixels shrink in proportion to keep
+# the whole demo near 10 minutes: the bear's 96 train 1200 steps, not 1400 (22.41 dB against
+# 22.67; docs/training.md).
+FULL_RUN_VIEWS = 80
 # The cap: 30k Gaussians, or room for densification to double the SfM points where they are
 # more than half of that (gaussctrl_bear's 34 790 points left no room under 30k: 22.05 dB in
 # 1400 steps and 293 s of colour-only training, 22.80 with 70k in 330 s), up to
@@ -53,11 +59,17 @@ class DemoOptions:
     backend: str = "auto"
 
 
-def capture_iters(view_pixels: int) -> int:
-    """The demo's training steps on a capture whose views have ``view_pixels`` pixels each:
-    :data:`RUN_PIXELS` pixels in all, in hundreds of steps, between :data:`MIN_SCENE_ITERS` and
-    :data:`MAX_SCENE_ITERS`."""
-    steps = round(RUN_PIXELS / max(view_pixels, 1), -2)
+def capture_pixels(views: int) -> float:
+    """The pixels the demo's run renders in all on a capture of ``views`` photos:
+    :data:`RUN_PIXELS`, times :data:`FULL_RUN_VIEWS` / ``views`` past that many photos."""
+    return RUN_PIXELS * min(1.0, FULL_RUN_VIEWS / max(views, 1))
+
+
+def capture_iters(view_pixels: int, views: int) -> int:
+    """The demo's training steps on a capture of ``views`` photos whose views have
+    ``view_pixels`` pixels each: :func:`capture_pixels` in all, in hundreds of steps, between
+    :data:`MIN_SCENE_ITERS` and :data:`MAX_SCENE_ITERS`."""
+    steps = round(capture_pixels(views) / max(view_pixels, 1), -2)
     return int(min(max(steps, MIN_SCENE_ITERS), MAX_SCENE_ITERS))
 
 

@@ -11,6 +11,7 @@ from dataset_tools.cameras import PinholeCamera
 from pipeline.demo import demo_training
 from pipeline.demo_options import (
     EMBEDDED_ITERS,
+    FULL_RUN_VIEWS,
     MAX_SCENE_GAUSSIANS,
     MAX_SCENE_ITERS,
     MIN_SCENE_GAUSSIANS,
@@ -19,23 +20,27 @@ from pipeline.demo_options import (
     DemoOptions,
     capture_gaussians,
     capture_iters,
+    capture_pixels,
 )
 
 
-def _capture(root: Path, size: int, points: int, folder: str = "images") -> Path:
-    """A capture of one black ``size`` x ``size`` view and an SfM model of ``points`` points."""
+def _capture(root: Path, size: int, points: int, folder: str = "images", views: int = 1) -> Path:
+    """A capture of ``views`` black ``size`` x ``size`` views, all from one pose, and an SfM
+    model of ``points`` points."""
     (root / folder).mkdir(parents=True)
-    cv2.imwrite(str(root / folder / "a.png"), np.zeros((size, size, 3), np.uint8))
+    names = [f"{k:03d}.png" for k in range(views)]
+    for name in names:
+        cv2.imwrite(str(root / folder / name), np.zeros((size, size, 3), np.uint8))
     rng = np.random.default_rng(0)
     xyz = rng.normal(0, 1, (points, 3)) + [0, 0, 5]
     camera = PinholeCamera(size, size, size, size, size / 2, size / 2)
     uv = xyz[:, :2] / xyz[:, 2:] * size + size / 2
     colmap.write_model(
         root / "sparse" / "0",
-        ["a.png"],
-        [camera],
-        [np.eye(4)[:3]],
-        [(np.arange(points), uv)],
+        names,
+        [camera] * views,
+        [np.eye(4)[:3]] * views,
+        [(np.arange(points), uv)] * views,
         xyz,
         np.zeros((points, 3), np.uint8),
     )
@@ -53,8 +58,21 @@ def _capture(root: Path, size: int, points: int, folder: str = "images") -> Path
     ],
 )
 def test_capture_iters_spends_the_pixel_budget_in_hundreds_of_steps_within_bounds(width, height, steps):
-    assert capture_iters(width * height) == steps
+    assert capture_iters(width * height, 66) == steps
     assert RUN_PIXELS == 2000 * 424 * 424
+
+
+@pytest.mark.parametrize(
+    "views, steps",
+    [
+        (FULL_RUN_VIEWS, 1400),  # 259 081 pixels a view: 1390 steps, in hundreds
+        (96, 1200),  # gaussctrl_bear: 1158
+        (190, MIN_SCENE_ITERS),  # 585: too few to fit anything
+    ],
+)
+def test_past_the_full_run_views_the_pixels_shrink_in_proportion(views, steps):
+    assert capture_pixels(views) == RUN_PIXELS * min(1.0, FULL_RUN_VIEWS / views)
+    assert capture_iters(509 * 509, views) == steps
 
 
 @pytest.mark.parametrize(
@@ -96,3 +114,13 @@ def test_demo_training_reads_the_view_size_and_the_sfm_points_and_says_why(tmp_p
     assert plan.why == "training 300 steps, at most 5,000 Gaussians (steps as asked; the cap as asked)"
     embedded = demo_training(scene, "images", DemoOptions())
     assert (embedded.iters, embedded.max_gaussians) == (EMBEDDED_ITERS, MIN_SCENE_GAUSSIANS)
+
+
+def test_demo_training_of_many_photos_says_how_their_pixels_shrank(tmp_path):
+    scene = _capture(tmp_path, 509, 16_000, views=96)
+    plan = demo_training(scene, "images", DemoOptions(scene=scene))
+    assert plan.iters == 1200
+    assert plan.why == (
+        "training 1200 steps, at most 32,000 Gaussians (300 million pixels in all, 80/96 of 360 for 96 photos, "
+        "at 509x509 a view, 1000-2000 steps; 16,000 SfM points, room to grow them 2x)"
+    )
