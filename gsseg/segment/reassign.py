@@ -47,12 +47,13 @@ class Segmentation:
     fill: bool = False
 
     @classmethod
-    def of_labels(cls, labels: np.ndarray, method: str, mode: str = "multi", gamma_p: float = 0.0) -> Segmentation:
+    def of_labels(cls, labels: np.ndarray, method: str, gamma_p: float = 0.0) -> Segmentation:
         """The segmentation whose objects are the labels other than 0 in ``labels`` (N,), each
-        selecting the Gaussians that carry it (labels made elsewhere: by hand, by a test)."""
+        selecting the Gaussians that carry it, one label a Gaussian (``multi``; labels made
+        elsewhere: by hand, by a test)."""
         labels = np.asarray(labels).astype(np.uint8)
         objects = np.unique(labels[labels > 0])
-        return cls(labels, objects, labels[None, :] == objects[:, None], method, mode, gamma_p)
+        return cls(labels, objects, labels[None, :] == objects[:, None], method, "multi", gamma_p)
 
     def relabelled(self, labels: np.ndarray, **changes) -> Segmentation:
         """A copy with new (N,) ``labels``, the selections made from them, and ``changes`` to
