@@ -35,7 +35,7 @@ def run_capture(name: str, real: Path, work: Path) -> dict:
     except InputError as refused:
         return {"scene": name, "photos": count, "refused": str(refused)}
     run = load_run(result.out / "run")
-    evaluation = json.loads((result.out / "run" / "evaluation.json").read_text())
+    evaluation = run.folder.read_evaluation()
     return {
         "scene": name,
         "photos": count,
