@@ -660,12 +660,11 @@ class ClickSelector:
         spacings of a selected Gaussian) than to the Gaussians the views hold off the object
         (unselected, seen, with a ``share`` (N,) of their ``weight`` (N,) in the object's
         regions under :attr:`ClickOptions.off_share`, or under one half where ``hazy`` (N,):
-        :meth:`_hazy`)
-        and the ``negative`` (S',) seeds; shown
-        by the click's view and alike in colour to the seeds rather than to the rest of the
-        unselected Gaussians. A highlight on a bronze head that the masks hold as a region of
-        its own, and the views therefore vote off the head, comes in whole with a click on
-        it; a click on what lies off the selection's surface grows nothing."""
+        :meth:`_hazy`) and the ``negative`` (S',) seeds; shown by the click's view and alike in
+        colour to the seeds rather than to the rest of the unselected Gaussians. A highlight on a
+        bronze head that the masks hold as a region of its own, and the views therefore vote off
+        the head, comes in whole with a click on it; a click on what lies off the selection's
+        surface grows nothing."""
         o = self.options
         seeds = seeds[~before[seeds]]  # what the click adds, not what it lands on of the selection
         if not before.any() or not len(seeds):

@@ -55,10 +55,10 @@ class Segmentation:
         objects = np.unique(labels[labels > 0])
         return cls(labels, objects, labels[None, :] == objects[:, None], method, "multi", gamma_p)
 
-    def relabelled(self, labels: np.ndarray, **changes) -> Segmentation:
-        """A copy with new (N,) ``labels``, the selections made from them, and ``changes`` to
-        the other fields (``objects`` among them)."""
-        objects = changes.pop("objects", self.objects)
+    def relabelled(self, labels: np.ndarray, objects: np.ndarray | None = None, **changes) -> Segmentation:
+        """A copy with new (N,) ``labels`` (and (M',) ``objects``, where given), the selections
+        made from them, and ``changes`` to the other fields."""
+        objects = self.objects if objects is None else objects
         labels = np.asarray(labels).astype(np.uint8)
         return replace(self, labels=labels, objects=objects, selections=labels[None, :] == objects[:, None], **changes)
 
