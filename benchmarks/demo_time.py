@@ -27,7 +27,8 @@ from pipeline.demo_options import DemoOptions
 
 def run_capture(name: str, real: Path, work: Path) -> dict:
     """The demo on ``real/name/photos`` into ``work/name`` (replaced): its seconds in all and
-    per stage, steps, Gaussians, test PSNR and edit; or why structure from motion refused it."""
+    per stage, steps, Gaussians, test PSNR and edit; or why it was refused (photos structure
+    from motion cannot pose, a ``work`` holding the photos)."""
     photos = real / name / "photos"
     count = sum(1 for p in photos.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
     try:
@@ -59,7 +60,7 @@ def report(r: dict) -> tuple[str, str]:
     headline = "; ".join(
         ([f"slowest: {slowest['scene']}, {slowest['seconds'] / 60:.1f} min"] if slowest else [])
         + [f"{x['scene']}: {x['photos']} photos, {x['seconds'] / 60:.1f} min, {x['test_psnr']:.2f} dB" for x in ran]
-        + [f"{x['scene']}: not posed by sfm" for x in refused]
+        + [f"{x['scene']}: refused" for x in refused]
     )
     stages = list(dict.fromkeys(s for x in ran for s in x["stages"]))
     rows = [
@@ -88,10 +89,10 @@ def report(r: dict) -> tuple[str, str]:
         ],
         rows,
     )
-    not_posed = "".join(f"\n\n{x['scene']}: not posed: {x['refused']}" for x in refused)
+    not_run = "".join(f"\n\n{x['scene']}: refused: {x['refused']}" for x in refused)
     details = (
         "`gsseg demo --scene REAL/<capture>/photos` from scratch, each capture in turn; the wall time of "
-        "every stage as the demo prints it.\n\n" + table + not_posed
+        "every stage as the demo prints it.\n\n" + table + not_run
     )
     return headline, details
 
