@@ -167,6 +167,29 @@ def test_clicks_carve_the_object_alone_where_the_masks_hold_the_whole_scene():
     assert not kept.vote.holds_the_scene(share, _click(len(g), a), kept.options.seen_share)
 
 
+def test_carving_decides_what_no_clicked_view_shows_by_the_cut():
+    """A bar along x, one region in every view: C (x < -1.5), A (red, the middle) and B (x >
+    1.5); the clicked view shows A and B, not C. A click on A, a negative one on B's far end:
+    C lies nearer A along the graph, outside the negative click's own cell, yet no clicked
+    view shows it, so the cut decides it by its colour: blue like B, it goes with B; red
+    like A, it stays."""
+    rng = np.random.default_rng(0)
+    x = rng.uniform(-3, 3, 900)
+    xyz = np.stack([x, rng.normal(0, 0.2, 900), rng.normal(0, 0.2, 900)], 1)
+    c, a, b = np.flatnonzero(x < -1.5), np.flatnonzero(np.abs(x) <= 1.5), np.flatnonzero(x > 1.5)
+    shown = np.where(x < -1.5, 0.0, 1.0)
+    clicks = [_click(900, a[np.argsort(np.abs(x[a]))], shown=shown), _click(900, b[np.argsort(-x[b])], False, shown)]
+    for c_like_a in (False, True):
+        red = x <= 1.5 if c_like_a else np.abs(x) <= 1.5
+        g = gaussians_from_points(
+            xyz, np.where(red[:, None], [200, 30, 30], [30, 30, 200]).astype(np.uint8), initial_opacity=0.9
+        )
+        selector = ClickSelector(g, np.full(900, 7, np.uint8), _regions(900, [np.arange(900)]))
+        carved = selector.select(clicks)
+        assert carved[a].all() and not carved[b].any()
+        assert carved[c].all() if c_like_a else not carved[c].any()
+
+
 def _spill():
     """A long object A of 400 Gaussians (x from 0 to 4) and a spill F of 60 of its colour beside
     its far end (x = 4.6), which three of six views' masks give to A, all under one label, on

@@ -53,7 +53,8 @@ Where the views' vote of the first click holds the scene (masks that read the ob
 surroundings as one region: :meth:`RegionVote.holds_the_scene`), neither the views nor the
 labels say where the object ends, and from the first negative click on the clicks carve it
 alone (:meth:`ClickSelector._carved`): the graph's geodesic split between the positive and
-negative seeds, colour models learned from the cut, and each click changing only its own cell.
+negative seeds, colour models learned from the cut, and each click changing only its own cell
+and what no click's view shows (:meth:`ClickSelector._unseen`), which every cut decides.
 
 The seeds are hard constraints; the source's side of the cut is the selection (parts apart
 in space, several objects under one mask, stay together where the views join them). A later
@@ -503,7 +504,7 @@ class ClickSelector:
         both = np.intersect1d(positive, negative)
         positive, negative = np.setdiff1d(positive, both), np.setdiff1d(negative, both)
         if before is not None and len(negative) and self.vote.holds_the_scene(share, clicks[0], o.seen_share):
-            return self._carved(clicks[-1].positive, np.setdiff1d(seeds[-1][0], both), positive, negative, before)
+            return self._carved(clicks, np.setdiff1d(seeds[-1][0], both), positive, negative, before)
         posterior = self._labelled(share, weight, seeds[0][0])
         cost = o.evidence * np.where(weight > 0, log_odds(posterior), -1.0)  # > 0: the object's
         if o.appearance_rounds:
@@ -605,31 +606,47 @@ class ClickSelector:
         return term
 
     def _carved(
-        self, positive_click: bool, clicked: np.ndarray, positive: np.ndarray, negative: np.ndarray, before: np.ndarray
+        self,
+        clicks: Sequence[ClickEvidence],
+        clicked: np.ndarray,
+        positive: np.ndarray,
+        negative: np.ndarray,
+        before: np.ndarray,
     ) -> np.ndarray:
-        """(N,) bool: the selection after a click where the views' vote holds the scene
-        (:meth:`RegionVote.holds_the_scene`), carved by the clicks alone, as seeded geodesic
-        segmentation and GrabCut do without masks: each Gaussian is the object's in proportion
-        to how much nearer, along the graph, it lies to a ``positive`` seed than to a
-        ``negative`` one ((d- - d+) / (d- + d+), times :attr:`ClickOptions.split_weight`), with
-        colour models learned from the cut (:meth:`_appearance`) and the selection ``before``
-        (N,) weighing :attr:`ClickOptions.carve_stickiness`. The click (for the object where
-        ``positive_click``; its seeds ``clicked`` (S,)) changes only its own cell: the Gaussians
-        nearer to its seeds than to any other click's. So a click on the wall behind a plant
-        takes the wall off, and a later click on the plant brings back none of it."""
+        """(N,) bool: the selection after the last of ``clicks`` where the views' vote holds the
+        scene (:meth:`RegionVote.holds_the_scene`), carved by the clicks alone, as seeded
+        geodesic segmentation and GrabCut do without masks: each Gaussian is the object's in
+        proportion to how much nearer, along the graph, it lies to a ``positive`` seed than to
+        a ``negative`` one ((d- - d+) / (d- + d+), times :attr:`ClickOptions.split_weight`),
+        with colour models learned from the cut (:meth:`_appearance`) and the selection
+        ``before`` (N,) weighing :attr:`ClickOptions.carve_stickiness`. The click (its seeds
+        ``clicked`` (S,)) changes only its own cell, the Gaussians nearer to its seeds than to
+        any other click's, and those no click's view shows (:meth:`_unseen`), which no click
+        speaks of and every cut decides: so a click on the wall behind a plant takes the wall
+        off, and a later click on the plant brings back none of it. The first negative click
+        decides the unseen Gaussians free of ``before``: the first click's selection of the
+        scene is the vote's, no choice of the user's."""
         o = self.options
         to_positive, to_negative = self.graph.distances(positive), self.graph.distances(negative)
         with np.errstate(invalid="ignore"):
             nearer = (to_negative - to_positive) / np.maximum(to_negative + to_positive, 1e-12)
         nearer = np.where(np.isinf(to_negative), 1.0, np.where(np.isinf(to_positive), -1.0, nearer))
-        cost = o.split_weight * nearer + o.carve_stickiness * np.where(before, 1.0, -1.0)
+        unseen = self._unseen(clicks)
+        first_carving = all(click.positive for click in clicks[:-1])
+        stickiness = np.where(unseen & first_carving, 0.0, o.carve_stickiness)
+        cost = o.split_weight * nearer + stickiness * np.where(before, 1.0, -1.0)
         if o.appearance_rounds:
             cost += o.appearance_weight * self._appearance(cost, positive, np.ones(len(cost), bool), negative)
         cut = self._min_cut(cost, positive, negative)
-        cell = self.graph.distances(clicked) < self.graph.distances(
-            np.setdiff1d(np.union1d(positive, negative), clicked)
-        )
-        return before | (cut & cell) if positive_click else before & (cut | ~cell)
+        others = np.setdiff1d(np.union1d(positive, negative), clicked)
+        cell = (self.graph.distances(clicked) < self.graph.distances(others)) | unseen
+        return before | (cut & cell) if clicks[-1].positive else before & (cut | ~cell)
+
+    def _unseen(self, clicks: Sequence[ClickEvidence]) -> np.ndarray:
+        """(N,) bool: the Gaussians that no click's view shows :attr:`ClickOptions.shown_share`
+        of (:attr:`ClickEvidence.shown`): in an orbit, the far side of the scene from the
+        clicked view."""
+        return np.max([self._shown_by(click) for click in clicks], axis=0) < 1.0
 
     def _alike(self, seeds: np.ndarray, others: np.ndarray) -> np.ndarray:
         """(N,) in [0, 1]: how far each Gaussian looks like a click's ``seeds`` (S,) rather
