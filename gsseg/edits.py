@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
@@ -24,7 +25,7 @@ from gsseg.model.sh import rgb_to_sh_dc
 from gsseg.render import Backend, get_backend
 from gsseg.run.folder import write_edit_record
 from gsseg.run.loaded import Background, Run, load_run
-from gsseg.segment.clicks import Click, ClickSelector
+from gsseg.segment.clicks import Click, ClickSelector, SceneHeld
 from gsseg.segment.prompts import click_evidence, pick_object, point_evidence
 from gsseg.segment.reassign import Segmentation
 from gsseg.segment.segment_run import run_regions
@@ -142,6 +143,15 @@ def select(
         )
     selector = ClickSelector(run.gaussians, segmentation.labels, run_regions(run, scene.root, backend=backend))
     mask = selector.select(evidence)
+    if all(e.positive for e in evidence) and selector.holds_the_scene(evidence):
+        warnings.warn(
+            SceneHeld(
+                "the masks hold the clicked object and its surroundings as one region, so the click "
+                "selects most of the scene; clicks against what is not the object carve it out "
+                "(--exclude-click VIEW U V; docs/segmentation.md, Clicks)."
+            ),
+            stacklevel=2,
+        )
     objects = sorted(set(np.unique(segmentation.labels[mask]).tolist()))
     split = any(not c.positive for c in clicks)
     return Selection(mask, None, "click_" + "+".join(map(str, objects)) + ("_split" if split else ""))

@@ -25,6 +25,7 @@ from __future__ import annotations
 import shutil
 import sys
 import time
+import warnings
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -47,7 +48,7 @@ from gsseg.model.ply import read_ply
 from gsseg.render import Backend, get_backend
 from gsseg.render.views import render_run
 from gsseg.run.loaded import Run, load_run
-from gsseg.segment.clicks import Click
+from gsseg.segment.clicks import Click, SceneHeld
 from gsseg.segment.label_options import LabelOptions
 from gsseg.segment.prompts import framed_object, object_click
 from gsseg.segment.reassign import Segmentation
@@ -345,7 +346,10 @@ def _run_demo(
     prompt, wide = _demo_prompt(scene_dir, run, segmentation, synth_point, backend)
     warning = " ".join(w for w in (warning, wide) if w) or None
     ops = {"remove": None, "extract": None, "recolor": (255, 40, 200)}
-    selection, folders = edit_runs(run_dir, ops, scene_dir=scene_dir, backend=backend, progress=progress, **prompt)
+    with warnings.catch_warnings():
+        if wide:  # the demo says it in its own words, with the viewer's shift-clicks
+            warnings.simplefilter("ignore", SceneHeld)
+        selection, folders = edit_runs(run_dir, ops, scene_dir=scene_dir, backend=backend, progress=progress, **prompt)
     edits = dict(zip(ops, folders))
     stages.done("edits")
     report = out / "report"

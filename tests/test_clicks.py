@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import shutil
 import subprocess
+import warnings
 from dataclasses import replace
 from pathlib import Path
 
@@ -24,7 +25,7 @@ from gsseg.model.gaussians import gaussians_from_points
 from gsseg.model.ply import read_ply
 from gsseg.render.contributions import RegionWeights
 from gsseg.run.loaded import load_run
-from gsseg.segment.clicks import ClickEvidence, ClickOptions, ClickSelector, ColourModel, RegionVote
+from gsseg.segment.clicks import ClickEvidence, ClickOptions, ClickSelector, ColourModel, RegionVote, SceneHeld
 from gsseg.segment.prompts import click_evidence, framed_object, object_click
 from gsseg.segment.segment_run import segment_run
 from gsseg.segment.served import complete_selection
@@ -625,3 +626,39 @@ def test_the_viewers_clicks_select_what_gsseg_edit_selects(segmented, tmp_path):
     session.edit("remove")
     assert len(session.current()[0]) == len(run.gaussians) - expected.sum() and session.selection() is None
     assert session.undo().object_id is None and len(session.current()[0]) == len(run.gaussians)
+
+
+@pytest.mark.slow
+def test_a_click_where_the_masks_hold_the_scene_says_so(segmented, small_scene, tmp_path):
+    """Masks of one region over every view (weight-free masks that read a plant and the room
+    behind it as one): a click on an object selects most of the scene, and ``gsseg edit``'s
+    selection and the viewer say that clicks against the rest carve it out. With the run's own
+    masks, or once a click is against, they say nothing."""
+    from gsseg.edits import select
+    from gsseg.viewer.session import ViewCamera, ViewerSession
+
+    run = load_run(segmented)
+    seg = run.labels()
+    a, b = (int(o) for o in np.argsort(-np.bincount(seg.labels, minlength=256)[1:])[:2] + 1)
+    on_a, on_b = (object_click(run.gaussians, seg.labels == o, run.scene().split("train")) for o in (a, b))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", SceneHeld)
+        select(run, seg, run.scene(small_scene.root), clicks=[on_a], backend="cpu")
+
+    run_dir = Path(shutil.copytree(segmented, tmp_path / "run"))
+    one = Path(shutil.copytree(small_scene.root, tmp_path / "scene"))
+    for view in load_scene(one, masks="object_mask").views:
+        write_bytes_atomic(view.mask_path, encode_png(np.ones_like(view.load_mask())))
+    segment_run(run_dir, one, backend="cpu", progress=False)
+    run = load_run(run_dir)
+    seg, scene = run.labels(), run.scene(one)
+    with pytest.warns(SceneHeld, match="exclude-click"):
+        assert select(run, seg, scene, clicks=[on_a], backend="cpu").mask.mean() > 0.5
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", SceneHeld)
+        select(run, seg, scene, clicks=[on_a, replace(on_b, positive=False)], backend="cpu")
+    session = ViewerSession(run, scene_dir=one, backend="cpu")
+    for click, mode, held in ((on_a, "select", True), (on_b, "exclude", False)):
+        view = scene.view(click.view)
+        session.select_at(ViewCamera(view.camera, view.cam_from_world), click.u, click.v, mode)
+        assert session.scene_held() is held

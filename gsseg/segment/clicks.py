@@ -84,6 +84,11 @@ from gsseg.render.contributions import SCENE_SHARE, SCENE_VIEWS, RegionWeights
 HARD = 1e9  # the capacity that pins a seed to its side of the cut
 
 
+class SceneHeld(UserWarning):
+    """The masks hold the clicked object and its surroundings as one region: the click selected
+    most of the scene (:meth:`ClickSelector.holds_the_scene`)."""
+
+
 @dataclass(frozen=True)
 class Click:
     """Pixel (u, v) of the view named ``view``, for (``positive``) or against the selection."""
@@ -383,7 +388,7 @@ class RegionVote:
         clicked = self.units.T @ (self.matrix @ click.weights)
         seen = clicked >= seen_share * max(float(clicked.max(initial=0)), 1e-12)
         wide = held >= SCENE_SHARE * np.maximum(self.unit_totals, 1e-12)
-        return bool(seen.any()) and (wide & seen).sum() >= SCENE_VIEWS * seen.sum()
+        return bool(seen.any() and (wide & seen).sum() >= SCENE_VIEWS * seen.sum())
 
     def vote(self, clicked: np.ndarray, options: ClickOptions) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(N,) each Gaussian's share of weight in the object's regions, starting from the
@@ -487,6 +492,14 @@ class ClickSelector:
         for k in range(len(clicks)):
             selected = self.cut(clicks[: k + 1], selected)
         return selected
+
+    def holds_the_scene(self, clicks: Sequence[ClickEvidence]) -> bool:
+        """Whether the views' vote of the first of ``clicks`` holds the scene
+        (:meth:`RegionVote.holds_the_scene`): the masks read the clicked object and its
+        surroundings as one, the first click selects the scene, and from the first negative
+        click on the clicks carve the object alone."""
+        share, _, _ = self.views_vote(clicks[:1], None)
+        return self.vote.holds_the_scene(share, clicks[0], self.options.seen_share)
 
     def cut(self, clicks: Sequence[ClickEvidence], before: np.ndarray | None) -> np.ndarray:
         """(N,) bool: the selection of ``clicks`` made from ``before``, the selection of all

@@ -194,9 +194,15 @@ class Viewer:
             self._say(str(e))
             return
         clicks = len(self.session.clicks)
+        held = (
+            " The masks hold this object and its surroundings as one region: shift-click what is not "
+            "the object to carve it out."
+            if self.session.scene_held()
+            else ""
+        )
         self._say(
             f"Selected {int(selection.sum()):,} Gaussians by {clicks} click{'s' if clicks > 1 else ''} "
-            "(ctrl-click adds a part, shift-click takes one out)."
+            f"(ctrl-click adds a part, shift-click takes one out).{held}"
         )
         self.refresh()
 

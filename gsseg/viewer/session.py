@@ -204,6 +204,15 @@ class ViewerSession:
             self.clicks, self.selected = clicks, None
             return self._click_selection
 
+    def scene_held(self) -> bool:
+        """Whether the clicks selecting now, none of them against, began on an object the masks
+        hold as one region with its surroundings (:meth:`ClickSelector.holds_the_scene`): the
+        selection is most of the scene until shift-clicks carve the object out."""
+        with self._lock:
+            if not self.clicks or not all(c.positive for c in self.clicks):
+                return False
+            return self._click_selector().holds_the_scene(self.clicks)
+
     def selection(self) -> np.ndarray | None:
         """(N,) bool: the Gaussians of the current model selected now, or None."""
         g, seg = self.current()
