@@ -44,6 +44,16 @@ class PinholeCamera:
         """Intrinsic matrix, (3, 3) float64."""
         return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
 
+    def pixels(self, points: np.ndarray, min_z: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Where camera-space ``points`` (P, 3) fall in the image: the rows of those deeper than
+        ``min_z`` that fall in it (K,), and the column and row of the pixel each falls in
+        (K,) int."""
+        with np.errstate(divide="ignore", invalid="ignore"):
+            u = points[:, 0] / points[:, 2] * self.fx + self.cx
+            v = points[:, 1] / points[:, 2] * self.fy + self.cy
+        rows = np.flatnonzero((points[:, 2] > min_z) & (u >= 0) & (u < self.width) & (v >= 0) & (v < self.height))
+        return rows, u[rows].astype(int), v[rows].astype(int)
+
     def resized(self, width: int, height: int) -> PinholeCamera:
         """The same camera for an image resampled to ``width`` x ``height``."""
         sx, sy = width / self.width, height / self.height

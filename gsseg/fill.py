@@ -160,11 +160,8 @@ def _shown_depth(
 ) -> tuple[np.ndarray, np.ndarray]:
     """The rows of the camera-space points ``pc`` (P, 3) deeper than ``min_z`` that fall in
     ``camera``'s image, and the ``depth`` (H, W) it shows at each of them."""
-    with np.errstate(divide="ignore", invalid="ignore"):
-        u = pc[:, 0] / pc[:, 2] * camera.fx + camera.cx
-        v = pc[:, 1] / pc[:, 2] * camera.fy + camera.cy
-    rows = np.flatnonzero((pc[:, 2] > min_z) & (u >= 0) & (u < camera.width) & (v >= 0) & (v < camera.height))
-    return rows, depth[v[rows].astype(int), u[rows].astype(int)]
+    rows, u, v = camera.pixels(pc, min_z)
+    return rows, depth[v, u]
 
 
 def unseen_pixels(

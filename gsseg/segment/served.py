@@ -5,9 +5,15 @@ some that only ever drew the object carry another label all the same (a floater 
 it, its rim that the vote gave to what lies behind). Removed without them the object leaves a
 ghost: a dark face over the bush where a statue's head was. Measured in the training views:
 each view's silhouette of the selection is where the selected Gaussians hold most of the
-blended weight (:func:`gsseg.render.pixel_labels.segment_pixels`); a Gaussian outside the
+blended weight (:func:`gsseg.render.pixel_labels.render_labels`); a Gaussian outside the
 selection whose weight, summed over the views, falls inside those silhouettes for at least
-:data:`SERVED_SHARE` of it served the object alone, and goes with it.
+:data:`SERVED_SHARE` of it served the object alone, and goes with it. So does one inside
+the object: within the convex hull of the selection's centres, and hidden by it from every
+view, as space carving reads a visual hull (its centre inside the silhouette and behind the
+surface the selection shows there in every view whose image it falls in, two at least). No
+photo saw it; removed with the object it would show what training left inside it, as a
+dark speck at a can's foot. What the object hides beyond its hull (the wall behind it) stays
+for the fill of :mod:`gsseg.fill` to cover.
 """
 
 from __future__ import annotations
@@ -17,13 +23,16 @@ from dataclasses import dataclass
 
 import numpy as np
 import torch
+from scipy.spatial import Delaunay, QhullError
 
+from dataset_tools.cameras import PinholeCamera
 from gsseg.model.gaussians import Gaussians
-from gsseg.render import Backend, get_backend
+from gsseg.render import Backend, get_backend, surface_depth
 from gsseg.render.contributions import Masked, MaskedView, contribution_matrix
-from gsseg.render.pixel_labels import segment_pixels
+from gsseg.render.pixel_labels import render_labels
 
 SERVED_SHARE = 0.9  # a Gaussian with this share of its weight inside the silhouettes served the object alone
+BEHIND = 0.02  # a centre less than this share of its depth in front of the selection's surface lies behind it
 
 
 @dataclass(frozen=True)
@@ -42,23 +51,54 @@ def complete_selection(
     gaussians: Gaussians, selected: np.ndarray, views: Sequence[Masked], *, backend: str | Backend = "cpu"
 ) -> Completed:
     """``selected`` (N,) bool and the Gaussians that served it alone in ``views`` (posed views;
-    their masks are not read)."""
+    their masks are not read), or that it hides from every one of them."""
     backend = get_backend(backend)
     g = gaussians.detach().to(backend.device)
-    silhouettes = []
+    means = g.means.cpu().numpy().astype(np.float64)
+    silhouettes, in_image, behind = [], np.zeros(len(selected), int), np.zeros(len(selected), int)
     for view in views:
         pose = torch.as_tensor(view.cam_from_world, dtype=torch.float32, device=backend.device)
-        shown = segment_pixels(g, selected.astype(np.uint8), view.camera, pose, backend=backend) == 1
+        labels, out = render_labels(g, selected.astype(np.uint8), view.camera, pose, backend=backend)
+        shown = labels == 1
         silhouettes.append(MaskedView(view.camera, view.cam_from_world, shown.astype(np.uint8)))
+        rows, hidden = _behind(
+            means, view.camera, np.asarray(view.cam_from_world, np.float64), shown, surface_depth(out)
+        )
+        in_image[rows] += 1
+        behind[rows[hidden]] += 1
     weights = contribution_matrix(g, silhouettes, backend=backend, progress=False)
     total = weights.weights.sum(0).numpy().astype(np.float64)
     inside = np.zeros(len(selected))
     if 1 in weights.labels:
         inside = weights.weights[int(np.flatnonzero(weights.labels == 1)[0])].numpy().astype(np.float64)
-    served = ~selected & (total > 0) & (inside >= SERVED_SHARE * total)
+    hidden = ~selected & (in_image >= 2) & (behind == in_image)
+    hidden[hidden] = _enclosed(means[hidden], means[selected])
+    served = ~selected & (((total > 0) & (inside >= SERVED_SHARE * total)) | hidden)
     mask = selected | served
 
     def ghost(kept: np.ndarray) -> float:
         return float(inside[~kept].sum() / max(inside.sum(), 1e-12))
 
     return Completed(mask, int(served.sum()), ghost(selected), ghost(mask))
+
+
+def _behind(
+    means: np.ndarray, camera: PinholeCamera, cam_from_world: np.ndarray, silhouette: np.ndarray, depth: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The rows of ``means`` (N, 3) whose centres fall in the view's image (K,), and whether
+    each lies inside the selection's ``silhouette`` (H, W) bool and behind the surface it
+    shows there (``depth`` (H, W), less than :data:`BEHIND` of it in front) (K,) bool."""
+    pc = means @ cam_from_world[:3, :3].T + cam_from_world[:3, 3]
+    rows, u, v = camera.pixels(pc, camera.near)
+    return rows, silhouette[v, u] & (pc[rows, 2] >= (1 - BEHIND) * depth[v, u])
+
+
+def _enclosed(points: np.ndarray, hull: np.ndarray) -> np.ndarray:
+    """(P,) bool: which ``points`` (P, 3) lie inside the convex hull of ``hull`` (M, 3) (none
+    where it spans no volume)."""
+    if len(points) == 0 or len(hull) < 4:
+        return np.zeros(len(points), bool)
+    try:
+        return Delaunay(hull).find_simplex(points) >= 0
+    except QhullError:
+        return np.zeros(len(points), bool)
