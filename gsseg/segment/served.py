@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import torch
-from scipy.spatial import Delaunay, QhullError
+from scipy.spatial import ConvexHull, Delaunay, QhullError
 
 from dataset_tools.cameras import PinholeCamera
 from gsseg.model.gaussians import Gaussians
@@ -99,6 +99,7 @@ def _enclosed(points: np.ndarray, hull: np.ndarray) -> np.ndarray:
     if len(points) == 0 or len(hull) < 4:
         return np.zeros(len(points), bool)
     try:
-        return Delaunay(hull).find_simplex(points) >= 0
+        corners = hull[ConvexHull(hull).vertices]  # a few hundred, however large the selection
+        return Delaunay(corners).find_simplex(points) >= 0
     except QhullError:
         return np.zeros(len(points), bool)
