@@ -143,7 +143,7 @@ def select(
         )
     selector = ClickSelector(run.gaussians, segmentation.labels, run_regions(run, scene.root, backend=backend))
     mask = selector.select(evidence)
-    if all(e.positive for e in evidence) and selector.holds_the_scene(evidence):
+    if selector.holds_the_scene(evidence):
         warnings.warn(
             SceneHeld(
                 "the masks hold the clicked object and its surroundings as one region, so the click "

@@ -494,10 +494,12 @@ class ClickSelector:
         return selected
 
     def holds_the_scene(self, clicks: Sequence[ClickEvidence]) -> bool:
-        """Whether the views' vote of the first of ``clicks`` holds the scene
-        (:meth:`RegionVote.holds_the_scene`): the masks read the clicked object and its
-        surroundings as one, the first click selects the scene, and from the first negative
-        click on the clicks carve the object alone."""
+        """Whether ``clicks``, none of them against, select the scene: the views' vote of the
+        first holds it (:meth:`RegionVote.holds_the_scene`), as where the masks read the clicked
+        object and its surroundings as one; from the first negative click on, the clicks carve
+        the object alone."""
+        if not clicks or not all(click.positive for click in clicks):
+            return False
         share, _, _ = self.views_vote(clicks[:1], None)
         return self.vote.holds_the_scene(share, clicks[0], self.options.seen_share)
 

@@ -209,9 +209,7 @@ class ViewerSession:
         hold as one region with its surroundings (:meth:`ClickSelector.holds_the_scene`): the
         selection is most of the scene until shift-clicks carve the object out."""
         with self._lock:
-            if not self.clicks or not all(c.positive for c in self.clicks):
-                return False
-            return self._click_selector().holds_the_scene(self.clicks)
+            return bool(self.clicks) and self._click_selector().holds_the_scene(self.clicks)
 
     def selection(self) -> np.ndarray | None:
         """(N,) bool: the Gaussians of the current model selected now, or None."""
