@@ -410,44 +410,53 @@ def test_the_viewer_in_headless_chromium_selects_and_removes_by_click(segmented,
 
     run = Path(os.environ["VIEWER_RUN"]) if "VIEWER_RUN" in os.environ else _copy(segmented, tmp_path)
     viewer = Viewer(ViewerSession(load_run(run), backend="cpu"), port=0)
-    try:
+    session, view = viewer.session, viewer.views[1]
+    # the pixel of the view's largest object, found before the page opens (nothing renders beside it)
+    mask = segment_pixels(
+        session.run.gaussians,
+        session.segmentation.labels,
+        view.camera,
+        torch.as_tensor(view.cam_from_world, dtype=torch.float32),
+        backend="cpu",
+    )
+    label = int(np.bincount(mask.ravel())[1:].argmax() + 1)
+    arrived = []  # the clicks the server received
+    viewer._click = lambda event, mode, answer=viewer._click: arrived.append(mode) or answer(event, mode)
+
+    def open_page():
+        """The page, looking along ``view``, drawn, its notices closed: its canvas element and
+        the canvas's frame."""
         browser.get(viewer.url)
         element = _wait(lambda: browser.find_elements(By.TAG_NAME, "canvas"), what="the canvas")[0]
         _wait(lambda: viewer.server.get_clients(), what="the browser to connect")
-        view = viewer.views[1]
         viewer.go_to(view.name)
-        # the scene is drawn: the canvas is not blank
-        _wait(lambda: _canvas_image(browser, element).std() > 20, what="a frame")
+        _wait(lambda: _canvas_image(browser, element).std() > 20, what="a frame")  # the scene is drawn
         for close in browser.find_elements(By.CSS_SELECTOR, "[class*='Notification-close']"):
             close.click()  # the notice that WebGL runs in software covers part of the canvas
         time.sleep(1)
-        shown = _canvas_image(browser, element)
+        return element, _canvas_image(browser, element)
+
+    try:
+        # a click on the pixel of the view's largest object selects it, and it is highlighted; a
+        # click the page drops is clicked again on a page opened again
+        for attempt in range(3):
+            element, shown = open_page()
+            canvas = _Canvas(element, view.camera)
+            x, y = canvas.from_view(*_inside_pixel(mask, label))
+            offset = (x - canvas.w // 2, y - canvas.h // 2)  # selenium's offsets are from the element's centre
+            ActionChains(browser).move_to_element_with_offset(element, *offset).click().perform()
+            try:
+                _wait(lambda: viewer.session.selection() is not None, seconds=30, what="a selection")
+                break
+            except AssertionError as e:
+                if attempt == 2:
+                    panel = browser.find_element(By.TAG_NAME, "body").text.replace("\n", " | ")
+                    raise AssertionError(f"{e}; the server received clicks {arrived}; the page reads: {panel}") from e
 
         def changes(region: np.ndarray, since: np.ndarray) -> bool:
             now = _canvas_image(browser, element)
             return np.abs(now[region].astype(int) - since[region].astype(int)).mean() > 25
 
-        # a click on the pixel of the view's largest object selects it, and it is highlighted
-        session = viewer.session
-        mask = segment_pixels(
-            session.run.gaussians,
-            session.segmentation.labels,
-            view.camera,
-            torch.as_tensor(view.cam_from_world, dtype=torch.float32),
-            backend="cpu",
-        )
-        label = int(np.bincount(mask.ravel())[1:].argmax() + 1)
-        canvas = _Canvas(element, view.camera)
-        x, y = canvas.from_view(*_inside_pixel(mask, label))
-        offset = (x - canvas.w // 2, y - canvas.h // 2)  # selenium's offsets are from the element's centre
-        for attempt in range(3):  # a click the page drops while it settles is clicked again
-            ActionChains(browser).move_to_element_with_offset(element, *offset).click().perform()
-            try:
-                _wait(lambda: viewer.session.selection() is not None, seconds=20, what="a selection")
-                break
-            except AssertionError:
-                if attempt == 2:
-                    raise
         selected = viewer.session.selection()
         own = session.segmentation.labels == label
         assert (selected & own).sum() / (selected | own).sum() > 0.5
