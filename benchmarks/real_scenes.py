@@ -400,6 +400,10 @@ def report(r: dict) -> tuple[str, str]:
         [f"{x['scene']}: one click mIoU {x['single_click_miou']:.3f}, NoC@90 {noc(x)}" for x in posed]
         + [f"{x['scene']}: not posed by sfm" for x in refused]
     )
+    falls = [x for x in posed if "largest_fall" in x and len(x["miou_by_clicks"]) > 1]
+    if falls:
+        steep = max(falls, key=lambda x: x["largest_fall"])
+        headline += f"; largest fall after a click: {steep['largest_fall']:.3f} ({steep['scene']})"
     if any("clicks_alone" in x for x in posed):
         headline += "; the clicks alone, mIoU after the 10th: " + ", ".join(
             f"{x['scene']} {x['clicks_alone']['miou_by_clicks'][-1]:.3f}" for x in posed if "clicks_alone" in x
