@@ -380,6 +380,30 @@ def test_a_later_positive_click_does_not_pin_a_large_hazy_gaussian():
         assert after[hazy] == pinned and after[a].all() and not after[b].any()
 
 
+def test_a_click_on_the_objects_edge_does_not_bring_the_neighbour_its_pixels_fall_in():
+    """A's edge E (20 of its Gaussians) lies under A's mask in one view and under B's in the
+    other five (masks that miss a boundary: a statue's shoulder beside a bush), and the
+    selection holds A without E. A later click on E, which the vote gives A in part (one
+    sixth), speaks through its seeds and the cut, not the regions under it, which in five
+    views are B's: nothing of B comes in. A click on B, which the vote holds off A, still
+    brings B's regions into the vote."""
+    g, a, b = _two_blobs()
+    n, edge = len(g), a[:20]
+    regions = _views_split([a, b], 1, [np.setdiff1d(a, edge), np.concatenate([b, edge])], 5, n)
+    selector = ClickSelector(g, np.full(n, 7, np.uint8), regions)
+    first = _click(n, a[50:])
+    share, _, _ = selector.views_vote([first], None)
+    assert np.allclose(share[edge], 1 / 6) and np.allclose(share[b], 0)
+    before = np.zeros(n, bool)
+    before[a[20:]] = True
+    on_edge = [first, _click(n, edge)]
+    share, _, _ = selector.views_vote(on_edge, before)
+    assert np.allclose(share[b], 0)
+    assert not selector.cut(on_edge, before)[b].any()
+    share, _, _ = selector.views_vote([first, _click(n, b)], before)
+    assert (share[b] > 0.5).all()
+
+
 def test_a_part_raises_the_views_vote_and_lowers_it_nowhere():
     """Three views show A alone as an object (B under the background), three show B alone (A
     under the background): the first click on A is seen in the first three, and A's share is

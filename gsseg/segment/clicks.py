@@ -58,10 +58,13 @@ and what no click's view shows (:meth:`ClickSelector._unseen`), which every cut 
 
 The seeds are hard constraints; the source's side of the cut is the selection (parts apart
 in space, several objects under one mask, stay together where the views join them). A later
-positive click adds its seeds, what the cut joins to them, and the regions under it that lie
-beside the selection (a part the first click's vote missed), which raise the vote and lower
-it nowhere (:meth:`ClickSelector.views_vote`); a region the masks joined to the selection (a
-statue's head and the bush behind it) it leaves out of the vote.
+positive click adds its seeds, what the cut joins to them, and, where it lands on what the
+vote holds off the object (a part the first click's vote missed), the regions under it that
+lie beside the selection, which raise the vote and lower it nowhere
+(:meth:`ClickSelector.views_vote`); a region the masks joined to the selection (a statue's
+head and the bush behind it) it leaves out of the vote, and so the regions under a click on
+what the vote gives the object in part (a statue's shoulder beside a bush, whose pixels the
+other views' masks give to the bush).
 """
 
 from __future__ import annotations
@@ -140,6 +143,8 @@ class ClickOptions:
         off_weight: ... or under one half of a weight at least this many times the median
             Gaussian's: large hazy ones seen much) or a negative click's seeds; such hazy
             Gaussians are no seeds of a later positive click (:meth:`ClickSelector._hazy`).
+            The regions under a later positive click join the vote only where its seeds'
+            share is under ``off_share`` (:meth:`ClickSelector.views_vote`).
         against_margin: on a negative click's side, a Gaussian the views hold to the object
             by twice this share more firmly than the clicked part keeps its evidence
             (:meth:`ClickSelector._yielding`).
@@ -568,16 +573,20 @@ class ClickSelector:
         """The views' vote of ``clicks`` (:meth:`RegionVote.vote`): (N,) each Gaussian's share of
         weight in the object's regions, (N,) the weight it is of (0: no view of the object
         sees it), (R,) the object's regions. The first click's regions start it; the regions
-        under a later positive click that lie beside the selection ``before`` (N,) (a part the
-        first vote missed) raise it where they speak and lower it nowhere: a part seen in views
-        where the first click is not counts those views against the rest of the object, which
-        the selection holds all the same."""
+        under a later positive click on what the vote holds off the object (its seeds' share
+        under :attr:`ClickOptions.off_share`: a highlight the masks hold as a region of its
+        own, an object to join) that lie beside the selection ``before`` (N,) raise it where
+        they speak and lower it nowhere: a part seen in views where the first click is not
+        counts those views against the rest of the object, which the selection holds all the
+        same. A click on what the vote gives the object in part (an edge the cut left out)
+        speaks through the part it grows (:meth:`_grown`), not its regions: on a statue's
+        shoulder beside a bush, the regions under it in the other views are the bush's."""
         o = self.options
         clicked = self.vote.clicked_regions(clicks[0], o.seen_share, layer_hold=o.hold_share)
         share, weight, regions = self.vote.vote(clicked, o)
         parts = np.zeros_like(clicked)
         for later in clicks[1:]:
-            if later.positive and before is not None:
+            if later.positive and before is not None and self._held_off(later, share):
                 under = self.vote.clicked_regions(later, o.seen_share, o.part_share)
                 parts |= self.vote.apart_from(under, before, o.overlap)
         if (parts & ~clicked).any():
@@ -709,6 +718,14 @@ class ClickSelector:
         off = np.flatnonzero(~before & seen & ((share < o.off_share) | hazy & (share < 0.5)))
         side = np.clip(self.graph.split(seeds, np.setdiff1d(np.union1d(off, negative), seeds)) / o.split_full, 0, 1)
         return side * self._shown_by(click) * self._alike(seeds, ~before)
+
+    def _held_off(self, click: ClickEvidence, share: np.ndarray) -> bool:
+        """Whether the views' vote holds what ``click`` lands on off the object: its seeds'
+        ``share`` (N,), weighed by the click's weight, under :attr:`ClickOptions.off_share`."""
+        o = self.options
+        seeds = click.seeds(o.seed_share, o.seed_local)
+        weights = click.weights[seeds]
+        return bool(weights.sum() > 0) and float(np.average(share[seeds], weights=weights)) < o.off_share
 
     def _hazy(self, weight: np.ndarray) -> np.ndarray:
         """(N,) bool: the Gaussians whose ``weight`` (N,) in the views is at least
