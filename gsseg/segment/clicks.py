@@ -58,13 +58,13 @@ and what no click's view shows (:meth:`ClickSelector._unseen`), which every cut 
 
 The seeds are hard constraints; the source's side of the cut is the selection (parts apart
 in space, several objects under one mask, stay together where the views join them). A later
-positive click adds its seeds, what the cut joins to them, and, where it lands on what the
-vote holds off the object (a part the first click's vote missed), the regions under it that
-lie beside the selection, which raise the vote and lower it nowhere
-(:meth:`ClickSelector.views_vote`); a region the masks joined to the selection (a statue's
-head and the bush behind it) it leaves out of the vote, and so the regions under a click on
-what the vote gives the object in part (a statue's shoulder beside a bush, whose pixels the
-other views' masks give to the bush).
+positive click adds its seeds, what the cut joins to them and the part it grows. Where it
+lands on what the vote holds off the object (a part the first click's vote missed), the
+regions under it that lie beside the selection also join the vote, raising it and lowering it
+nowhere (:meth:`ClickSelector.views_vote`). A region the masks joined to the selection (a
+statue's head and the bush behind it) stays out of the vote, and so do the regions under a
+click on what the vote gives the object in part (a statue's shoulder, whose pixels the other
+views' masks give to the bush beside it).
 """
 
 from __future__ import annotations
