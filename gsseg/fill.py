@@ -17,10 +17,11 @@ fits new Gaussians to a 2D inpainting of them, with the rest of the model frozen
    where a diffusion (Telea) leaves a flat smudge.
 3. **Gaussians on the surface around the hole.** In up to :attr:`FillOptions.views` views
    spread over those with unseen pixels, new Gaussians are seeded on a pixel grid of the
-   unseen pixels, at the inpainted colour and at the depth inpainted from the surface around
-   the hole, each the size of its grid cell; a seed in space some view saw through (in front
-   of the surface it shows, or where it shows the environment) is dropped, there is nothing
-   there.
+   unseen pixels, at the inpainted colour and on the plane of the surface around the hole
+   (fitted robustly to the depth of the pixels around it, so that an occluder's edge in the
+   ring does not tilt it), each the size of its grid cell; a seed in space some view saw
+   through (in front of the nearest surface it shows within a pixel, or where it shows the
+   environment) is dropped, there is nothing there.
 4. **A fit across the views.** The new Gaussians alone (positions, colours, opacities) are
    optimised, a few hundred steps, to those views' inpainted renders around the object (a
    crop: its silhouette and a margin, where the target is the removal's render as it is, so
@@ -42,6 +43,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 import torch
+from scipy.optimize import least_squares
 from tqdm import tqdm
 
 from dataset_tools.cameras import PinholeCamera
@@ -73,7 +75,7 @@ class FillOptions:
         rim: pixels the object's silhouettes are widened by (its blurred edge).
         margin: pixels of the removal's render kept as they are around each hole in the fit.
         depth_tolerance: relative depth difference under which another view sees a point.
-        depth_radius: neighbourhood of the depth's inpainting (OpenCV's Telea), in pixels.
+        depth_radius: width in pixels of the ring around a hole whose surface is carried across it.
         initial_opacity: opacity of a new Gaussian.
         lambda_dssim: weight of the SSIM term in the fit's loss, training's.
         seed: seeds the choice of view at each step.
@@ -202,13 +204,16 @@ def unseen_pixels(
 
 def seen_through(points: np.ndarray, views: Sequence[SurfaceView], tolerance: float) -> np.ndarray:
     """(P,) bool: which world ``points`` (P, 3) lie in space some view saw through: in its
-    image, in front of the surface it shows there by more than ``tolerance`` (relative), or
-    where it shows the environment. ``views``: (camera, (3, 4) cam_from_world, (H, W) surface
-    depth of the whole model, 0 where it shows the environment)."""
+    image, in front of the nearest surface it shows within a pixel by more than ``tolerance``
+    (relative), or where it shows the environment all around. A pixel on an occluder's edge
+    blends it with what lies behind, so the depth it shows is the occluder's neighbour's.
+    ``views``: (camera, (3, 4) cam_from_world, (H, W) surface depth of the whole model, 0
+    where it shows the environment)."""
     out = np.zeros(len(points), bool)
     for cam, pose, depth in views:
         pc = points @ pose[:3, :3].T + pose[:3, 3]
-        rows, shown = _shown_depth(pc, cam, depth, cam.near)
+        nearest = cv2.erode(np.where(depth > 0, depth, np.inf).astype(np.float32), np.ones((3, 3), np.uint8))
+        rows, shown = _shown_depth(pc, cam, np.where(np.isfinite(nearest), nearest, 0.0), cam.near)
         out[rows[(shown <= 0) | (pc[rows, 2] < (1 - tolerance) * shown)]] = True
     return out
 
@@ -220,6 +225,34 @@ def inpaint(rgb: np.ndarray, missing: np.ndarray) -> np.ndarray:
     missing = cv2.dilate(missing.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
     out = np.empty_like(rgb)
     cv2.xphoto.inpaint(rgb, (~missing).astype(np.uint8), out, cv2.xphoto.INPAINT_FSR_FAST)
+    return out
+
+
+def surface_across(
+    hole: np.ndarray, depth: np.ndarray, camera: PinholeCamera, radius: int, tolerance: float
+) -> np.ndarray:
+    """(H, W) float32 ``depth`` (H, W), 0 where nothing is seen, carried across each connected
+    part of ``hole`` (H, W) bool on the plane of the surface around it: the pixels within
+    ``radius`` of the part that see a surface, their inverse depth fitted as an affine function
+    of the pixel's ray (a plane in space) with a robust loss (relative depth errors beyond
+    ``tolerance`` count less), the part's pixels at that plane's depth; 0 where their ray
+    misses it, or where fewer than three pixels around the part see a surface."""
+    out = np.where(hole, 0.0, depth).astype(np.float32)
+    count, parts = cv2.connectedComponents(hole.astype(np.uint8), connectivity=8)
+    ring_kernel = np.ones((2 * radius + 1,) * 2, np.uint8)
+    for k in range(1, count):
+        part = parts == k
+        ring = (cv2.dilate(part.astype(np.uint8), ring_kernel) > 0) & ~hole & (depth > 0)
+        ys, xs = np.nonzero(ring)
+        if len(ys) < 3:
+            continue
+        rays = _pixel_rays(xs, ys, camera)  # (P, 3): x/z, y/z, 1
+        z = depth[ys, xs].astype(np.float64)
+        plane0 = np.linalg.lstsq(rays, 1 / z, rcond=None)[0]  # 1/z = plane . ray
+        fit = least_squares(lambda q: z * (rays @ q) - 1, plane0, loss="cauchy", f_scale=tolerance)
+        ys, xs = np.nonzero(part)
+        inverse = _pixel_rays(xs, ys, camera) @ fit.x
+        out[ys, xs] = np.where(inverse > 0, 1 / np.maximum(inverse, 1e-12), 0.0)
     return out
 
 
@@ -359,15 +392,12 @@ def _seed(
     features: int,
     options: FillOptions,
 ) -> Gaussians:
-    """New Gaussians on the unseen pixels of ``holes``, at their inpainted colour and depth,
-    none in space a view saw through."""
+    """New Gaussians on the unseen pixels of ``holes``, at their inpainted colour and on the
+    surface around each hole (:func:`surface_across`), none in space a view saw through."""
     points, colours, sizes = [], [], []
     for s in holes:
-        unknown = (cv2.dilate(s.unseen.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0) | (s.depth <= 0)
-        depth = cv2.inpaint(
-            s.depth.astype(np.float32), unknown.astype(np.uint8), options.depth_radius, cv2.INPAINT_TELEA
-        )
         view = views[s.index]
+        depth = surface_across(s.unseen, s.depth, view.camera, options.depth_radius, options.depth_tolerance)
         p, c, r = _grid_points(
             s.unseen, depth, targets[s.index], view.camera, np.asarray(view.cam_from_world), options.stride
         )

@@ -14,7 +14,15 @@ import torch
 from helpers import script
 
 from dataset_tools.cameras import PinholeCamera
-from gsseg.fill import FillOptions, crop_camera, fill_removal, inpaint, seen_through, unseen_pixels
+from gsseg.fill import (
+    FillOptions,
+    crop_camera,
+    fill_removal,
+    inpaint,
+    seen_through,
+    surface_across,
+    unseen_pixels,
+)
 from gsseg.model.gaussians import gaussians_from_points
 from gsseg.model.ply import read_ply
 from gsseg.render import render
@@ -164,3 +172,31 @@ def test_gsseg_edit_fills_a_removal_unless_told_not_to_plumbing(segmented, small
     )
     assert r.returncode == 0, r.stderr
     assert torch.equal(read_ply(out).means, filled.means)
+
+
+def test_surface_across_carries_a_tilted_plane_over_the_hole_despite_an_occluder():
+    """A floor seen at a slant (inverse depth affine in the pixel's ray) with a hole: the hole
+    gets the floor's depth, although a near occluder covers part of the ring around it; a hole
+    with no surface around it stays 0."""
+    u, v = np.meshgrid(np.arange(CAMERA.width) + 0.5, np.arange(CAMERA.height) + 0.5)
+    x, y = (u - CAMERA.cx) / CAMERA.fx, (v - CAMERA.cy) / CAMERA.fy
+    floor = (1 / (0.02 * x + 0.1 * y + 0.2)).astype(np.float32)
+    hole = np.zeros_like(floor, bool)
+    hole[14:26, 16:32] = True
+    depth = np.where(hole, 0.0, floor).astype(np.float32)
+    depth[10:16, 12:20] = 1.5  # an occluder over a corner of the ring
+    out = surface_across(hole, depth, CAMERA, radius=5, tolerance=0.02)
+    np.testing.assert_allclose(out[hole], floor[hole], rtol=0.01)
+    np.testing.assert_array_equal(out[~hole], depth[~hole])
+    assert not surface_across(hole, np.zeros_like(depth), CAMERA, radius=5, tolerance=0.02).any()
+
+
+def test_a_point_behind_an_occluders_edge_is_not_seen_through():
+    """An occluder's edge pixel blends it with the wall behind, so its depth lies between: a
+    point behind the occluder, just inside its edge, is hidden, not seen through."""
+    depth = _wall_depth(5.0)
+    depth[:, :24] = 2.0  # an occluder over the left half
+    depth[:, 24] = 3.5  # its edge pixel, blended
+    point = np.array([[(24.5 - CAMERA.cx) / CAMERA.fx * 3.0, 0.0, 3.0]])  # behind the occluder, in the edge pixel
+    assert not seen_through(point, [(CAMERA, _pose(0.0), depth)], 0.02).any()
+    assert seen_through(point + [[0.4, 0, 0]], [(CAMERA, _pose(0.0), depth)], 0.02).all()  # past the edge
