@@ -81,7 +81,7 @@ class FillOptions:
         seed: seeds the choice of view at each step.
     """
 
-    steps: int = 800
+    steps: int = 600
     views: int = 12
     fit_views: int = 32
     stride: int = 3
