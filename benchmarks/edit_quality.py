@@ -9,9 +9,11 @@ compared with the generator's views without the object and of the object alone:
 
 - removal: PSNR over the view, over the region the object covered (where a ghost shows),
   over the part of it whose background a training view saw, over the rest (unseen), and
-  outside the region; for the ``prior`` labels and the demo's (``+ smooth + fill``) also with
-  the removal filled (``gsseg edit``'s default, :mod:`gsseg.fill`), with the fill's time per
-  object;
+  outside the region; SSIM over the region, and with ``--lpips FILE`` (an LPIPS network,
+  ``gseval export-lpips``) LPIPS around it; the ghost share (the selection's weight in the
+  training views that the Gaussians left behind carry); for the ``prior`` labels and the
+  demo's (``+ smooth + fill``) also with the removal filled (``gsseg edit``'s default,
+  :mod:`gsseg.fill`), with the fill's time per object;
 - extraction: IoU of its alpha >= 0.5 silhouette with the whole true silhouette, PSNR inside
   it (on white), and the leak, the share of its opacity outside the silhouette dilated by 2 px.
 
@@ -19,7 +21,7 @@ With ``--knn-reg W`` the ``medium`` scenes are also trained with Gaussian Groupi
 identity term at weight W. Prints markdown tables and writes JSON.
 
     python -m benchmarks.edit_quality [--iters 1000] [--res 512] [--train-seeds 0,1]
-        [--masks exact,medium,high] [--knn-reg 1.0] [--out FILE]
+        [--masks exact,medium,high] [--knn-reg 1.0] [--lpips FILE] [--out FILE]
 """
 
 from __future__ import annotations
@@ -36,6 +38,7 @@ from dataset_tools.scene import GT_MASKS
 from dataset_tools.synth.edit_truth import write_edit_truth
 from eval.edit_scores import edit_rows, summarize_edits
 from eval.evaluate import evaluate
+from eval.lpips import LPIPS
 from eval.report import markdown_table
 from gsseg.run.loaded import load_run
 from gsseg.segment.label_options import LabelOptions
@@ -62,8 +65,8 @@ def masks_for(scene: Path, kind: str, seed: int) -> str:
     return associate_masks(scene, f"noisy_{kind}", f"assoc_{kind}", associate="tracks")
 
 
-def score_run(run_dir: Path, scene: Path, masks: str) -> dict:
-    """Every setting's edit scores (and visible mIoU) on one trained run."""
+def score_run(run_dir: Path, scene: Path, masks: str, lpips: LPIPS | None = None) -> dict:
+    """Every setting's edit scores (and visible mIoU) on one trained run (LPIPS with ``lpips``)."""
     run = load_run(run_dir)
     contributions = mask_contributions(run, scene, masks=masks, backend="cpu", progress=False)
     views = run.scene(scene, masks=GT_MASKS).split("test")
@@ -73,7 +76,7 @@ def score_run(run_dir: Path, scene: Path, masks: str) -> dict:
         evaluation, _ = evaluate(
             run, segmentation, views, with_truth=True, scene=str(scene), split="test", backend="cpu", progress=False
         )
-        rows = edit_rows(run, segmentation, views, scene, evaluation.id_map, fill=name in FILLED)
+        rows = edit_rows(run, segmentation, views, scene, evaluation.id_map, fill=name in FILLED, lpips=lpips)
         out[name] = {
             **summarize_edits(rows),
             "miou": evaluation.summary()["visible"]["miou"],
@@ -96,7 +99,9 @@ def main() -> None:
     parser.add_argument("--masks", default="exact,medium,high")
     parser.add_argument("--paths", default="orbit,forward")
     parser.add_argument("--knn-reg", type=float, default=0.0, help="Also train medium with the 3D identity term.")
+    parser.add_argument("--lpips", default=None, help="LPIPS network (gseval export-lpips): removals' LPIPS too.")
     args = parser.parse_args()
+    lpips = LPIPS(args.lpips) if args.lpips else None  # a bad file fails before any training
     seeds = [int(s) for s in args.train_seeds.split(",")]
     results: dict = {"runs": {}, "setup": vars(args)}
     with tempfile.TemporaryDirectory() as tmp:
@@ -123,7 +128,7 @@ def main() -> None:
                                 knn_reg=knn,
                             ),
                         )
-                        results["runs"][name] = score_run(run, scene, masks)
+                        results["runs"][name] = score_run(run, scene, masks, lpips)
                         print(
                             name,
                             json.dumps(
@@ -172,6 +177,7 @@ def report(r: dict) -> tuple[str, str]:
                     _spread([c["leak"] for c in cells]),
                     _spread([c["extraction_psnr_inside"] for c in cells]),
                     _spread([c["miou"] for c in cells]),
+                    _spread([c.get("ghost_share_after") for c in cells]),
                 ]
             )
     headline = "; ".join(
@@ -195,6 +201,7 @@ def report(r: dict) -> tuple[str, str]:
             "leak",
             "extraction PSNR inside (dB)",
             "mIoU",
+            "ghost share",
         ],
         rows,
     )
@@ -204,13 +211,8 @@ def report(r: dict) -> tuple[str, str]:
             kind,
             setting,
             *(
-                f"{_spread([c[plain] for c in cells])} -> {_spread([c[fill] for c in cells])}"
-                for plain, fill in (
-                    ("removal_psnr_region", "filled_psnr_region"),
-                    ("removal_psnr_unseen", "filled_psnr_unseen"),
-                    ("removal_psnr_seen", "filled_psnr_seen"),
-                    ("removal_psnr_outside", "filled_psnr_outside"),
-                )
+                f"{_spread([c.get(f'removal_{k}') for c in cells])} -> {_spread([c.get(f'filled_{k}') for c in cells])}"
+                for k in ("psnr_region", "psnr_unseen", "psnr_seen", "psnr_outside", "ssim_region", "lpips_region")
             ),
             _spread([c["fill_seconds"] for c in cells]),
         ]
@@ -229,6 +231,8 @@ def report(r: dict) -> tuple[str, str]:
             "unseen part (dB)",
             "seen part (dB)",
             "outside the region (dB)",
+            "region SSIM",
+            "LPIPS around the region",
             "fill time per object (s)",
         ],
         filled,
@@ -237,11 +241,13 @@ def report(r: dict) -> tuple[str, str]:
         "Means over the ground-truth objects and test views; the mean over training seeds with their "
         "range in brackets. The seen part of a silhouette is what some training view saw of the object "
         "(a forward capture never sees what other objects hide from every view); the IoU over it leaves "
-        f"the rest out.\n\n{table}"
+        "the rest out. The ghost share: the selection's weight in the training views that the Gaussians "
+        f"its removal leaves carry (n/a: not measured then).\n\n{table}"
         + (
-            "\n\nThe removal without and with the fill (PSNR, plain -> filled): the region the object "
+            "\n\nThe removal without and with the fill (plain -> filled): PSNR over the region the object "
             "covered, its parts whose background no training view saw and some did, and the rest of the "
-            f"view.\n\n{fill_table}"
+            "view; SSIM over the region and LPIPS over the box around it (n/a: no network given, or "
+            f"not measured then).\n\n{fill_table}"
             if filled
             else ""
         )

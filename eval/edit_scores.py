@@ -13,6 +13,7 @@ import torch
 from dataset_tools.infra.errors import InputError
 from dataset_tools.scene import View
 from dataset_tools.synth.edit_truth import EDIT_TRUTH, read_edit_truth
+from eval.lpips import LPIPS
 from eval.metrics import extraction_scores, removal_scores
 from gsseg.edits import apply_edit
 from gsseg.fill import fill_run_removal
@@ -31,12 +32,17 @@ def edit_rows(
     *,
     objects: list[int] | None = None,
     fill: bool = False,
+    lpips: LPIPS | None = None,
     backend: str | Backend = "cpu",
 ) -> list[dict]:
     """One row per (view, ground-truth object) that has edit truth and a predicted label:
-    {view, object, label, removal: {...}, extraction: {...}}, and with ``fill`` the removal
-    filled (:mod:`gsseg.fill`) too: removal_filled {...}, fill_seconds. ``id_map`` maps
-    predicted labels to ground-truth IDs; ``objects`` limits the ground-truth objects scored."""
+    {view, object, label, ghost_share, removal: {...}, extraction: {...}}, and with ``fill``
+    the removal filled (:mod:`gsseg.fill`) too: removal_filled {...}, fill_seconds.
+    ``ghost_share`` is the share of the selection's weight in the training views that the
+    Gaussians left behind carry, before and after those that served it alone join it
+    (:func:`gsseg.segment.served.complete_selection`, as ``gsseg edit`` records it). ``id_map``
+    maps predicted labels to ground-truth IDs; ``objects`` limits the ground-truth objects
+    scored; ``lpips`` adds the removals' LPIPS around the region."""
     backend = get_backend(backend)
     label_of = {gt: p for p, gt in id_map.items()}
     train = run.scene(scene_dir).split("train")
@@ -45,12 +51,13 @@ def edit_rows(
         for obj in sorted(label_of if objects is None else objects):
             if obj not in label_of:
                 continue
-            selected = complete_selection(
+            completed = complete_selection(
                 run.gaussians,
                 segmentation.selection(label_of[obj]),
                 train,
                 backend=backend,
-            ).mask  # as gsseg edit removes and extracts
+            )
+            selected = completed.mask  # as gsseg edit removes and extracts
             removed = apply_edit(run.gaussians, selected, "remove")
             alone = apply_edit(run.gaussians, selected, "extract")
             filled = fill_run_removal(run, selected, train, backend=backend, progress=False) if fill else None
@@ -75,6 +82,7 @@ def edit_rows(
                             truth.without,
                             region,
                             truth.seen,
+                            lpips,
                         ),
                         "fill_seconds": filled.seconds,
                     }
@@ -84,8 +92,13 @@ def edit_rows(
                         "view": view.stem,
                         "object": obj,
                         "label": label_of[obj],
+                        "ghost_share": [completed.ghost_before, completed.ghost_after],
                         "removal": removal_scores(
-                            run.render_rgb(view, gaussians=removed, backend=backend), truth.without, region, truth.seen
+                            run.render_rgb(view, gaussians=removed, backend=backend),
+                            truth.without,
+                            region,
+                            truth.seen,
+                            lpips,
                         ),
                         "extraction": extraction_scores(
                             extracted.alpha.cpu().numpy(),
@@ -107,19 +120,23 @@ def summarize_edits(rows: list[dict]) -> dict:
         kept = [v for v in values if v is not None and np.isfinite(v)]
         return float(np.mean(kept)) if kept else None
 
-    psnrs = ("psnr", "psnr_region", "psnr_seen", "psnr_unseen", "psnr_outside")  # of removal_scores
+    scores = ("psnr", "psnr_region", "psnr_seen", "psnr_unseen", "psnr_outside", "ssim_region", "lpips_region")
     filled = [r for r in rows if "removal_filled" in r]
     return {
         **(
             {
-                **{f"filled_{k}": mean([r["removal_filled"][k] for r in filled]) for k in psnrs},
+                **{f"filled_{k}": mean([r["removal_filled"].get(k) for r in filled]) for k in scores},
                 "fill_seconds": mean(list({r["object"]: r["fill_seconds"] for r in filled}.values())),  # per object
             }
             if filled
             else {}
         ),
         "pairs": len(rows),
-        **{f"removal_{k}": mean([r["removal"][k] for r in rows]) for k in psnrs},
+        **{f"removal_{k}": mean([r["removal"].get(k) for r in rows]) for k in scores},
+        **{
+            f"ghost_share_{when}": mean(list({r["object"]: r["ghost_share"][i] for r in rows}.values()))  # per object
+            for i, when in enumerate(("before", "after"))
+        },
         "extraction_iou": mean([r["extraction"]["iou"] for r in rows]),
         "extraction_iou_seen": mean([r["extraction"]["iou_seen"] for r in rows]),
         "extraction_psnr_inside": mean([r["extraction"]["psnr_inside"] for r in rows]),

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 import torch
 
@@ -14,14 +16,35 @@ def psnr(pred: np.ndarray, target: np.ndarray) -> float:
     return float("inf") if mse == 0 else float(10 * np.log10(255.0**2 / mse))
 
 
-def ssim(pred: np.ndarray, target: np.ndarray) -> float:
-    """SSIM (kornia, 11x11 Gaussian window) of two (H, W, 3) uint8 images."""
+def ssim_map(pred: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """(H, W) SSIM (kornia, 11x11 Gaussian window) of two (H, W, 3) uint8 images at each
+    pixel, the mean over the channels."""
     from kornia.metrics import ssim as kornia_ssim
 
     def to_tensor(x: np.ndarray) -> torch.Tensor:
         return torch.from_numpy(x).permute(2, 0, 1)[None].double() / 255
 
-    return float(kornia_ssim(to_tensor(pred), to_tensor(target), 11).mean())
+    return kornia_ssim(to_tensor(pred), to_tensor(target), 11)[0].mean(0).numpy()
+
+
+def ssim(pred: np.ndarray, target: np.ndarray) -> float:
+    """SSIM (kornia, 11x11 Gaussian window) of two (H, W, 3) uint8 images."""
+    return float(ssim_map(pred, target).mean())
+
+
+def region_box(region: np.ndarray, margin: int = 8, min_side: int = 64) -> tuple[slice, slice]:
+    """The box around the (H, W) bool ``region`` widened by ``margin`` pixels and to at least
+    ``min_side`` pixels a side (a network's receptive field), within the image."""
+    rows, cols = np.flatnonzero(region.any(1)), np.flatnonzero(region.any(0))
+
+    def span(lo: int, hi: int, size: int) -> slice:
+        lo, hi = lo - margin, hi + 1 + margin
+        grow = max(0, min_side - (hi - lo))
+        lo, hi = lo - grow // 2, hi + grow - grow // 2
+        shift = max(0, -lo) - max(0, hi - size)
+        return slice(max(0, lo + shift), min(size, hi + shift))
+
+    return span(rows[0], rows[-1], region.shape[0]), span(cols[0], cols[-1], region.shape[1])
 
 
 def binary_scores(pred: np.ndarray, target: np.ndarray) -> tuple[float, float]:
@@ -121,11 +144,19 @@ def camera_errors(
     return errors(align), np.linalg.norm((s * est @ R.T + t) - true, axis=1) / extent
 
 
-def removal_scores(removed: np.ndarray, truth: np.ndarray, region: np.ndarray, seen: np.ndarray) -> dict[str, float]:
+def removal_scores(
+    removed: np.ndarray,
+    truth: np.ndarray,
+    region: np.ndarray,
+    seen: np.ndarray,
+    lpips: Callable[[np.ndarray, np.ndarray], float] | None = None,
+) -> dict[str, float | None]:
     """A removal against the view rendered without the object: PSNR and SSIM of the whole view,
     PSNR over the ``region`` (H, W) bool the object covered (where a ghost of it would show),
     over its ``seen`` part (whose background some training view saw), its unseen part (what
-    a fill must invent) and outside it (what a removal must leave as it was).
+    a fill must invent) and outside it (what a removal must leave as it was); SSIM over the
+    region (the mean of the SSIM map there), and with an ``lpips`` network
+    (:class:`eval.lpips.LPIPS`) its distance over the box around the region (:func:`region_box`).
 
     Args:
         removed, truth: (H, W, 3) uint8.
@@ -134,13 +165,17 @@ def removal_scores(removed: np.ndarray, truth: np.ndarray, region: np.ndarray, s
     def masked_psnr(mask: np.ndarray) -> float | None:
         return psnr(removed[mask], truth[mask]) if mask.any() else None
 
+    similarity = ssim_map(removed, truth)
+    box = region_box(region) if region.any() else None
     return {
         "psnr": psnr(removed, truth),
-        "ssim": ssim(removed, truth),
+        "ssim": float(similarity.mean()),
         "psnr_region": masked_psnr(region),
         "psnr_seen": masked_psnr(region & seen),
         "psnr_unseen": masked_psnr(region & ~seen),
         "psnr_outside": masked_psnr(~region),
+        "ssim_region": float(similarity[region].mean()) if box else None,
+        **({"lpips_region": lpips(removed[box], truth[box]) if box else None} if lpips is not None else {}),
     }
 
 

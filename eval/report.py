@@ -36,17 +36,18 @@ from gsseg.segment.served import complete_selection
 
 PANELS = ("photo", "ground truth", "predicted (visible)", "removal", "extraction", "recolour")
 TRUTH_PANELS = ("removal", "the view without the object", "extraction", "the object alone")
-EDIT_HEAD = [
-    "object",
-    "ground-truth match",
-    "removal PSNR (dB)",
-    "removal PSNR, object's region",
-    "removal PSNR, region seen",
-    "extraction IoU",
-    "extraction IoU, seen part",
-    "extraction PSNR inside",
-    "leak",
-]
+EDIT_COLUMNS = {  # the edits table's scores: header -> key of eval.edit_scores.summarize_edits
+    "removal PSNR (dB)": "removal_psnr",
+    "removal PSNR, object's region": "removal_psnr_region",
+    "removal PSNR, region seen": "removal_psnr_seen",
+    "removal SSIM, object's region": "removal_ssim_region",
+    "removal LPIPS, around the region": "removal_lpips_region",
+    "extraction IoU": "extraction_iou",
+    "extraction IoU, seen part": "extraction_iou_seen",
+    "extraction PSNR inside": "extraction_psnr_inside",
+    "leak": "leak",
+    "ghost share": "ghost_share_after",
+}
 
 
 def _fmt(x: float | None, digits: int = 3) -> str:
@@ -206,18 +207,15 @@ def _sections(ev: Evaluation) -> list[tuple[str, list[str], list[list[str]]]]:
         sections.append(
             (
                 "Edits against ground truth",
-                EDIT_HEAD,
+                ["object", "ground-truth match", *EDIT_COLUMNS],
                 [
                     [
                         str(label),
                         str(obj),
-                        *(
-                            _fmt(v, 3 if "iou" in k or k == "leak" else 2)
-                            for k, v in summarize_edits([r for r in ev.edits if r["object"] == obj]).items()
-                            if k != "pairs"
-                        ),
+                        *(_fmt(scores[k], 2 if "psnr" in k else 3) for k in EDIT_COLUMNS.values()),
                     ]
                     for obj, label in sorted({(r["object"], r["label"]) for r in ev.edits})
+                    for scores in [summarize_edits([r for r in ev.edits if r["object"] == obj])]
                 ],
             )
         )
@@ -362,7 +360,7 @@ def report_run(
         selection = Selection(segmentation.selection(k), k, str(k))
     label = selection.object_id if selection.object_id is not None else selection.main_label(segmentation.labels)
     if gt_masks is not None:
-        ev.edits = edit_rows(run, segmentation, views, scene_dir, ev.id_map, backend=backend)
+        ev.edits = edit_rows(run, segmentation, views, scene_dir, ev.id_map, lpips=lpips_net, backend=backend)
     train_views = run.scene(scene_dir).split("train")
     completed = complete_selection(run.gaussians, selection.mask, train_views, backend=backend)
     edits = edit_panels(

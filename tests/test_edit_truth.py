@@ -9,7 +9,7 @@ import pytest
 from dataset_tools import InputError, load_scene
 from dataset_tools.synth.edit_truth import edit_truth, read_edit_truth, scene_layout, write_edit_truth
 from dataset_tools.synth.generator import render_view
-from eval.metrics import extraction_scores, removal_scores
+from eval.metrics import extraction_scores, region_box, removal_scores, ssim, ssim_map
 
 
 def boundary_band(mask: np.ndarray, width: int = 1) -> np.ndarray:
@@ -82,6 +82,34 @@ def test_removal_scores_have_known_answers():
     assert scores["psnr"] == pytest.approx(10 * np.log10(255**2 / (8 * 100 / 100)))
     assert removal_scores(truth, truth, region, region)["psnr_region"] == float("inf")
     assert removal_scores(truth, truth, region, ~region)["psnr_seen"] is None
+
+
+def test_removal_ssim_and_lpips_are_taken_over_the_region():
+    rng = np.random.default_rng(0)
+    truth = rng.integers(0, 256, (80, 100, 3)).astype(np.uint8)
+    region = np.zeros((80, 100), bool)
+    region[30:40, 60:75] = True
+    removed = truth.copy()
+    removed[region] = 128  # a flat smudge where the object was
+    crops = []
+
+    def distance(pred: np.ndarray, target: np.ndarray) -> float:
+        crops.append(pred.shape)
+        return float(np.abs(pred.astype(float) - target).mean())
+
+    scores = removal_scores(removed, truth, region, region, lpips=distance)
+    similarity = ssim_map(removed, truth)
+    assert scores["ssim"] == pytest.approx(ssim(removed, truth)) == pytest.approx(similarity.mean())
+    assert scores["ssim_region"] == pytest.approx(similarity[region].mean())
+    assert scores["ssim_region"] < 0.5 < scores["ssim"]
+    assert similarity[:15].min() == pytest.approx(1.0)  # 11x11 windows away from the smudge see no change
+    # LPIPS over the region's box widened by 8 px, then to 64 px a side: rows 3..67, columns 36..100
+    assert crops == [(64, 64, 3)]
+    box = region_box(region)
+    assert (box[0].start, box[0].stop, box[1].start, box[1].stop) == (3, 67, 36, 100)
+    assert scores["lpips_region"] == pytest.approx(np.abs(removed[box].astype(float) - truth[box]).mean())
+    assert "lpips_region" not in removal_scores(removed, truth, region, region)
+    assert removal_scores(removed, truth, np.zeros_like(region), region)["ssim_region"] is None
 
 
 def test_extraction_scores_have_known_answers():

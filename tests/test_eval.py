@@ -177,8 +177,13 @@ def test_report_scores_edits_where_the_scene_has_edit_truth(segmented, small_sce
     assert len(ev.edits) == len(ev.id_map) * len(test_views)
     edits = ev.summary()["edits"]
     assert 0 < edits["extraction_iou"] <= 1 and 0 <= edits["leak"] <= 1 and edits["removal_psnr"] > 10
+    assert 0 <= edits["ghost_share_after"] <= edits["ghost_share_before"] <= 1  # what served it alone goes too
+    assert all(-1 <= r["removal"]["ssim_region"] <= 1 for r in ev.edits)
     md = (tmp_path / "report" / "report.md").read_text()
     assert "## Edits against ground truth" in md and "## Edits beside their truth" in md
+    table = md.split("## Edits against ground truth")[1].split("##")[0].strip().splitlines()
+    head, rows = table[0], [line for line in table[2:] if line.startswith("|")]
+    assert len(rows) == len(ev.id_map) and all(row.count("|") == head.count("|") for row in rows)
     for view in test_views:
         row = read_image(tmp_path / "report" / "images" / f"{view.stem}_truth.png")
         assert row.shape == (view.camera.height, 4 * view.camera.width + 12, 3)
