@@ -1,9 +1,24 @@
-"""Operations on object-ID maps shared by every stage: overlap counts and ID matching."""
+"""Operations on object-ID maps shared by every stage: overlap counts, ID matching and the box
+around a mask."""
 
 from __future__ import annotations
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
+
+
+def mask_box(mask: np.ndarray, margin: int = 0, min_side: int = 0) -> tuple[slice, slice]:
+    """(rows, columns) of the box around the (H, W) bool ``mask`` (not empty), widened by
+    ``margin`` pixels and cut to the image, then grown about its centre to ``min_side`` a side
+    (or the image's side), kept within the image."""
+
+    def span(nonzero: np.ndarray, size: int) -> slice:
+        lo, hi = max(int(nonzero[0]) - margin, 0), min(int(nonzero[-1]) + 1 + margin, size)
+        grow = max(0, min(min_side, size) - (hi - lo))
+        start = min(max(lo - grow // 2, 0), size - (hi - lo + grow))
+        return slice(start, start + hi - lo + grow)
+
+    return span(np.flatnonzero(mask.any(1)), mask.shape[0]), span(np.flatnonzero(mask.any(0)), mask.shape[1])
 
 
 def overlap(pred: np.ndarray, gt: np.ndarray) -> np.ndarray:

@@ -7,7 +7,7 @@ from collections.abc import Callable
 import numpy as np
 import torch
 
-from dataset_tools.label_maps import match_ids, overlap
+from dataset_tools.label_maps import mask_box, match_ids, overlap
 
 
 def psnr(pred: np.ndarray, target: np.ndarray) -> float:
@@ -32,19 +32,10 @@ def ssim(pred: np.ndarray, target: np.ndarray) -> float:
     return float(ssim_map(pred, target).mean())
 
 
-def region_box(region: np.ndarray, margin: int = 8, min_side: int = 64) -> tuple[slice, slice]:
-    """The box around the (H, W) bool ``region`` widened by ``margin`` pixels and to at least
-    ``min_side`` pixels a side (a network's receptive field), within the image."""
-    rows, cols = np.flatnonzero(region.any(1)), np.flatnonzero(region.any(0))
-
-    def span(lo: int, hi: int, size: int) -> slice:
-        lo, hi = lo - margin, hi + 1 + margin
-        grow = max(0, min_side - (hi - lo))
-        lo, hi = lo - grow // 2, hi + grow - grow // 2
-        shift = max(0, -lo) - max(0, hi - size)
-        return slice(max(0, lo + shift), min(size, hi + shift))
-
-    return span(rows[0], rows[-1], region.shape[0]), span(cols[0], cols[-1], region.shape[1])
+def region_box(region: np.ndarray) -> tuple[slice, slice]:
+    """The box around the (H, W) bool ``region`` (not empty) that LPIPS scores: widened by 8
+    pixels, and to at least 64 pixels a side (the network's reach), within the image."""
+    return mask_box(region, margin=8, min_side=64)
 
 
 def binary_scores(pred: np.ndarray, target: np.ndarray) -> tuple[float, float]:
@@ -166,17 +157,19 @@ def removal_scores(
         return psnr(removed[mask], truth[mask]) if mask.any() else None
 
     similarity = ssim_map(removed, truth)
-    box = region_box(region) if region.any() else None
-    return {
+    scores = {
         "psnr": psnr(removed, truth),
         "ssim": float(similarity.mean()),
         "psnr_region": masked_psnr(region),
         "psnr_seen": masked_psnr(region & seen),
         "psnr_unseen": masked_psnr(region & ~seen),
         "psnr_outside": masked_psnr(~region),
-        "ssim_region": float(similarity[region].mean()) if box else None,
-        **({"lpips_region": lpips(removed[box], truth[box]) if box else None} if lpips is not None else {}),
+        "ssim_region": float(similarity[region].mean()) if region.any() else None,
     }
+    if lpips is not None:
+        box = region_box(region) if region.any() else None
+        scores["lpips_region"] = lpips(removed[box], truth[box]) if box is not None else None
+    return scores
 
 
 def extraction_scores(

@@ -48,6 +48,7 @@ from tqdm import tqdm
 
 from dataset_tools.cameras import PinholeCamera
 from dataset_tools.infra.engine import task_cpus
+from dataset_tools.label_maps import mask_box
 from gsseg.model.environment import Environment, background_image
 from gsseg.model.gaussians import Gaussians, gaussians_from_points
 from gsseg.render import Backend, get_backend, render, surface_depth, to_uint8
@@ -422,10 +423,8 @@ def _crop(
     backend: Backend,
 ) -> _Crop:
     """The fit's step in one view: its silhouette's box widened by the margin."""
-    ys, xs = np.nonzero(shown.silhouette)
-    H, W = shown.silhouette.shape
-    x0, x1 = max(int(xs.min()) - options.margin, 0), min(int(xs.max()) + options.margin + 1, W)
-    y0, y1 = max(int(ys.min()) - options.margin, 0), min(int(ys.max()) + options.margin + 1, H)
+    rows, cols = mask_box(shown.silhouette, options.margin)
+    x0, y0, x1, y1 = cols.start, rows.start, cols.stop, rows.stop
     camera = crop_camera(view.camera, x0, y0, x1, y1)
     pose = torch.as_tensor(view.cam_from_world, dtype=torch.float32, device=backend.device)
     with torch.no_grad():  # the environment is frozen too
