@@ -34,6 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks import record
+from dataset_tools.infra.overlap import refuse_overlap
 from dataset_tools.scene import GT_MASKS
 from dataset_tools.synth.edit_truth import write_edit_truth
 from eval.edit_scores import edit_rows, summarize_edits
@@ -101,6 +102,8 @@ def main() -> None:
     parser.add_argument("--knn-reg", type=float, default=0.0, help="Also train medium with the 3D identity term.")
     parser.add_argument("--lpips", default=None, help="LPIPS network (gseval export-lpips): removals' LPIPS too.")
     args = parser.parse_args()
+    if args.lpips:  # the JSON is written after each run: never over the network it reads
+        refuse_overlap(record.out_path("edit_quality", out=args.out), [("the LPIPS network", Path(args.lpips))])
     lpips = LPIPS(args.lpips) if args.lpips else None  # a bad file fails before any training
     seeds = [int(s) for s in args.train_seeds.split(",")]
     results: dict = {"runs": {}, "setup": vars(args)}

@@ -76,10 +76,15 @@ def provenance() -> dict:
     }
 
 
+def out_path(benchmark: str, *, tag: str = "", out: str | Path | None = None) -> Path:
+    """Where :func:`save` writes: ``out``, or ``benchmarks/results/<benchmark>[-tag].json``."""
+    return Path(out) if out else RESULTS / f"{benchmark}{'-' + tag if tag else ''}.json"
+
+
 def save(benchmark: str, results: dict, *, tag: str = "", out: str | Path | None = None) -> Path:
-    """Write ``results`` with their provenance to ``out`` or ``benchmarks/results/<benchmark>[-tag].json``
-    and print where. Returns the path."""
-    path = Path(out) if out else RESULTS / f"{benchmark}{'-' + tag if tag else ''}.json"
+    """Write ``results`` with their provenance to :func:`out_path` and print where. Returns
+    the path."""
+    path = out_path(benchmark, tag=tag, out=out)
     data = {"benchmark": benchmark, **provenance(), "results": results}
     write_bytes_atomic(path, (json.dumps(data, indent=2) + "\n").encode())
     print(f"wrote {path}")

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 import torch
 
+from dataset_tools import InputError
 from dataset_tools.cameras import PinholeCamera
 from dataset_tools.image_files import read_image
 from dataset_tools.scene import load_scene
@@ -294,6 +295,18 @@ def test_unusable_lpips_file_is_one_sentence(segmented, small_scene, tmp_path):
     )
     assert r.returncode == 2 and "ONNX Runtime cannot load it" in r.stderr
     assert len(r.stderr.strip().splitlines()) == 1 and not (tmp_path / "out").exists()
+
+
+def test_edit_quality_never_writes_its_json_over_the_lpips_network(tmp_path, monkeypatch):
+    from benchmarks import edit_quality
+
+    net = tmp_path / "lpips.onnx"
+    _standin_lpips(net)
+    before = net.read_bytes()
+    monkeypatch.setattr("sys.argv", ["edit_quality", "--lpips", str(net), "--out", str(net)])
+    with pytest.raises(InputError, match="would replace the LPIPS network"):
+        edit_quality.main()
+    assert net.read_bytes() == before
 
 
 @pytest.mark.slow
