@@ -14,7 +14,9 @@ fits new Gaussians to a 2D inpainting of them, with the rest of the model frozen
    direction when another view shows the environment there. The rest is unseen.
 2. **Inpainting.** In each of those views the removal's render is inpainted over its unseen
    pixels by frequency-selective reconstruction (OpenCV's ``xphoto``), which carries textures on
-   where a diffusion (Telea) leaves a flat smudge.
+   where a diffusion (Telea) leaves a flat smudge. What stands in front of the object (its
+   footprint, rendered alone, where it does not show) continues no surface into the hole, and
+   the inpainting does not draw from it.
 3. **Gaussians on the surface around the hole.** In up to :attr:`FillOptions.views` views
    spread over those with unseen pixels, new Gaussians are seeded on a pixel grid of the
    unseen pixels, at the inpainted colour and on the plane of the surface around the hole
@@ -128,6 +130,7 @@ class _Shown:
     index: int  # into the views
     silhouette: np.ndarray  # (H, W) bool, the object's, widened by its rim
     unseen: np.ndarray  # (H, W) bool, the silhouette's pixels no other view saw behind the object
+    in_front: np.ndarray  # (H, W) bool, what hides the object: its footprint where it does not show
     rgb: np.ndarray  # (H, W, 3) uint8 render of the removal
     depth: np.ndarray  # (H, W) its surface depth, 0 where it shows the environment
 
@@ -219,14 +222,15 @@ def seen_through(points: np.ndarray, views: Sequence[SurfaceView], tolerance: fl
     return out
 
 
-def inpaint(rgb: np.ndarray, missing: np.ndarray) -> np.ndarray:
+def inpaint(rgb: np.ndarray, missing: np.ndarray, excluded: np.ndarray | None = None) -> np.ndarray:
     """(H, W, 3) uint8 ``rgb`` with its ``missing`` (H, W) bool pixels, widened by one pixel,
-    filled from the rest by
+    filled from the rest but the ``excluded`` (H, W) bool pixels (kept as they are) by
     frequency-selective reconstruction (OpenCV's ``xphoto``), which carries textures on."""
     missing = cv2.dilate(missing.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
-    out = np.empty_like(rgb)
-    cv2.xphoto.inpaint(rgb, (~missing).astype(np.uint8), out, cv2.xphoto.INPAINT_FSR_FAST)
-    return out
+    known = ~missing if excluded is None else ~(missing | excluded)
+    filled = np.empty_like(rgb)
+    cv2.xphoto.inpaint(rgb, known.astype(np.uint8), filled, cv2.xphoto.INPAINT_FSR_FAST)
+    return np.where(missing[..., None], filled, rgb)
 
 
 def surface_across(
@@ -307,7 +311,10 @@ def fill_removal(
         return Filled(kept.to(gaussians.means.device), 0, share, time.perf_counter() - start)
     with ThreadPoolExecutor(task_cpus()) as pool:  # OpenCV's inpainting runs on one core, without the GIL
         targets = dict(
-            zip([s.index for s in holes], pool.map(inpaint, [s.rgb for s in holes], [s.unseen for s in holes]))
+            zip(
+                [s.index for s in holes],
+                pool.map(inpaint, [s.rgb for s in holes], [s.unseen for s in holes], [s.in_front for s in holes]),
+            )
         )
     seeds = _seed(_spread(holes, options.views), targets, views, seen_by, kept.obj_feat.shape[1], options)
     crops = [_crop(s, targets.get(s.index, s.rgb), views[s.index], kept, environment, options, backend) for s in shown]
@@ -361,6 +368,7 @@ def _removal_views(
     spread over them (:class:`_Shown`), and every view with its surface depth of the whole
     model."""
     whole = gaussians.detach().to(backend.device)
+    alone = whole.select(torch.as_tensor(removed, device=backend.device))
     poses = [torch.as_tensor(v.cam_from_world, dtype=torch.float32, device=backend.device) for v in views]
     rim = np.ones((2 * options.rim + 1,) * 2, np.uint8)
     silhouettes, depths = [], []
@@ -378,10 +386,12 @@ def _removal_views(
                 kept, view.camera, pose, sh_degree=sh_degree, background=bg, with_features=False, backend=backend
             )
             depth = surface_depth(out)
+            alone_out = render(alone, view.camera, pose, sh_degree=0, with_features=False, backend=backend)
+            in_front = (surface_depth(alone_out) > 0) & ~silhouettes[i]  # its footprint where it does not show
             others = seen_by[:i] + seen_by[i + 1 :]
             unseen = unseen_pixels(silhouettes[i], depth, *seen_by[i][:2], others, options.depth_tolerance)
             unseen = cv2.morphologyEx(unseen.astype(np.uint8), cv2.MORPH_OPEN, np.ones((3, 3), np.uint8)) > 0
-            shown.append(_Shown(i, silhouettes[i], unseen, to_uint8(out.rgb), depth))
+            shown.append(_Shown(i, silhouettes[i], unseen, in_front, to_uint8(out.rgb), depth))
     return shown, seen_by
 
 

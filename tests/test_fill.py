@@ -99,6 +99,21 @@ def test_inpaint_carries_stripes_on():
     np.testing.assert_array_equal(out[:20], rgb[:20])
 
 
+def test_inpaint_draws_nothing_from_what_stands_in_front():
+    """A hole in a grey wall beside a yellow occluder: left in, the occluder's colour bleeds
+    into the hole; excluded, the hole comes back grey and the occluder is kept."""
+    rgb = np.full((64, 64, 3), 120, np.uint8)
+    occluder = np.zeros((64, 64), bool)
+    occluder[20:44, 36:48] = True
+    rgb[occluder] = (230, 200, 30)
+    missing = np.zeros((64, 64), bool)
+    missing[22:42, 20:35] = True
+    bleeding = np.abs(inpaint(rgb, missing)[missing].astype(float) - 120).mean()
+    out = inpaint(rgb, missing, occluder)
+    assert np.abs(out[missing].astype(float) - 120).mean() < min(2.0, 0.25 * bleeding)
+    np.testing.assert_array_equal(out[~missing], rgb[~missing])
+
+
 def _box_scene():
     """A red wall of Gaussians at z = 6 with a hole behind a blue box at z = 4, as training
     leaves a wall where no view saw it; three cameras 0.1 apart see the box from the front."""
