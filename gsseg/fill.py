@@ -21,7 +21,8 @@ fits new Gaussians to a 2D inpainting of them, with the rest of the model frozen
    spread over those with unseen pixels, new Gaussians are seeded on a pixel grid of the
    unseen pixels, at the inpainted colour and on the plane of the surface around the hole
    (fitted robustly to the depth of the pixels around it, so that an occluder's edge in the
-   ring does not tilt it), each the size of its grid cell; a seed in space some view saw
+   ring does not tilt it, and not to what stands in front of the object), each the size of
+   its grid cell; a seed in space some view saw
    through (in front of the nearest surface it shows within a pixel, or where it shows the
    environment) is dropped, there is nothing there.
 4. **A fit across the views.** The new Gaussians alone (positions, colours, opacities) are
@@ -408,7 +409,8 @@ def _seed(
     points, colours, sizes = [], [], []
     for s in holes:
         view = views[s.index]
-        depth = surface_across(s.unseen, s.depth, view.camera, options.depth_radius, options.depth_tolerance)
+        ring_depth = np.where(s.in_front, 0.0, s.depth)  # what stands in front carries no surface across
+        depth = surface_across(s.unseen, ring_depth, view.camera, options.depth_radius, options.depth_tolerance)
         p, c, r = _grid_points(
             s.unseen, depth, targets[s.index], view.camera, np.asarray(view.cam_from_world), options.stride
         )
