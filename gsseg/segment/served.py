@@ -12,8 +12,12 @@ the object: within the convex hull of the selection's centres, and hidden by it 
 view, as space carving reads a visual hull (its centre inside the silhouette and behind the
 surface the selection shows there in every view whose image it falls in, two at least). No
 photo saw it; removed with the object it would show what training left inside it, as a
-dark speck at a can's foot. What the object hides beyond its hull (the wall behind it) stays
-for the fill of :mod:`gsseg.fill` to cover.
+dark speck at a can's foot. Within that hull a Gaussian also goes when most of its weight,
+:data:`HULL_SHARE`, falls inside the silhouettes: the object's own rim and foot that the vote
+gave to the floor, which win a few pixels of their own and so never reach
+:data:`SERVED_SHARE`. What the object hides beyond its hull (the wall behind it) stays for the
+fill of :mod:`gsseg.fill` to cover, and what shows through a gap within the hull stays, its
+weight falling outside the silhouettes.
 """
 
 from __future__ import annotations
@@ -32,6 +36,7 @@ from gsseg.render.contributions import Masked, MaskedView, contribution_matrix
 from gsseg.render.pixel_labels import render_labels
 
 SERVED_SHARE = 0.9  # a Gaussian with this share of its weight inside the silhouettes served the object alone
+HULL_SHARE = 0.5  # within the selection's hull, this share of it is enough
 BEHIND = 0.02  # a centre less than this share of its depth in front of the selection's surface lies behind it
 
 
@@ -51,7 +56,8 @@ def complete_selection(
     gaussians: Gaussians, selected: np.ndarray, views: Sequence[Masked], *, backend: str | Backend = "cpu"
 ) -> Completed:
     """``selected`` (N,) bool and the Gaussians that served it alone in ``views`` (posed views;
-    their masks are not read), or that it hides from every one of them."""
+    their masks are not read), or that lie within its hull and that it hides from every one of
+    them or whose weight falls mostly inside its silhouettes."""
     backend = get_backend(backend)
     g = gaussians.detach().to(backend.device)
     means = g.means.cpu().numpy().astype(np.float64)
@@ -71,9 +77,11 @@ def complete_selection(
     inside = np.zeros(len(selected))
     if 1 in weights.labels:
         inside = weights.weights[int(np.flatnonzero(weights.labels == 1)[0])].numpy().astype(np.float64)
-    hidden = ~selected & (in_image >= 2) & (behind == in_image)
-    hidden[hidden] = _enclosed(means[hidden], means[selected])
-    served = ~selected & (((total > 0) & (inside >= SERVED_SHARE * total)) | hidden)
+    drawn = total > 0
+    hidden = (in_image >= 2) & (behind == in_image)
+    within = ~selected & (hidden | (drawn & (inside >= HULL_SHARE * total)))
+    within[within] = _enclosed(means[within], means[selected])
+    served = ~selected & ((drawn & (inside >= SERVED_SHARE * total)) | within)
     mask = selected | served
 
     def ghost(kept: np.ndarray) -> float:
