@@ -191,6 +191,43 @@ def test_carving_decides_what_no_clicked_view_shows_by_the_cut():
         assert carved[c].all() if c_like_a else not carved[c].any()
 
 
+def test_a_negative_click_on_what_the_vote_holds_loosely_does_not_carve():
+    """A (red, x from 0 to 4, its far end x > 3 orange) fills most of every view, and the masks
+    hold it apart from a grey backdrop beyond it (x = 5.5), so the vote holds the scene yet
+    says where A ends; S (orange, x = 4.2) lies in A's region in half the views and in the
+    backdrop's in the rest. The clicked view shows A's near half and S. A negative click on S,
+    held at one half, is a negative click as with masks: S goes, and A's far end, which no
+    clicked view shows and which lies nearer S along the graph and in colour, stays. Where the
+    masks hold S in A's region in every view, the same click carves, and the far end goes
+    with S (DTU's house, whose back a click on its spill in a corner took)."""
+    rng = np.random.default_rng(2)
+    xyz = np.concatenate(
+        [
+            rng.uniform([0, -0.2, -0.2], [4, 0.2, 0.2], (400, 3)),
+            rng.normal([4.2, 0, 0], 0.15, (20, 3)),
+            rng.normal([5.5, 0, 0], 0.2, (60, 3)),
+        ]
+    )
+    n, a, s = len(xyz), np.arange(400), np.arange(400, 420)
+    rgb = np.concatenate([np.tile([200, 30, 30], (420, 1)), np.full((60, 3), 128)])
+    rgb[(xyz[:, 0] > 3) & (np.arange(n) < 420)] = [200, 150, 30]
+    g = gaussians_from_points(
+        xyz, np.clip(rgb + rng.integers(-12, 13, rgb.shape), 0, 255).astype(np.uint8), initial_opacity=0.9
+    )
+    near, far = a[xyz[a, 0] < 1], a[xyz[a, 0] > 3]
+    shown = np.where(xyz[:, 0] > 2, 0.0, 1.0)
+    shown[s] = 1.0
+    clicks = [_click(n, near, shown=shown), _click(n, s, positive=False, shown=shown)]
+    for s_in_a in (False, True):
+        regions = _views_split([np.concatenate([a, s])], 3, [np.concatenate([a, s]) if s_in_a else a], 3, n)
+        selector = ClickSelector(g, np.full(n, 7, np.uint8), regions)
+        share, _, _ = selector.views_vote(clicks[:1], None)
+        assert selector.vote.holds_the_scene(share, clicks[0], selector.options.seen_share)
+        after = selector.select(clicks)
+        assert after[near].all() and after[s].mean() < 0.1
+        assert not after[far].any() if s_in_a else after[far].all()
+
+
 def _spill():
     """A long object A of 400 Gaussians (x from 0 to 4) and a spill F of 60 of its colour beside
     its far end (x = 4.6), which three of six views' masks give to A, all under one label, on
