@@ -228,6 +228,33 @@ def test_a_negative_click_on_what_the_vote_holds_loosely_does_not_carve():
         assert not after[far].any() if s_in_a else after[far].all()
 
 
+def test_the_click_that_starts_the_carving_decides_the_earlier_negative_clicks_cells():
+    """A (red), C (blue, its half towards A red) and B (green), in a row and one region in
+    half the views; the other half hold A and B as one region and C in the background. The
+    vote holds the scene. A negative click on C's blue half, held at one half, is one as with
+    masks: the blue half goes, the red half (like A) stays. A negative click on B, held
+    firmly, starts the carving, which decides C's side too: C's red half goes with B."""
+    rng = np.random.default_rng(0)
+    xyz = np.concatenate([rng.normal([x, 0, 0], 0.3, (200, 3)) for x in (0, -3, 3)])
+    n, a, c, b = 600, np.arange(200), np.arange(200, 400), np.arange(400, 600)
+    rgb = np.concatenate([np.tile(colour, (200, 1)) for colour in ([200, 30, 30], [30, 30, 200], [30, 200, 30])])
+    red_c, blue_c = c[xyz[c, 0] > -3], c[xyz[c, 0] <= -3]
+    rgb[red_c] = [200, 30, 30]
+    g = gaussians_from_points(
+        xyz, np.clip(rgb + rng.integers(-12, 13, rgb.shape), 0, 255).astype(np.uint8), initial_opacity=0.9
+    )
+    selector = ClickSelector(
+        g, np.full(n, 7, np.uint8), _views_split([np.arange(n)], 3, [np.concatenate([a, b])], 3, n)
+    )
+    clicks = [_click(n, a), _click(n, blue_c[np.argsort(xyz[blue_c, 0])], False), _click(n, b, False)]
+    share, _, _ = selector.views_vote(clicks[:1], None)
+    assert selector.vote.holds_the_scene(share, clicks[0], selector.options.seen_share)
+    with_masks = selector.select(clicks[:2])
+    assert with_masks[a].all() and with_masks[red_c].all() and not with_masks[blue_c].any() and with_masks[b].all()
+    carved = selector.select(clicks)
+    assert carved[a].all() and not carved[c].any() and not carved[b].any()
+
+
 def _spill():
     """A long object A of 400 Gaussians (x from 0 to 4) and a spill F of 60 of its colour beside
     its far end (x = 4.6), which three of six views' masks give to A, all under one label, on
