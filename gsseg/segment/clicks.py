@@ -56,10 +56,10 @@ firmly (:meth:`ClickSelector._carving`: the masks joined it to the object) the c
 alone (:meth:`ClickSelector._carved`): the graph's geodesic split between the positive and
 negative seeds, colour models learned from the cut, and each click changing only its own cell
 (the first to carve: the cells of all negative clicks so far) and what no click's view shows
-(:meth:`ClickSelector._unseen`), which every cut decides. A
-negative click on what the vote holds loosely (the spill of an object that fills most of
-every view, drawn over the background beside it) is a negative click as with masks: there
-the vote does say where the object ends.
+(:meth:`ClickSelector._unseen`), which every cut decides. A negative click on what the vote
+holds loosely (the spill of an object that fills most of every view, drawn over the
+background beside it) is a negative click as with masks: there the vote does say where the
+object ends.
 
 The seeds are hard constraints; the source's side of the cut is the selection (parts apart
 in space, several objects under one mask, stay together where the views join them). A later
@@ -747,8 +747,9 @@ class ClickSelector:
         vote holds firmly (their share, :meth:`_seeds_share`, at least
         :attr:`ClickOptions.carve_share`; the first click's, so that the carving, once begun,
         starts at the same click whatever the later ones add), from which the clicks carve
-        where the vote holds the scene (:meth:`_carved`); None where there is none. Such a click tells the object from a
-        part the masks joined to it (the wall behind a plant), which only the clicks can cut.
+        where the vote holds the scene (:meth:`_carved`); None where there is none. Such a
+        click tells the object from a part the masks joined to it (the wall behind a plant),
+        which only the clicks can cut.
         One on what the vote holds loosely tells the object from its spill: on DTU's house,
         which fills most of every view, a click in the view's corner lands on large Gaussians
         of the house drawn over the background, held at 0.52; carving from there took the back
