@@ -19,6 +19,10 @@ selection (docs/evaluation.md):
   one label, object features of zero: what weight-free masks give on a capture they read as
   one region, a plant and the wall behind it), so that the clicks carve the object alone
   (:meth:`gsseg.segment.clicks.ClickSelector._carved`);
+- **the clicks in two views**: the same ten clicks, with the masks and alone, where those after
+  the first go in turn to the view that looks from farthest away and to the first, as a user
+  turns the model in the viewer (:func:`farthest_view`); the views other than the two are
+  scored;
 - **the options**: the single-click mIoU under ``gsseg segment``'s defaults as well;
 - **the ceiling**: the mIoU of the Gaussians whose weight falls mostly inside the people's
   masks over the views, what any selection of the model can reach;
@@ -132,8 +136,9 @@ def clicks_alone(run: Run, regions: RegionWeights) -> ClickSelector:
 
 
 class Clicker:
-    """Selections of a segmented run by clicks in one view (the rule of ``gsseg edit --click``;
-    with nothing from the masks where ``alone``, :func:`clicks_alone`), scored in the others."""
+    """Selections of a segmented run by clicks in the first view, or also in a ``second`` one
+    (the rule of ``gsseg edit --click``; with nothing from the masks where ``alone``,
+    :func:`clicks_alone`), scored in the others."""
 
     def __init__(
         self,
@@ -142,8 +147,10 @@ class Clicker:
         truth: dict[str, np.ndarray],
         backend: str | Backend = "cpu",
         alone: bool = False,
+        second: View | None = None,
     ):
-        self.run, self.first, self.others, self.truth = run, views[0], views[1:], truth
+        self.run, self.first, self.truth = run, views[0], truth
+        self.others = [v for v in views[1:] if v is not second]
         self.backend = get_backend(backend)
         regions = run_regions(run, backend=self.backend)
         self.selector = (
@@ -152,13 +159,14 @@ class Clicker:
         self.clicks: list[ClickEvidence] = []
         self.selected = np.zeros(len(run.gaussians), bool)
 
-    def click(self, u: float, v: float, positive: bool) -> None:
-        """Add a click at pixel (u, v) of the first view; a click on nothing opaque, or a
-        negative one before any positive, is spent without changing the selection."""
+    def click(self, u: float, v: float, positive: bool, view: View | None = None) -> None:
+        """Add a click at pixel (u, v) of ``view`` (the first view by default); a click on
+        nothing opaque, or a negative one before any positive, is spent without changing the
+        selection."""
         try:
-            first = self.first
+            view = view or self.first
             seen = click_evidence(
-                self.run.gaussians, first.camera, first.cam_from_world, u, v, positive, backend=self.backend
+                self.run.gaussians, view.camera, view.cam_from_world, u, v, positive, backend=self.backend
             )
             clicks = [*self.clicks, seen]
             self.selected = self.selector.cut(clicks, self.selected if self.clicks else None)
@@ -174,11 +182,15 @@ class Clicker:
         ]
         return float(np.mean([p[0] for p in pairs])), float(np.mean([p[1] for p in pairs]))
 
-    def next_click(self, tried: list[tuple[float, float]]) -> tuple[float, float, bool] | None:
-        """The deepest pixel of the largest error region of the first view that holds no
-        earlier click: (u, v, positive), or None when there is none."""
-        shown = rendered_selection(self.run, self.selected, self.first, self.backend)
-        truth = self.truth[self.first.name]
+    def next_click(
+        self, tried: list[tuple[float, float]], view: View | None = None
+    ) -> tuple[float, float, bool] | None:
+        """The deepest pixel of the largest error region of ``view`` (the first view by
+        default) that holds no earlier click there (``tried``): (u, v, positive), or None when
+        there is none."""
+        view = view or self.first
+        shown = rendered_selection(self.run, self.selected, view, self.backend)
+        truth = self.truth[view.name]
         regions = []
         for positive, error in ((True, truth & ~shown), (False, shown & ~truth)):
             ids, n = ndimage.label(error)
@@ -189,6 +201,12 @@ class Clicker:
         return None
 
 
+def farthest_view(views: list[View]) -> View:
+    """The view of ``views[1:]`` whose optical axis turns farthest from the first view's."""
+    axis = np.asarray(views[0].cam_from_world)[2, :3]
+    return min(views[1:], key=lambda v: float(np.asarray(v.cam_from_world)[2, :3] @ axis))
+
+
 def interactive(
     run: Run,
     views: list[View],
@@ -197,21 +215,27 @@ def interactive(
     backend: str | Backend = "cpu",
     past_target: bool = False,
     alone: bool = False,
+    alternate: bool = False,
 ) -> dict:
     """The single-click scores and the clicks to reach :data:`TARGET` (NoC@90), up to
     ``max_clicks`` (all ``max_clicks`` where ``past_target``: how later clicks behave),
-    rendered on ``backend``; with nothing from the masks where ``alone`` (:class:`Clicker`)."""
-    clicker = Clicker(run, views, truth, backend, alone)
+    rendered on ``backend``; with nothing from the masks where ``alone`` (:class:`Clicker`).
+    Where ``alternate``, the clicks after the first go in turn to the :func:`farthest_view`
+    and the first view, as a user turns the model in the viewer, and the views other than
+    the two are scored."""
+    second = farthest_view(views) if alternate else None
+    clicker = Clicker(run, views, truth, backend, alone, second)
     u, v = deepest_pixel(truth[views[0].name])
     clicker.click(u, v, True)
     miou, macc = clicker.scores()
-    curve, tried = [miou], [(u, v)]
+    curve, tried = [miou], {views[0].name: [(u, v)]}
     while (past_target or curve[-1] < TARGET) and len(curve) < max_clicks:
-        nxt = clicker.next_click(tried)
+        view = second if second is not None and len(curve) % 2 else views[0]
+        nxt = clicker.next_click(tried.setdefault(view.name, []), view)
         if nxt is None:
             break
-        clicker.click(*nxt)
-        tried.append(nxt[:2])
+        clicker.click(*nxt, view)
+        tried[view.name].append(nxt[:2])
         curve.append(clicker.scores()[0])
     reached = [k + 1 for k, m in enumerate(curve) if m >= TARGET]
     return {
@@ -220,7 +244,7 @@ def interactive(
         "noc90": reached[0] if reached else None,
         "miou_by_clicks": curve,
         "largest_fall": max([0.0, *(a - b for a, b in zip(curve, curve[1:]))]),
-        "clicks": [[float(a), float(b)] for a, b in tried],
+        "clicks": {name: [[float(a), float(b)] for a, b in at] for name, at in tried.items()},
     }
 
 
@@ -342,6 +366,17 @@ def run_scene(
     clicks = interactive(run, views, truth, past_target=past_target)
     times["clicks_s"] = time.perf_counter() - start
     alone = interactive(run, views, truth, past_target=True, alone=True)
+    curve = ("miou_by_clicks", "noc90", "largest_fall")
+    alternating = {
+        "second_view": farthest_view(views).name,
+        **{
+            kind: {k: r[k] for k in curve}
+            for kind, r in (
+                ("masks", interactive(run, views, truth, past_target=True, alternate=True)),
+                ("alone", interactive(run, views, truth, past_target=True, alone=True, alternate=True)),
+            )
+        },
+    }
     obj = TrueObject.of(run, views, truth)
     return {
         "scene": name,
@@ -352,7 +387,8 @@ def run_scene(
         "gaussians": len(run.gaussians),
         "iters": run.config.timing.iters,
         **clicks,
-        "clicks_alone": {k: alone[k] for k in ("miou_by_clicks", "noc90", "largest_fall")},
+        "clicks_alone": {k: alone[k] for k in curve},
+        "alternating": alternating,
         "ceiling_miou": obj.ceiling(run, views, truth),
         "object_left": removal_left(run, views, truth, obj),
         "single_click_miou_default_options": default_options,
@@ -409,6 +445,13 @@ def report(r: dict) -> tuple[str, str]:
             f"{x['scene']} {x['clicks_alone']['miou_by_clicks'][-1]:.3f}" for x in posed if "clicks_alone" in x
         )
 
+    if any("alternating" in x for x in posed):
+        headline += "; clicks alternating with a second view, NoC@90 with the masks / alone: " + ", ".join(
+            f"{x['scene']} {noc(x['alternating']['masks'])} / {noc(x['alternating']['alone'])}"
+            for x in posed
+            if "alternating" in x
+        )
+
     def masks(m: dict) -> str:
         return f"{m['best_id_iou']:.2f} / {m['union_iou']:.2f} / {m['consistency']:.2f}"
 
@@ -417,6 +460,15 @@ def report(r: dict) -> tuple[str, str]:
             return "n/a"
         a = x["clicks_alone"]
         return f"{' '.join(f'{m:.2f}' for m in a['miou_by_clicks'])}; NoC@90 {noc(a)}; fall {a['largest_fall']:.3f}"
+
+    def alternating(x: dict) -> str:
+        if "alternating" not in x:
+            return "n/a"
+        a = x["alternating"]
+        return f"{a['second_view']}: " + "; ".join(
+            f"{kind}: {' '.join(f'{m:.2f}' for m in a[kind]['miou_by_clicks'])}, fall {a[kind]['largest_fall']:.3f}"
+            for kind in ("masks", "alone")
+        )
 
     stages = ("sfm_s", "masks_s", "train_s", "depth_masks_s", "segment_s", "clicks_s")
     rows = [
@@ -435,6 +487,7 @@ def report(r: dict) -> tuple[str, str]:
             " ".join(f"{m:.2f}" for m in x["miou_by_clicks"]),
             f"{x['largest_fall']:.3f}" if "largest_fall" in x else "n/a",
             alone(x),
+            alternating(x),
             masks(x["masks"]),
             masks(x["depth_masks"]),
             " / ".join(f"{x[k]:.0f}" for k in stages),
@@ -457,6 +510,7 @@ def report(r: dict) -> tuple[str, str]:
             "mIoU after each click",
             "largest fall after a click",
             "the clicks alone (masks that say nothing): mIoU after each click; NoC@90; largest fall",
+            "clicks alternating with a second view: with the masks; alone",
             "masks of colour: best ID / union / consistency",
             "masks at depth jumps: the same",
             "seconds: sfm / masks / train / depth masks / segment / clicks",

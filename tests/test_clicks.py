@@ -444,6 +444,28 @@ def test_a_later_positive_click_does_not_pin_a_large_hazy_gaussian():
         assert after[hazy] == pinned and after[a].all() and not after[b].any()
 
 
+def test_a_later_positive_click_does_not_pin_a_gaussian_many_times_the_median_size():
+    """The masks hold the scene, the clicks carve A from B; a later positive click on A's rim
+    whose pixel shows only L, a Gaussian ten times the median size drawn behind it, adds
+    nothing (L is what stands behind the object, and pinning it would bring what lies near it);
+    where no size counts as large, the same click pins L."""
+    g, a, b = _two_blobs()
+    xyz = np.concatenate([g.means.numpy(), [[1.8, 0.0, 0.0]]])
+    rgb = np.concatenate([np.tile([200, 30, 30], (200, 1)), np.tile([30, 30, 200], (200, 1)), [[120, 120, 120]]])
+    g = gaussians_from_points(xyz, rgb.astype(np.uint8), initial_opacity=0.9)
+    n, large = len(g), 400
+    g.log_scales[large] = g.log_scales.max(1).values.median() + np.log(10.0)
+    regions = _regions(n, [np.arange(n)])
+    clicks = [_click(n, a), _click(n, b, positive=False)]
+    on_large = ClickEvidence(np.eye(n)[large], True)
+    for options, pinned in ((ClickOptions(), False), (ClickOptions(large_size=1e9), True)):
+        selector = ClickSelector(g, np.full(n, 7, np.uint8), regions, options)
+        carved = selector.select(clicks)
+        assert carved[a].all() and not carved[b].any() and not carved[large]
+        after = selector.cut([*clicks, on_large], carved)
+        assert after[large] == pinned and after[a].all() and not after[b].any()
+
+
 def test_a_click_on_the_objects_edge_does_not_bring_the_neighbour_its_pixels_fall_in():
     """A's edge E (20 of its Gaussians) lies under A's mask in one view and under B's in the
     other five (masks that miss a boundary: a statue's shoulder beside a bush), and the
