@@ -148,7 +148,8 @@ def select(
             SceneHeld(
                 "the masks hold the clicked object and its surroundings as one region, so the click "
                 "selects most of the scene; clicks against what is not the object carve it out "
-                "(--exclude-click VIEW U V; docs/segmentation.md, Clicks)."
+                "(--exclude-click VIEW U V), in two views or more: a click reaches only what its "
+                "view shows (docs/segmentation.md, Clicks)."
             ),
             stacklevel=2,
         )

@@ -196,7 +196,7 @@ class Viewer:
         clicks = len(self.session.clicks)
         held = (
             " The masks hold this object and its surroundings as one region: shift-click what is not "
-            "the object to carve it out."
+            "the object to carve it out, and turn the model to click what this view does not show."
             if self.session.scene_held()
             else ""
         )
