@@ -9,6 +9,7 @@ import subprocess
 import sys
 from dataclasses import dataclass
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -381,3 +382,16 @@ def test_without_truth_the_label_panel_shows_every_object_in_its_own_colour():
     )
     labels = row[:, 10:16]  # the second panel, after the photo and a 4 px gap
     assert (labels[:, 2] != labels[:, 4]).any() and (labels[:, 0] == 0).all()
+
+
+def test_the_two_view_clicks_turn_to_the_view_that_looks_from_farthest_away():
+    from benchmarks.real_scenes import farthest_view
+
+    def view(degrees: float) -> SimpleNamespace:  # a camera turned about the vertical axis
+        a = np.radians(degrees)
+        rotation = np.array([[np.cos(a), 0, -np.sin(a)], [0, 1, 0], [np.sin(a), 0, np.cos(a)]])
+        return SimpleNamespace(cam_from_world=np.hstack([rotation, np.zeros((3, 1))]))
+
+    views = [view(10), view(70), view(-170), view(130), view(-80)]
+    assert farthest_view(views) is views[2]
+    assert farthest_view(views[:2] + views[3:]) is views[3]
