@@ -367,16 +367,20 @@ def run_scene(
     times["clicks_s"] = time.perf_counter() - start
     alone = interactive(run, views, truth, past_target=True, alone=True)
     curve = ("miou_by_clicks", "noc90", "largest_fall")
-    alternating = {
-        "second_view": farthest_view(views).name,
-        **{
-            kind: {k: r[k] for k in curve}
-            for kind, r in (
-                ("masks", interactive(run, views, truth, past_target=True, alternate=True)),
-                ("alone", interactive(run, views, truth, past_target=True, alone=True, alternate=True)),
-            )
-        },
-    }
+    alternating = (
+        {
+            "second_view": farthest_view(views).name,
+            **{
+                kind: {k: r[k] for k in curve}
+                for kind, r in (
+                    ("masks", interactive(run, views, truth, past_target=True, alternate=True)),
+                    ("alone", interactive(run, views, truth, past_target=True, alone=True, alternate=True)),
+                )
+            },
+        }
+        if len(views) > 2  # a view to score besides the two clicked
+        else None
+    )
     obj = TrueObject.of(run, views, truth)
     return {
         "scene": name,
@@ -388,7 +392,7 @@ def run_scene(
         "iters": run.config.timing.iters,
         **clicks,
         "clicks_alone": {k: alone[k] for k in curve},
-        "alternating": alternating,
+        **({"alternating": alternating} if alternating else {}),
         "ceiling_miou": obj.ceiling(run, views, truth),
         "object_left": removal_left(run, views, truth, obj),
         "single_click_miou_default_options": default_options,
