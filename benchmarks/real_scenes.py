@@ -245,6 +245,7 @@ def interactive(
         "miou_by_clicks": curve,
         "largest_fall": max([0.0, *(a - b for a, b in zip(curve, curve[1:]))]),
         "clicks": {name: [[float(a), float(b)] for a, b in at] for name, at in tried.items()},
+        **({"second_view": second.name} if second is not None else {}),
     }
 
 
@@ -367,20 +368,15 @@ def run_scene(
     times["clicks_s"] = time.perf_counter() - start
     alone = interactive(run, views, truth, past_target=True, alone=True)
     curve = ("miou_by_clicks", "noc90", "largest_fall")
-    alternating = (
-        {
-            "second_view": farthest_view(views).name,
-            **{
-                kind: {k: r[k] for k in curve}
-                for kind, r in (
-                    ("masks", interactive(run, views, truth, past_target=True, alternate=True)),
-                    ("alone", interactive(run, views, truth, past_target=True, alone=True, alternate=True)),
-                )
-            },
+    alternating = {}
+    if len(views) > 2:  # a view to score besides the two clicked
+        masked = interactive(run, views, truth, past_target=True, alternate=True)
+        unmasked = interactive(run, views, truth, past_target=True, alone=True, alternate=True)
+        alternating = {
+            "second_view": masked["second_view"],
+            "masks": {k: masked[k] for k in curve},
+            "alone": {k: unmasked[k] for k in curve},
         }
-        if len(views) > 2  # a view to score besides the two clicked
-        else None
-    )
     obj = TrueObject.of(run, views, truth)
     return {
         "scene": name,
@@ -456,6 +452,9 @@ def report(r: dict) -> tuple[str, str]:
             if "alternating" in x
         )
 
+    def curve_text(miou: list[float]) -> str:
+        return " ".join(f"{m:.2f}" for m in miou)
+
     def masks(m: dict) -> str:
         return f"{m['best_id_iou']:.2f} / {m['union_iou']:.2f} / {m['consistency']:.2f}"
 
@@ -463,14 +462,14 @@ def report(r: dict) -> tuple[str, str]:
         if "clicks_alone" not in x:
             return "n/a"
         a = x["clicks_alone"]
-        return f"{' '.join(f'{m:.2f}' for m in a['miou_by_clicks'])}; NoC@90 {noc(a)}; fall {a['largest_fall']:.3f}"
+        return f"{curve_text(a['miou_by_clicks'])}; NoC@90 {noc(a)}; fall {a['largest_fall']:.3f}"
 
     def alternating(x: dict) -> str:
         if "alternating" not in x:
             return "n/a"
         a = x["alternating"]
         return f"{a['second_view']}: " + "; ".join(
-            f"{kind}: {' '.join(f'{m:.2f}' for m in a[kind]['miou_by_clicks'])}, fall {a[kind]['largest_fall']:.3f}"
+            f"{kind}: {curve_text(a[kind]['miou_by_clicks'])}, fall {a[kind]['largest_fall']:.3f}"
             for kind in ("masks", "alone")
         )
 
@@ -488,7 +487,7 @@ def report(r: dict) -> tuple[str, str]:
             f"{x['ceiling_miou']:.3f}" if "ceiling_miou" in x else "n/a",
             f"{x['object_left']:.1%}" if "object_left" in x else "n/a",
             noc(x),
-            " ".join(f"{m:.2f}" for m in x["miou_by_clicks"]),
+            curve_text(x["miou_by_clicks"]),
             f"{x['largest_fall']:.3f}" if "largest_fall" in x else "n/a",
             alone(x),
             alternating(x),

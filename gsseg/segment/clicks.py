@@ -490,7 +490,8 @@ class ClickSelector:
         self.options = options
         self.labels = np.asarray(labels)
         self.means = gaussians.means.detach().cpu().numpy().astype(np.float64)
-        self.log_sizes = gaussians.log_scales.detach().cpu().numpy().max(1)  # (N,) the longest axis
+        longest = gaussians.log_scales.detach().cpu().numpy().max(1)  # (N,) log of each longest axis
+        self.large = longest >= np.log(options.large_size) + float(np.median(longest))  # (N,) bool
         self.graph = GaussianGraph.of(gaussians, options.neighbours)
         self.vote = RegionVote(regions)
         self.colours = ColourModel(
@@ -789,7 +790,7 @@ class ClickSelector:
         0.937 -> 0.771)."""
         seen = weight > 0
         heavy = weight >= self.options.off_weight * float(np.median(weight[seen])) if seen.any() else seen
-        return heavy | (self.log_sizes >= np.log(self.options.large_size) + float(np.median(self.log_sizes)))
+        return heavy | self.large
 
     def _shown_by(self, click: ClickEvidence) -> np.ndarray:
         """(N,) in [0, 1]: how much of each Gaussian the ``click``'s view shows, in shares of
