@@ -14,12 +14,14 @@ from helpers import script
 
 from dataset_tools import InputError, load_scene
 from dataset_tools.cameras import turned_frames
+from dataset_tools.colmap import load_pycolmap
 from dataset_tools.image_files import read_image
 from dataset_tools.infra.locks import exclusive
 from dataset_tools.sfm import SfmConfig, run_sfm
 from dataset_tools.sfm.pipeline import (
     _input_images,
     incremental_options,
+    mean_residuals,
     pixel_scale,
     sift_peak_threshold,
     weakly_posed,
@@ -90,14 +92,39 @@ def test_sift_threshold_is_colmaps_for_large_images_and_lower_for_small_ones():
 
 
 def test_weakly_posed_images_hold_under_a_fifth_of_the_median_share_of_3d_points():
-    """Shares of keypoints with a 3D point 0.30, 0.25, 0.35, 0.05 and 0.049: the median is 0.25
-    and a fifth of it 0.05; 0.049 is under it, 0.05 is not."""
+    """Shares of keypoints with a 3D point 0.30, 0.25, 0.35, 0.05 and 0.049, all reprojecting
+    alike: the median is 0.25 and a fifth of it 0.05; 0.049 is under it, 0.05 is not."""
     names = ["a", "b", "c", "d", "e"]
     keypoints = np.array([1000, 2000, 400, 1000, 1000])
     triangulated = np.array([300, 500, 140, 50, 49])
-    assert weakly_posed(names, keypoints, triangulated) == ["e"]
-    assert weakly_posed(names, keypoints, keypoints) == []  # all alike: none
-    assert weakly_posed(["x"], np.array([0]), np.array([0])) == []  # no keypoints: share 0, as the median's
+    alike = np.full(5, 0.5)
+    assert weakly_posed(names, keypoints, triangulated, alike) == ["e"]
+    assert weakly_posed(names, keypoints, keypoints, alike) == []  # all alike: none
+    no_keypoints = np.array([0])  # share 0, as the median's
+    assert weakly_posed(["x"], no_keypoints, no_keypoints, np.array([0.0])) == []
+
+
+def test_a_pose_whose_points_reproject_far_has_its_share_discounted():
+    """Shares 0.25 (the median) and 0.075 (0.3 of it): reprojecting twice as far as the median
+    image's, the second's support is 0.15, under a fifth; reprojecting half as far earns the
+    third nothing, at 0.04 of the median share (0.16 of it)."""
+    names = ["a", "b", "c", "d", "e"]
+    keypoints = np.full(5, 1000)
+    triangulated = np.array([250, 75, 40, 250, 300])
+    assert weakly_posed(names, keypoints, triangulated, np.array([0.5, 0.5, 0.5, 0.5, 0.5])) == ["c"]
+    assert weakly_posed(names, keypoints, triangulated, np.array([0.5, 1.0, 0.25, 0.5, 0.5])) == ["b", "c"]
+
+
+def test_mean_residuals_agree_with_colmaps_errors_of_the_points(beer):
+    """Each image's mean distance between its keypoints and where their points project, times
+    how many it has, summed over the images, is the sum over the points of COLMAP's mean error
+    over each one's track times its length: both count every observation once."""
+    pycolmap = load_pycolmap()
+    model = pycolmap.Reconstruction(str(beer / "sparse" / "0"))
+    model.update_point_3d_errors()
+    counts = np.array([image.num_points3D for image in model.images.values()])
+    by_points = sum(point.error * point.track.length() for point in model.points3D.values())
+    assert np.sum(mean_residuals(model) * counts) == pytest.approx(by_points, rel=1e-6)
 
 
 def test_mapper_thresholds_are_colmaps_for_large_images_and_scaled_for_small_ones():

@@ -56,8 +56,9 @@ if TYPE_CHECKING:
 STEPS = ("images", "features", "matches", "mapping", "undistort")
 EXHAUSTIVE_UP_TO = 80
 MIN_REGISTERED_SHARE = 0.5
-# An image whose share of keypoints with a 3D point is under this share of the median image's
-# is posed on too little to trust (weakly_posed).
+# An image whose support (share of keypoints with a 3D point, discounted by how far they
+# reproject) is under this share of the median image's is posed on too little to trust
+# (weakly_posed).
 WEAK_POSE_SHARE = 0.2
 SIFT_PEAK_THRESHOLD = 0.02 / 3  # COLMAP's default, for photos of about REFERENCE_SIDE pixels
 REFERENCE_SIDE = 1000
@@ -127,8 +128,8 @@ class SfmResult:
             )
         if self.left_out:
             said.append(
-                f"{', '.join(self.left_out)}: posed on too few points and left out (an object turned on a turntable "
-                "in front of a still background gives such photos; docs/sfm.md)."
+                f"{', '.join(self.left_out)}: posed on too few points, or on points that fit them badly, and left "
+                "out (an object turned on a turntable in front of a still background gives such photos; docs/sfm.md)."
             )
         return " ".join(said) or None
 
@@ -236,17 +237,41 @@ def incremental_options(scale: float, seed: int, threads: int) -> pycolmap.Incre
     return options
 
 
-def weakly_posed(names: list[str], keypoints: np.ndarray, triangulated: np.ndarray) -> list[str]:
-    """Those of the registered images ``names`` whose share of ``keypoints`` (N,) that hold a
-    3D point (``triangulated`` (N,)) is under :data:`WEAK_POSE_SHARE` of the median image's.
+def weakly_posed(names: list[str], keypoints: np.ndarray, triangulated: np.ndarray, residuals: np.ndarray) -> list[str]:
+    """Those of the registered images ``names`` whose support is under :data:`WEAK_POSE_SHARE`
+    of the median image's: the share of its ``keypoints`` (N,) that hold a 3D point
+    (``triangulated`` (N,)), over the median share, divided by the mean distance in pixels at
+    which those points reproject (``residuals`` (N,)), over the median distance, where that
+    is above one.
     Such a pose rests on a few matches that may belong to something else: an object turned on
     a turntable in front of a still background gives photos the mapper poses from the
-    background, on top of other photos' places (nerd_ethiopian_head: 7 of 66 photos, each at
-    10-17% of the median share, render the back of the head where the photo shows its face);
-    the photos posed right on four other captures hold at least 26% of it (docs/sfm.md)."""
+    background, on top of other photos' places (nerd_ethiopian_head: 7 of 66 photos at 10-17%
+    of the median share; in another mapping of the same photos 6 at 21-27%, whose points
+    reproject 1.5-1.8 times as far as the median photo's, support 11-18%), rendering the back
+    of the head where the photo shows its face; the photos posed right on four other captures
+    have a support of at least 23% (docs/sfm.md)."""
     shares = np.asarray(triangulated, float) / np.maximum(np.asarray(keypoints, float), 1)
-    floor = WEAK_POSE_SHARE * float(np.median(shares)) if len(shares) else 0.0
-    return sorted(name for name, share in zip(names, shares) if share < floor)
+    if not len(shares) or np.median(shares) <= 0:
+        return []
+    residuals = np.asarray(residuals, float)
+    spread = residuals / max(float(np.median(residuals)), 1e-12)
+    support = shares / float(np.median(shares)) / np.maximum(spread, 1.0)  # a fit better than the median's earns none
+    return sorted(name for name, held in zip(names, support) if held < WEAK_POSE_SHARE)
+
+
+def mean_residuals(model) -> np.ndarray:
+    """(N,) each registered image of the pycolmap ``model`` (in ``model.images`` order): the
+    mean distance in pixels between its keypoints that hold a 3D point and where that point
+    projects (0 where none does)."""
+    out = []
+    for image in model.images.values():
+        residuals = [
+            np.linalg.norm(image.project_point(model.points3D[p.point3D_id].xyz) - p.xy)
+            for p in image.points2D
+            if p.has_point3D()
+        ]
+        out.append(float(np.mean(residuals)) if residuals else 0.0)
+    return np.array(out)
 
 
 def sequential_pairs(n: int, cfg: SfmConfig) -> list[tuple[int, int]]:
@@ -518,7 +543,10 @@ class _SfmJob:
             model = models[best]
             images = list(model.images.values())
             left_out = weakly_posed(
-                [im.name for im in images], [len(im.points2D) for im in images], [im.num_points3D for im in images]
+                [im.name for im in images],
+                [len(im.points2D) for im in images],
+                [im.num_points3D for im in images],
+                mean_residuals(model),
             )
             for image in images:
                 if image.name in left_out:
