@@ -203,8 +203,9 @@ def speckled(tmp_path_factory) -> Path:
 def test_sfm_recovers_the_exact_cameras_of_a_synthetic_orbit_and_again_the_same(speckled, tmp_path):
     """A second run on the same photos gives the same cameras (on several threads, COLMAP's CPU
     SIFT gives slightly different keypoints on this capture from run to run: about 1e-6). To
-    1e-4: the matching runs on every core, and once, on a loaded machine, two runs' poses
-    differed by 4e-5."""
+    1e-3: the matching runs on every core, and two runs' poses once differed by 4e-5 on a
+    loaded AMD EPYC, once by 3e-4 on an Intel Xeon after the rest of the test suite (another
+    model, from another initial pair or registration order, moves them by far more)."""
     shutil.copytree(speckled / "images", tmp_path / "photos")
     result = run_sfm(tmp_path / "photos", tmp_path / "scene", progress=False)
     assert result.registered == result.images == 40
@@ -216,7 +217,7 @@ def test_sfm_recovers_the_exact_cameras_of_a_synthetic_orbit_and_again_the_same(
         np.abs(
             np.stack([v.cam_from_world for v in again.views]) - np.stack([v.cam_from_world for v in made.views])
         ).max()
-        < 1e-4
+        < 1e-3
     )
 
 
