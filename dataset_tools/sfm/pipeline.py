@@ -259,7 +259,7 @@ def weakly_posed(names: list[str], keypoints: np.ndarray, triangulated: np.ndarr
     return sorted(name for name, held in zip(names, support) if held < WEAK_POSE_SHARE)
 
 
-def mean_residuals(model) -> np.ndarray:
+def mean_residuals(model: pycolmap.Reconstruction) -> np.ndarray:
     """(N,) each registered image of the pycolmap ``model`` (in ``model.images`` order): the
     mean distance in pixels between its keypoints that hold a 3D point and where that point
     projects (0 where none does)."""
