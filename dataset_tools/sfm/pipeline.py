@@ -251,11 +251,12 @@ def weakly_posed(names: list[str], keypoints: np.ndarray, triangulated: np.ndarr
     of the head where the photo shows its face; the photos posed right on four other captures
     have a support of at least 23% (docs/sfm.md)."""
     shares = np.asarray(triangulated, float) / np.maximum(np.asarray(keypoints, float), 1)
-    if not len(shares) or np.median(shares) <= 0:
+    median_share = float(np.median(shares)) if len(shares) else 0.0
+    if median_share <= 0:
         return []
     residuals = np.asarray(residuals, float)
-    spread = residuals / max(float(np.median(residuals)), 1e-12)
-    support = shares / float(np.median(shares)) / np.maximum(spread, 1.0)  # a fit better than the median's earns none
+    spread = np.maximum(residuals / max(float(np.median(residuals)), 1e-12), 1.0)  # a better fit earns nothing
+    support = shares / median_share / spread
     return sorted(name for name, held in zip(names, support) if held < WEAK_POSE_SHARE)
 
 
