@@ -84,30 +84,35 @@ def test_what_the_object_hides_from_every_view_goes_with_it():
     assert not done.mask[405:].any()
 
 
-def test_within_the_hull_most_of_the_weight_inside_is_enough():
+def test_within_the_reach_of_the_hull_most_of_the_weight_inside_is_enough():
     """A flat ring of 600 Gaussians (the selection) seen from the five cameras above it, and
-    three unselected patches of 8 just under its top: along its inner edge (within the ring's
-    hull: its rim, which the vote gave to the hole's floor; most of their weight falls inside
-    the ring's silhouettes, none 90% of it, and each wins a few pixels of its own), along its
-    outer edge (the same, but beyond the hull: the ground around it), and a patch in the hole
-    (within the hull, but seen through it: its weight falls outside the silhouettes). The
-    inner rim goes with the ring wherever at least half its weight falls inside; the outer
-    rim and what shows through the hole stay."""
+    four unselected patches of 8: along its inner edge just under its top (within the hull of
+    the ring's centres: its rim, which the vote gave to the hole's floor; most of their weight
+    falls inside the ring's silhouettes, none 90% of it, and each wins a few pixels of its
+    own), along its outer edge (beyond the hull of the centres, but within the reach of the
+    ring's Gaussians: its blurred edge, which the vote gave to the ground around it), under
+    its band 0.25 below it (the ground it stands over, beyond the reach of its Gaussians),
+    and a patch in the hole (within the hull, but seen through it: its weight falls outside
+    the silhouettes). Both rims go with the ring wherever at least half their weight falls
+    inside; the ground under it and what shows through the hole stay."""
     rng = np.random.default_rng(0)
     angle, radius = rng.uniform(0, 2 * np.pi, 600), np.sqrt(rng.uniform(0.5**2, 0.8**2, 600))
     ring = np.c_[radius * np.cos(angle), radius * np.sin(angle), rng.uniform(-0.1, 0.1, 600)]
     wall = np.c_[rng.uniform(-2, 2, (400, 2)), np.full(400, -1.5)]
     around = np.radians(np.arange(0, 360, 45))
     inner = np.c_[0.52 * np.cos(around), 0.52 * np.sin(around), np.full(8, 0.09)]
-    outer = np.c_[0.78 * np.cos(around), 0.78 * np.sin(around), np.full(8, 0.09)]
+    outer = np.c_[0.8 * np.cos(around), 0.8 * np.sin(around), np.zeros(8)]
+    under = np.c_[0.65 * np.cos(around), 0.65 * np.sin(around), np.full(8, -0.35)]
     hole = rng.normal(size=(8, 3)) * [0.05, 0.05, 0.0] + [0, 0, -0.05]
     g = Gaussians.concat(
         _blobs(ring, 0.06, 0.99, 0.5),
         _blobs(inner, 0.08, 0.99, -1.0),
         _blobs(outer, 0.08, 0.99, -1.0),
+        _blobs(under, 0.08, 0.99, -1.0),
         _blobs(hole, 0.06, 0.99, -1.0),
         _blobs(wall, 0.15, 0.99, 1.0),
     )
-    done = complete_selection(g, np.r_[np.ones(600, bool), np.zeros(424, bool)], _around_the_top())
+    done = complete_selection(g, np.r_[np.ones(600, bool), np.zeros(432, bool)], _around_the_top())
     assert done.mask[600:608].sum() == 7  # the one with 46% of its weight inside stays
-    assert not done.mask[608:].any()
+    assert done.mask[608:616].sum() == 7  # as does one on the outer edge
+    assert not done.mask[616:].any()

@@ -8,14 +8,16 @@ each view's silhouette of the selection is where the selected Gaussians hold mos
 blended weight (:func:`gsseg.render.pixel_labels.render_labels`); a Gaussian outside the
 selection whose weight, summed over the views, falls inside those silhouettes for at least
 :data:`SERVED_SHARE` of it served the object alone, and goes with it. So does one inside
-the object: within the convex hull of the selection's centres, and hidden by it from every
-view, as space carving reads a visual hull (its centre inside the silhouette and behind the
+the object: within its reach (the convex hull of the selection's centres pushed out by
+:data:`EXTENT` times their median largest scale, as far as its Gaussians draw), and hidden
+by it from every view, as space carving reads a visual hull (its centre inside the silhouette and behind the
 surface the selection shows there in every view whose image it falls in, two at least). No
 photo saw it; removed with the object it would show what training left inside it, as a
-dark speck at a can's foot. Within that hull a Gaussian also goes when most of its weight,
+dark speck at a can's foot. Within that reach a Gaussian also goes when most of its weight,
 :data:`HULL_SHARE`, falls inside the silhouettes: the object's own rim and foot that the vote
 gave to the floor, which win a few pixels of their own and so never reach
-:data:`SERVED_SHARE`. What the object hides beyond its hull (the wall behind it) stays for the
+:data:`SERVED_SHARE`; at an object's foot they lie below its lowest centres, beyond their
+hull. What the object hides beyond its reach (the wall behind it) stays for the
 fill of :mod:`gsseg.fill` to cover, and what shows through a gap within the hull stays, its
 weight falling outside the silhouettes.
 """
@@ -27,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import torch
-from scipy.spatial import ConvexHull, Delaunay, QhullError
+from scipy.spatial import ConvexHull, QhullError
 
 from dataset_tools.cameras import PinholeCamera
 from gsseg.model.gaussians import Gaussians
@@ -36,7 +38,8 @@ from gsseg.render.contributions import Masked, MaskedView, contribution_matrix
 from gsseg.render.pixel_labels import render_labels
 
 SERVED_SHARE = 0.9  # a Gaussian with this share of its weight inside the silhouettes served the object alone
-HULL_SHARE = 0.5  # within the selection's hull, this share of it is enough
+HULL_SHARE = 0.5  # within the selection's reach, this share of it is enough
+EXTENT = 3.0  # the selection reaches this many of its Gaussians' median largest scale beyond its centres' hull
 BEHIND = 0.02  # a centre less than this share of its depth in front of the selection's surface lies behind it
 
 
@@ -56,8 +59,8 @@ def complete_selection(
     gaussians: Gaussians, selected: np.ndarray, views: Sequence[Masked], *, backend: str | Backend = "cpu"
 ) -> Completed:
     """``selected`` (N,) bool and the Gaussians that served it alone in ``views`` (posed views;
-    their masks are not read), or that lie within its hull and that it hides from every one of
-    them or whose weight falls mostly inside its silhouettes."""
+    their masks are not read), or that lie within its reach and that it hides from every one
+    of them or whose weight falls mostly inside its silhouettes."""
     backend = get_backend(backend)
     g = gaussians.detach().to(backend.device)
     means = g.means.cpu().numpy().astype(np.float64)
@@ -80,7 +83,8 @@ def complete_selection(
     drawn = total > 0
     hidden = (in_image >= 2) & (behind == in_image)
     within = ~selected & (hidden | (drawn & (inside >= HULL_SHARE * total)))
-    within[within] = _enclosed(means[within], means[selected])
+    reach = EXTENT * float(np.median(g.scales.amax(1).cpu().numpy()[selected])) if selected.any() else 0.0
+    within[within] = _enclosed(means[within], means[selected], reach)
     served = ~selected & ((drawn & (inside >= SERVED_SHARE * total)) | within)
     mask = selected | served
 
@@ -101,13 +105,13 @@ def _behind(
     return rows, silhouette[v, u] & (pc[rows, 2] >= (1 - BEHIND) * depth[v, u])
 
 
-def _enclosed(points: np.ndarray, hull: np.ndarray) -> np.ndarray:
-    """(P,) bool: which ``points`` (P, 3) lie inside the convex hull of ``hull`` (M, 3) (none
-    where it spans no volume)."""
+def _enclosed(points: np.ndarray, hull: np.ndarray, margin: float = 0.0) -> np.ndarray:
+    """(P,) bool: which ``points`` (P, 3) lie inside the convex hull of ``hull`` (M, 3) pushed
+    out by ``margin`` along each face's normal (none where it spans no volume)."""
     if len(points) == 0 or len(hull) < 4:
         return np.zeros(len(points), bool)
     try:
-        corners = hull[ConvexHull(hull).vertices]  # a few hundred, however large the selection
-        return Delaunay(corners).find_simplex(points) >= 0
+        faces = ConvexHull(hull).equations  # (F, 4): unit outward normal, offset; <= 0 inside
     except QhullError:
         return np.zeros(len(points), bool)
+    return (points @ faces[:, :3].T + faces[:, 3]).max(1) <= margin
