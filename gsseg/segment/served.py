@@ -10,16 +10,16 @@ selection whose weight, summed over the views, falls inside those silhouettes fo
 :data:`SERVED_SHARE` of it served the object alone, and goes with it. So does one inside
 the object: within its reach (the convex hull of the selection's centres pushed out by
 :data:`EXTENT` times their median largest scale, as far as its Gaussians draw), and hidden
-by it from every view, as space carving reads a visual hull (its centre inside the silhouette and behind the
-surface the selection shows there in every view whose image it falls in, two at least). No
-photo saw it; removed with the object it would show what training left inside it, as a
-dark speck at a can's foot. Within that reach a Gaussian also goes when most of its weight,
-:data:`HULL_SHARE`, falls inside the silhouettes: the object's own rim and foot that the vote
-gave to the floor, which win a few pixels of their own and so never reach
-:data:`SERVED_SHARE`; at an object's foot they lie below its lowest centres, beyond their
-hull. What the object hides beyond its reach (the wall behind it) stays for the
-fill of :mod:`gsseg.fill` to cover, and what shows through a gap within the hull stays, its
-weight falling outside the silhouettes.
+by it from every view, as space carving reads a visual hull (its centre inside the
+silhouette and behind the surface the selection shows there in every view whose image it
+falls in, two at least). No photo saw it; removed with the object it would show what
+training left inside it, as a dark speck at a can's foot. Within that reach a Gaussian also
+goes when most of its weight, :data:`HULL_SHARE`, falls inside the silhouettes: the
+object's own rim and foot that the vote gave to the floor, which win a few pixels of their
+own and so never reach :data:`SERVED_SHARE`; at an object's foot they lie below its lowest
+centres, beyond their hull. What the object hides beyond its reach (the wall behind it)
+stays for the fill of :mod:`gsseg.fill` to cover, and what shows through a gap within its
+reach stays, its weight falling outside the silhouettes.
 """
 
 from __future__ import annotations
@@ -105,7 +105,7 @@ def _behind(
     return rows, silhouette[v, u] & (pc[rows, 2] >= (1 - BEHIND) * depth[v, u])
 
 
-def _enclosed(points: np.ndarray, hull: np.ndarray, margin: float = 0.0) -> np.ndarray:
+def _enclosed(points: np.ndarray, hull: np.ndarray, margin: float) -> np.ndarray:
     """(P,) bool: which ``points`` (P, 3) lie inside the convex hull of ``hull`` (M, 3) pushed
     out by ``margin`` along each face's normal (none where it spans no volume)."""
     if len(points) == 0 or len(hull) < 4:
