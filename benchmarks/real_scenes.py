@@ -19,6 +19,10 @@ selection (docs/evaluation.md):
   one label, object features of zero: what weight-free masks give on a capture they read as
   one region, a plant and the wall behind it), so that the clicks carve the object alone
   (:meth:`gsseg.segment.clicks.ClickSelector._carved`);
+- **half the object given away**: the same ten clicks where every view's masks hold one half
+  of the object (its Gaussians on one side of their median along their longest axis) and
+  give the other to the background, with no object features (a box's lid joined to the
+  bench under it: :func:`half_given_away`); the first click deep inside the kept half;
 - **the clicks in two views**: the same ten clicks, with the masks and alone, where those after
   the first go in turn to the view that looks from farthest away and to the first, as a user
   turns the model in the viewer (:func:`farthest_view`); the views other than the two are
@@ -108,13 +112,18 @@ def posed_scene(photos: Path, out: Path) -> Path:
     return out
 
 
-def rendered_selection(run: Run, selected: np.ndarray, view: View, backend: str | Backend = "cpu") -> np.ndarray:
-    """(H, W) bool: where the ``selected`` Gaussians win the blended weight (``render --what
-    segments`` of a two-label segmentation)."""
+def rendered_labels(run: Run, labels: np.ndarray, view: View, backend: str | Backend = "cpu") -> np.ndarray:
+    """(H, W) the label of the Gaussians (``labels`` (N,) uint8) that win each pixel's blended
+    weight (``render --what segments``)."""
     backend = get_backend(backend)
     pose = torch.as_tensor(view.cam_from_world, dtype=torch.float32, device=backend.device)
-    labels = selected.astype(np.uint8)
-    return segment_pixels(run.gaussians_on(backend.device), labels, view.camera, pose, backend=backend) == 1
+    return segment_pixels(run.gaussians_on(backend.device), labels, view.camera, pose, backend=backend)
+
+
+def rendered_selection(run: Run, selected: np.ndarray, view: View, backend: str | Backend = "cpu") -> np.ndarray:
+    """(H, W) bool: where the ``selected`` Gaussians win the blended weight (a two-label
+    :func:`rendered_labels`)."""
+    return rendered_labels(run, selected.astype(np.uint8), view, backend) == 1
 
 
 def clicks_alone(run: Run, regions: RegionWeights) -> ClickSelector:
@@ -135,10 +144,37 @@ def clicks_alone(run: Run, regions: RegionWeights) -> ClickSelector:
     return ClickSelector(blank, np.ones(len(blank), np.uint8), one)
 
 
+def half_given_away(
+    run: Run, views: list[View], truth: dict[str, np.ndarray], obj: TrueObject, backend: str | Backend = "cpu"
+) -> tuple[ClickSelector, np.ndarray]:
+    """The click rule of ``run`` where every training view's masks hold one half of the object
+    and give the other half to the background: the object's Gaussians (``obj``) split at the
+    median of their centres along their longest axis, a view's mask the people's mask where
+    the first half's Gaussians draw it (label 1, the rest 0), region weights of those masks,
+    the first half's Gaussians labelled and object features of zero (learned from other
+    masks); and (H, W) bool the first half's pixels in the first of ``views``."""
+    means = run.gaussians.means.numpy().astype(np.float64)
+    held = means[obj.held]
+    axis = np.linalg.svd(held - held.mean(0), full_matrices=False)[2][0]
+    along = (means - held.mean(0)) @ axis
+    kept = obj.held & (along <= np.median(along[obj.held]))
+    halves = np.where(kept, 1, np.where(obj.held, 2, 0)).astype(np.uint8)
+
+    def kept_pixels(view: View) -> np.ndarray:
+        return (rendered_labels(run, halves, view, backend) == 1) & truth[view.name]
+
+    train = [v for v in run.scene().split("train") if v.name in truth]
+    masked = [MaskedView(v.camera, v.cam_from_world, kept_pixels(v).astype(np.uint8)) for v in train]
+    regions = contribution_matrix(run.gaussians, masked, backend=backend, regions=True, progress=False).regions
+    regions.layers, regions.model = ("half",), run.fingerprint
+    blank = replace(run.gaussians, obj_feat=torch.zeros_like(run.gaussians.obj_feat))
+    return ClickSelector(blank, kept.astype(np.uint8), regions), kept_pixels(views[0])
+
+
 class Clicker:
     """Selections of a segmented run by clicks in the first view, or also in a ``second`` one
     (the rule of ``gsseg edit --click``; with nothing from the masks where ``alone``,
-    :func:`clicks_alone`), scored in the others."""
+    :func:`clicks_alone`; the ``selector`` given, where one is), scored in the others."""
 
     def __init__(
         self,
@@ -148,14 +184,17 @@ class Clicker:
         backend: str | Backend = "cpu",
         alone: bool = False,
         second: View | None = None,
+        selector: ClickSelector | None = None,
     ):
         self.run, self.first, self.truth = run, views[0], truth
         self.others = [v for v in views[1:] if v is not second]
         self.backend = get_backend(backend)
-        regions = run_regions(run, backend=self.backend)
-        self.selector = (
-            clicks_alone(run, regions) if alone else ClickSelector(run.gaussians, run.labels().labels, regions)
-        )
+        if selector is None:
+            regions = run_regions(run, backend=self.backend)
+            selector = (
+                clicks_alone(run, regions) if alone else ClickSelector(run.gaussians, run.labels().labels, regions)
+            )
+        self.selector = selector
         self.clicks: list[ClickEvidence] = []
         self.selected = np.zeros(len(run.gaussians), bool)
 
@@ -216,16 +255,19 @@ def interactive(
     past_target: bool = False,
     alone: bool = False,
     alternate: bool = False,
+    half: TrueObject | None = None,
 ) -> dict:
     """The single-click scores and the clicks to reach :data:`TARGET` (NoC@90), up to
     ``max_clicks`` (all ``max_clicks`` where ``past_target``: how later clicks behave),
-    rendered on ``backend``; with nothing from the masks where ``alone`` (:class:`Clicker`).
-    Where ``alternate``, the clicks after the first go in turn to the :func:`farthest_view`
-    and the first view, as a user turns the model in the viewer, and the views other than
-    the two are scored."""
+    rendered on ``backend``; with nothing from the masks where ``alone`` (:class:`Clicker`);
+    where the object's ``half`` is given away (:func:`half_given_away` of that object), the
+    first click deep inside the half kept. Where ``alternate``, the clicks after the first go
+    in turn to the :func:`farthest_view` and the first view, as a user turns the model in the
+    viewer, and the views other than the two are scored."""
     second = farthest_view(views) if alternate else None
-    clicker = Clicker(run, views, truth, backend, alone, second)
-    u, v = deepest_pixel(truth[views[0].name])
+    selector, first = (None, truth[views[0].name]) if half is None else half_given_away(run, views, truth, half)
+    clicker = Clicker(run, views, truth, backend, alone, second, selector)
+    u, v = deepest_pixel(first)
     clicker.click(u, v, True)
     miou, macc = clicker.scores()
     curve, tried = [miou], {views[0].name: [(u, v)]}
@@ -367,6 +409,8 @@ def run_scene(
     clicks = interactive(run, views, truth, past_target=past_target)
     times["clicks_s"] = time.perf_counter() - start
     alone = interactive(run, views, truth, past_target=True, alone=True)
+    obj = TrueObject.of(run, views, truth)
+    half = interactive(run, views, truth, past_target=True, half=obj)
     curve = ("miou_by_clicks", "noc90", "largest_fall")
     alternating = {}
     if len(views) > 2:  # a view to score besides the two clicked
@@ -377,7 +421,6 @@ def run_scene(
             "masks": {k: masked[k] for k in curve},
             "alone": {k: unmasked[k] for k in curve},
         }
-    obj = TrueObject.of(run, views, truth)
     return {
         "scene": name,
         "images": images,
@@ -388,6 +431,7 @@ def run_scene(
         "iters": run.config.timing.iters,
         **clicks,
         "clicks_alone": {k: alone[k] for k in curve},
+        "half_given_away": {k: half[k] for k in curve},
         **({"alternating": alternating} if alternating else {}),
         "ceiling_miou": obj.ceiling(run, views, truth),
         "object_left": removal_left(run, views, truth, obj),
@@ -445,6 +489,13 @@ def report(r: dict) -> tuple[str, str]:
             f"{x['scene']} {x['clicks_alone']['miou_by_clicks'][-1]:.3f}" for x in posed if "clicks_alone" in x
         )
 
+    if any("half_given_away" in x for x in posed):
+        headline += "; half the object given away, mIoU after the 1st / 10th click: " + ", ".join(
+            f"{x['scene']} {x['half_given_away']['miou_by_clicks'][0]:.3f} / "
+            f"{x['half_given_away']['miou_by_clicks'][-1]:.3f}"
+            for x in posed
+            if "half_given_away" in x
+        )
     if any("alternating" in x for x in posed):
         headline += "; clicks alternating with a second view, NoC@90 with the masks / alone: " + ", ".join(
             f"{x['scene']} {noc(x['alternating']['masks'])} / {noc(x['alternating']['alone'])}"
@@ -458,10 +509,10 @@ def report(r: dict) -> tuple[str, str]:
     def masks(m: dict) -> str:
         return f"{m['best_id_iou']:.2f} / {m['union_iou']:.2f} / {m['consistency']:.2f}"
 
-    def alone(x: dict) -> str:
-        if "clicks_alone" not in x:
+    def protocol(x: dict, key: str) -> str:
+        if key not in x:
             return "n/a"
-        a = x["clicks_alone"]
+        a = x[key]
         return f"{curve_text(a['miou_by_clicks'])}; NoC@90 {noc(a)}; fall {a['largest_fall']:.3f}"
 
     def alternating(x: dict) -> str:
@@ -489,7 +540,8 @@ def report(r: dict) -> tuple[str, str]:
             noc(x),
             curve_text(x["miou_by_clicks"]),
             f"{x['largest_fall']:.3f}" if "largest_fall" in x else "n/a",
-            alone(x),
+            protocol(x, "clicks_alone"),
+            protocol(x, "half_given_away"),
             alternating(x),
             masks(x["masks"]),
             masks(x["depth_masks"]),
@@ -513,6 +565,7 @@ def report(r: dict) -> tuple[str, str]:
             "mIoU after each click",
             "largest fall after a click",
             "the clicks alone (masks that say nothing): mIoU after each click; NoC@90; largest fall",
+            "half the object given away to the background: the same",
             "clicks alternating with a second view: with the masks; alone",
             "masks of colour: best ID / union / consistency",
             "masks at depth jumps: the same",

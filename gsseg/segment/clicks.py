@@ -28,7 +28,8 @@ max-flow solver (PyMaxflow), with a cost per Gaussian from six kinds of evidence
 - **the selection before the click** (from the second click on): a click changes the
   selection only where its evidence outweighs :attr:`ClickOptions.stickiness`, and only its
   way: a positive click adds to the selection and takes nothing out, a negative click takes
-  out and adds nothing, so that a click never undoes what the earlier clicks fixed;
+  out and adds nothing, and only from its side of the graph (the Gaussians nearer its seeds
+  than any positive seed), so that a click never undoes what the earlier clicks fixed;
 - **a negative click**: over the Gaussians nearer, along the graph (edge lengths from
   position, colour and feature), to its seeds than to any positive seed, in proportion to how
   much nearer, the click's word replaces the rest (:meth:`GaussianGraph.split`): a part the
@@ -44,8 +45,10 @@ max-flow solver (PyMaxflow), with a cost per Gaussian from six kinds of evidence
   Gaussians nearer, along the graph, to its seeds that lie beside the selection than to those
   the views hold off the object, the click's word replaces the rest, where its view shows
   them and they look like the clicked part: a highlight on a bronze head that the masks hold
-  as a region of its own comes in whole; a click on something off the selection's surface
-  grows nothing. Its seeds leave out the large hazy Gaussians the views see much of
+  as a region of its own comes in whole. A click whose seeds all lie away from the
+  selection, deep inside a part the masks gave to the surroundings (a box's lid joined to
+  the bench under it), grows its part up to the Gaussians held off whose colour the object
+  does not have. Its seeds leave out the large hazy Gaussians the views see much of
   (:meth:`ClickSelector._hazy`): a click on a head's rim where such a Gaussian shows does
   not bring the blur it draws beside the head.
 
@@ -152,6 +155,11 @@ class ClickOptions:
             share is under ``off_share`` (:meth:`ClickSelector.views_vote`).
         large_size: Gaussians whose longest axis is at least this many times the median
             Gaussian's count as hazy too.
+        far_colour: where none of a later positive click's seeds lies within ``part_reach``
+            (a part the masks gave to the surroundings, clicked deep inside), its part is
+            bounded only by the Gaussians the views hold off the object whose colour is at
+            least this many log-units likelier under the rest's colours than under the
+            object's (:class:`ColourModel`, clipped at 3: colours the object does not have).
         against_margin: on a negative click's side, a Gaussian the views hold to the object
             by twice this share more firmly than the clicked part keeps its evidence
             (:meth:`ClickSelector._yielding`).
@@ -194,6 +202,7 @@ class ClickOptions:
     off_share: float = 0.05
     off_weight: float = 16.0
     large_size: float = 8.0
+    far_colour: float = 3.0
     against_margin: float = 0.2
     shown_share: float = 0.1
     against_colour: float = 1.0
@@ -215,9 +224,11 @@ class ClickOptions:
             )
         if self.neighbours < 1 or self.iterations < 1:
             raise OptionError("{neighbours} and {iterations}: give 1 or more.", neighbours=self.neighbours)
-        if self.against_colour <= 0:
+        if self.against_colour <= 0 or self.far_colour <= 0:
             raise OptionError(
-                "{against_colour}: give a number of log-units above 0.", against_colour=self.against_colour
+                "{against_colour} and {far_colour}: give a number of log-units above 0.",
+                against_colour=self.against_colour,
+                far_colour=self.far_colour,
             )
         if self.appearance_rounds < 0 or self.appearance_bins < 2:
             raise OptionError(
@@ -563,7 +574,10 @@ class ClickSelector:
         cut = self._min_cut(cost, positive, negative)
         if before is None:
             return cut
-        return before | cut if clicks[-1].positive else before & cut
+        if clicks[-1].positive:
+            return before | cut
+        own = np.setdiff1d(seeds[-1][0], both)  # a negative click takes out only what lies on its side
+        return before & (cut | (self.graph.split(own, positive) <= 0))
 
     def _labelled(self, share: np.ndarray, weight: np.ndarray, first_seeds: np.ndarray) -> np.ndarray:
         """(N,) the views' ``share`` (N,) with the label under the first click's seeds
@@ -726,20 +740,34 @@ class ClickSelector:
         :meth:`_hazy`) and the ``negative`` (S',) seeds; shown by the click's view and alike in
         colour to the seeds rather than to the rest of the unselected Gaussians. A highlight on a
         bronze head that the masks hold as a region of its own, and the views therefore vote off
-        the head, comes in whole with a click on it; a click on what lies off the selection's
-        surface grows nothing."""
+        the head, comes in whole with a click on it.
+
+        Where none of the seeds lies beside the selection, the click lands deep inside a part
+        the views hold off the object with its surroundings (masks that gave a box's lid to the
+        bench under it: the vote cannot tell the two apart). The part is then every Gaussian
+        nearer along the graph to the seeds than to those of the Gaussians held off whose
+        colour the object (the selection and the seeds) does not have
+        (:attr:`ClickOptions.far_colour`), and alike means alike to the object."""
         o = self.options
         seeds = seeds[~before[seeds]]  # what the click adds, not what it lands on of the selection
         if not before.any() or not len(seeds):
             return np.zeros(len(self.labels))
         beside = cKDTree(self.means[before]).query(self.means[seeds])[0]
-        seeds = seeds[beside <= o.part_reach * self.graph.spacing]
-        if not len(seeds):
-            return np.zeros(len(self.labels))
-        seen = weight > 0
-        off = np.flatnonzero(~before & seen & ((share < o.off_share) | hazy & (share < 0.5)))
-        side = np.clip(self.graph.split(seeds, np.setdiff1d(np.union1d(off, negative), seeds)) / o.split_full, 0, 1)
-        return side * self._shown_by(click) * self._alike(seeds, ~before)
+        off = ~before & (weight > 0) & ((share < o.off_share) | hazy & (share < 0.5))
+        near = bool((beside <= o.part_reach * self.graph.spacing).any())
+        if near:
+            seeds = seeds[beside <= o.part_reach * self.graph.spacing]
+            alike = self._alike(seeds, ~before)
+        else:
+            obj = before.copy()
+            obj[seeds] = True
+            ratio = self.colours.ratio(obj, ~obj)
+            off &= ratio <= -o.far_colour
+            alike = np.clip(1 + ratio / o.against_colour, 0, 1)
+        bound = np.setdiff1d(np.union1d(np.flatnonzero(off), negative), seeds)
+        side = self.graph.split(seeds, bound)
+        side = np.clip(side / o.split_full, 0, 1) if near else (side > 0).astype(float)
+        return side * self._shown_by(click) * alike
 
     def _held_off(self, click: ClickEvidence, share: np.ndarray) -> bool:
         """Whether the views' vote holds what ``click`` lands on off the object: its seeds'
