@@ -718,7 +718,11 @@ class ClickSelector:
         part looks like the object, the graph alone decides."""
         mask = np.zeros(len(self.labels), bool)
         mask[seeds] = True
-        ratio = self.colours.ratio(mask, others & ~mask)
+        return self._likeness(self.colours.ratio(mask, others & ~mask))
+
+    def _likeness(self, ratio: np.ndarray) -> np.ndarray:
+        """(N,) in [0, 1] of a colour log-likelihood ``ratio`` (N,) (:meth:`ColourModel.ratio`):
+        1 from 0 up, 0 from -:attr:`ClickOptions.against_colour` down, linearly between."""
         return np.clip(1 + ratio / self.options.against_colour, 0, 1)
 
     def _grown(
@@ -754,16 +758,17 @@ class ClickSelector:
             return np.zeros(len(self.labels))
         beside = cKDTree(self.means[before]).query(self.means[seeds])[0]
         off = ~before & (weight > 0) & ((share < o.off_share) | hazy & (share < 0.5))
-        near = bool((beside <= o.part_reach * self.graph.spacing).any())
+        reached = beside <= o.part_reach * self.graph.spacing
+        near = bool(reached.any())
         if near:
-            seeds = seeds[beside <= o.part_reach * self.graph.spacing]
+            seeds = seeds[reached]
             alike = self._alike(seeds, ~before)
         else:
             obj = before.copy()
             obj[seeds] = True
             ratio = self.colours.ratio(obj, ~obj)
             off &= ratio <= -o.far_colour
-            alike = np.clip(1 + ratio / o.against_colour, 0, 1)
+            alike = self._likeness(ratio)
         bound = np.setdiff1d(np.union1d(np.flatnonzero(off), negative), seeds)
         side = self.graph.split(seeds, bound)
         side = np.clip(side / o.split_full, 0, 1) if near else (side > 0).astype(float)
