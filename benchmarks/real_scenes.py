@@ -23,6 +23,9 @@ selection (docs/evaluation.md):
   of the object (its Gaussians on one side of their median along their longest axis) and
   give the other to the background, with no object features (a box's lid joined to the
   bench under it: :func:`half_given_away`); the first click deep inside the kept half;
+- **joined to its surroundings**: the same ten clicks where every view's masks join the object
+  to the Gaussians around it, as many as it has (tools and the table under them as one
+  region, with no object features: :func:`joined_to_surroundings`);
 - **the clicks in two views**: the same ten clicks, with the masks and alone, where those after
   the first go in turn to the view that looks from farthest away and to the first, as a user
   turns the model in the viewer (:func:`farthest_view`); the views other than the two are
@@ -60,6 +63,7 @@ from pathlib import Path
 import numpy as np
 import torch
 from scipy import ndimage
+from scipy.spatial import cKDTree
 
 from benchmarks import record
 from dataset_tools import colmap
@@ -144,15 +148,27 @@ def clicks_alone(run: Run, regions: RegionWeights) -> ClickSelector:
     return ClickSelector(blank, np.ones(len(blank), np.uint8), one)
 
 
+def masked_selector(run: Run, masks: dict[str, np.ndarray], labels: np.ndarray, layer: str) -> ClickSelector:
+    """The click rule of ``run`` with other masks than its own: ``masks`` (H, W) bool of the
+    training views by name (one region besides the background), ``labels`` (N,) and object
+    features of zero (they were learned from the run's masks)."""
+    train = [v for v in run.scene().split("train") if v.name in masks]
+    masked = [MaskedView(v.camera, v.cam_from_world, masks[v.name].astype(np.uint8)) for v in train]
+    regions = contribution_matrix(run.gaussians, masked, backend="cpu", regions=True, progress=False).regions
+    regions.layers, regions.model = (layer,), run.fingerprint
+    blank = replace(run.gaussians, obj_feat=torch.zeros_like(run.gaussians.obj_feat))
+    return ClickSelector(blank, labels.astype(np.uint8), regions)
+
+
 def half_given_away(
-    run: Run, views: list[View], truth: dict[str, np.ndarray], obj: TrueObject, backend: str | Backend = "cpu"
+    run: Run, views: list[View], truth: dict[str, np.ndarray], obj: TrueObject
 ) -> tuple[ClickSelector, np.ndarray]:
     """The click rule of ``run`` where every training view's masks hold one half of the object
     and give the other half to the background: the object's Gaussians (``obj``) split at the
     median of their centres along their longest axis, a view's mask the people's mask where
-    the first half's Gaussians draw it (label 1, the rest 0), region weights of those masks,
-    the first half's Gaussians labelled and object features of zero (learned from other
-    masks); and (H, W) bool the first half's pixels in the first of ``views``."""
+    the first half's Gaussians draw it, the first half's Gaussians labelled
+    (:func:`masked_selector`); and (H, W) bool the first half's pixels in the first of
+    ``views``, where the first click goes."""
     means = run.gaussians.means.numpy().astype(np.float64)
     held = means[obj.held]
     axis = np.linalg.svd(held - held.mean(0), full_matrices=False)[2][0]
@@ -161,14 +177,34 @@ def half_given_away(
     halves = np.where(kept, 1, np.where(obj.held, 2, 0)).astype(np.uint8)
 
     def kept_pixels(view: View) -> np.ndarray:
-        return (rendered_labels(run, halves, view, backend) == 1) & truth[view.name]
+        return (rendered_labels(run, halves, view) == 1) & truth[view.name]
 
-    train = [v for v in run.scene().split("train") if v.name in truth]
-    masked = [MaskedView(v.camera, v.cam_from_world, kept_pixels(v).astype(np.uint8)) for v in train]
-    regions = contribution_matrix(run.gaussians, masked, backend=backend, regions=True, progress=False).regions
-    regions.layers, regions.model = ("half",), run.fingerprint
-    blank = replace(run.gaussians, obj_feat=torch.zeros_like(run.gaussians.obj_feat))
-    return ClickSelector(blank, kept.astype(np.uint8), regions), kept_pixels(views[0])
+    masks = {v.name: kept_pixels(v) for v in run.scene().split("train") if v.name in truth}
+    return masked_selector(run, masks, kept, "half"), kept_pixels(views[0])
+
+
+def joined_to_surroundings(
+    run: Run, views: list[View], truth: dict[str, np.ndarray], obj: TrueObject
+) -> tuple[ClickSelector, np.ndarray]:
+    """The click rule of ``run`` where every training view's masks join the object to what
+    lies around it (tools and the table under them as one region): the surroundings are the
+    Gaussians off the object (``obj``) whose centres lie nearest to one of its own, as many as
+    it has (at most half of the rest); a view's mask the people's mask and the pixels the
+    surroundings win, the object and its surroundings labelled (:func:`masked_selector`); and
+    (H, W) bool the people's mask of the first of ``views``, where the first click goes."""
+    means = run.gaussians.means.numpy().astype(np.float64)
+    gap = cKDTree(means[obj.held]).query(means)[0]
+    off = np.flatnonzero(~obj.held)
+    near = off[np.argsort(gap[off], kind="stable")[: min(int(obj.held.sum()), len(off) // 2)]]
+    joined = obj.held.copy()
+    joined[near] = True
+    surroundings = (~obj.held & joined).astype(np.uint8)
+    masks = {
+        v.name: truth[v.name] | (rendered_labels(run, surroundings, v) == 1)
+        for v in run.scene().split("train")
+        if v.name in truth
+    }
+    return masked_selector(run, masks, joined, "joined"), truth[views[0].name]
 
 
 class Clicker:
@@ -255,17 +291,18 @@ def interactive(
     past_target: bool = False,
     alone: bool = False,
     alternate: bool = False,
-    half: TrueObject | None = None,
+    given: tuple[ClickSelector, np.ndarray] | None = None,
 ) -> dict:
     """The single-click scores and the clicks to reach :data:`TARGET` (NoC@90), up to
     ``max_clicks`` (all ``max_clicks`` where ``past_target``: how later clicks behave),
     rendered on ``backend``; with nothing from the masks where ``alone`` (:class:`Clicker`);
-    where the object's ``half`` is given away (:func:`half_given_away` of that object), the
-    first click deep inside the half kept. Where ``alternate``, the clicks after the first go
-    in turn to the :func:`farthest_view` and the first view, as a user turns the model in the
-    viewer, and the views other than the two are scored."""
+    with the click rule and first view's pixels of other masks where ``given``
+    (:func:`half_given_away`, :func:`joined_to_surroundings`), the first click deep inside
+    those pixels. Where ``alternate``, the clicks after the first go in turn to the
+    :func:`farthest_view` and the first view, as a user turns the model in the viewer, and the
+    views other than the two are scored."""
     second = farthest_view(views) if alternate else None
-    selector, first = (None, truth[views[0].name]) if half is None else half_given_away(run, views, truth, half)
+    selector, first = (None, truth[views[0].name]) if given is None else given
     clicker = Clicker(run, views, truth, backend, alone, second, selector)
     u, v = deepest_pixel(first)
     clicker.click(u, v, True)
@@ -410,7 +447,8 @@ def run_scene(
     times["clicks_s"] = time.perf_counter() - start
     alone = interactive(run, views, truth, past_target=True, alone=True)
     obj = TrueObject.of(run, views, truth)
-    half = interactive(run, views, truth, past_target=True, half=obj)
+    half = interactive(run, views, truth, past_target=True, given=half_given_away(run, views, truth, obj))
+    joined = interactive(run, views, truth, past_target=True, given=joined_to_surroundings(run, views, truth, obj))
     curve = ("miou_by_clicks", "noc90", "largest_fall")
     alternating = {}
     if len(views) > 2:  # a view to score besides the two clicked
@@ -432,6 +470,7 @@ def run_scene(
         **clicks,
         "clicks_alone": {k: alone[k] for k in curve},
         "half_given_away": {k: half[k] for k in curve},
+        "joined_to_surroundings": {k: joined[k] for k in curve},
         **({"alternating": alternating} if alternating else {}),
         "ceiling_miou": obj.ceiling(run, views, truth),
         "object_left": removal_left(run, views, truth, obj),
@@ -496,6 +535,14 @@ def report(r: dict) -> tuple[str, str]:
             for x in posed
             if "half_given_away" in x
         )
+    if any("joined_to_surroundings" in x for x in posed):
+        headline += "; joined to its surroundings, mIoU after the 1st / 10th click, largest fall: " + ", ".join(
+            f"{x['scene']} {x['joined_to_surroundings']['miou_by_clicks'][0]:.3f} / "
+            f"{x['joined_to_surroundings']['miou_by_clicks'][-1]:.3f}, "
+            f"{x['joined_to_surroundings']['largest_fall']:.3f}"
+            for x in posed
+            if "joined_to_surroundings" in x
+        )
     if any("alternating" in x for x in posed):
         headline += "; clicks alternating with a second view, NoC@90 with the masks / alone: " + ", ".join(
             f"{x['scene']} {noc(x['alternating']['masks'])} / {noc(x['alternating']['alone'])}"
@@ -542,6 +589,7 @@ def report(r: dict) -> tuple[str, str]:
             f"{x['largest_fall']:.3f}" if "largest_fall" in x else "n/a",
             protocol(x, "clicks_alone"),
             protocol(x, "half_given_away"),
+            protocol(x, "joined_to_surroundings"),
             alternating(x),
             masks(x["masks"]),
             masks(x["depth_masks"]),
@@ -566,6 +614,7 @@ def report(r: dict) -> tuple[str, str]:
             "largest fall after a click",
             "the clicks alone (masks that say nothing): mIoU after each click; NoC@90; largest fall",
             "half the object given away to the background: the same",
+            "the object joined to its surroundings: the same",
             "clicks alternating with a second view: with the masks; alone",
             "masks of colour: best ID / union / consistency",
             "masks at depth jumps: the same",

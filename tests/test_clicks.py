@@ -120,10 +120,13 @@ def _two_blobs_on_a_backdrop():
 
 
 def test_a_negative_click_reaches_only_what_its_view_shows():
-    """The clicked view shows B's near half alone (its far half hidden behind it, as a face
-    hides the back of a head): a negative click on B takes that half; the hidden half keeps
-    what the views and labels say of it, and the same click seeing all of B takes all of it."""
-    g, a, b = _two_blobs_on_a_backdrop()
+    """B has A's colour, and the clicked view shows B's near half alone (its far half hidden
+    behind it, as a face hides the back of a head): a negative click on B takes that half; the
+    hidden half keeps what the views and labels say of it, and the same click seeing all of B
+    takes all of it. (Of another colour than A, B would be carved apart whole:
+    :func:`test_a_negative_click_carves_apart_a_surface_the_masks_joined_to_the_object`.)"""
+    g, a, b = _two_blobs()
+    g = _on_a_backdrop(g.means.numpy(), np.tile([200, 30, 30], (400, 1)))
     n = len(g)
     selector = ClickSelector(g, np.full(n, 7, np.uint8), _regions(n, [np.concatenate([a, b])]))
     far = g.means[:, 0].numpy() > 3.0
@@ -450,6 +453,45 @@ def test_a_positive_click_deep_in_a_part_the_masks_gave_to_the_surroundings_adds
     assert np.array_equal(again, after)
     beside = ClickSelector(g, labels, _regions(n, [a]), ClickOptions(part_reach=100.0))
     assert beside.cut(clicks, first)[t].sum() < 20
+
+
+def _column_on_a_table(table_rgb: list[int]):
+    """A red column (200 Gaussians) standing on a table (400) of colour ``table_rgb``, on
+    :func:`_on_a_backdrop`; the column, the table, and the table's half behind the column
+    (y > 0.3) as index arrays."""
+    rng = np.random.default_rng(1)
+    column = np.c_[rng.normal(0, 0.15, (200, 2)), rng.uniform(0.05, 1.5, 200)]
+    table = np.c_[rng.uniform(-1.5, 1.5, (400, 2)), rng.normal(0, 0.02, 400)]
+    rgb = np.repeat(np.array([[200, 30, 30], table_rgb]), [200, 400], axis=0)
+    g = _on_a_backdrop(np.concatenate([column, table]), rgb)
+    c, t = np.arange(200), np.arange(200, 600)
+    return g, c, t, t[table[:, 1] > 0.3]
+
+
+def test_a_negative_click_carves_apart_a_surface_the_masks_joined_to_the_object():
+    """Every view's masks join a red column to the grey table it stands on (tools and the table
+    under them as one region); the clicked view shows the table's front, not its back. A
+    negative click on the front takes the whole table, the back too, and none of the column,
+    and a later positive click on the column brings none of it back. Where the table has the
+    column's colour, the clicks cannot tell the two apart: the click is one as with masks and
+    reaches only what its view shows."""
+    for table_rgb, apart in (([128, 128, 128], True), ([200, 30, 30], False)):
+        g, c, t, back = _column_on_a_table(table_rgb)
+        n = len(g)
+        selector = ClickSelector(g, np.isin(np.arange(n), np.r_[c, t]).astype(np.uint8), _regions(n, [np.r_[c, t]]))
+        front = t[np.argsort(g.means.numpy()[t, 1])]  # the table's nearest edge first
+        shown = np.where(np.isin(np.arange(n), back), 0.0, 1.0)
+        clicks = [_click(n, c), _click(n, front, positive=False, shown=shown)]
+        first = selector.select(clicks[:1])
+        assert first[c].all() and first[t].all()
+        after = selector.cut(clicks, first)
+        assert after[c].all() and not after[front[:100]].any()
+        if apart:
+            assert after[t].mean() < 0.05 and after[back].mean() < 0.05
+            top = c[np.argsort(-g.means.numpy()[c, 2])]
+            assert np.array_equal(selector.cut([*clicks, _click(n, top)], after), after)
+        else:
+            assert after[back].mean() > 0.9
 
 
 def test_a_later_positive_click_does_not_pin_a_large_hazy_gaussian():
