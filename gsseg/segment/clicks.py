@@ -42,8 +42,8 @@ max-flow solver (PyMaxflow), with a cost per Gaussian from six kinds of evidence
   (:meth:`ClickSelector._alike`: a green floater beside a bronze head goes, the head's side
   next to it stays). On a part the masks joined to the object, of a colour the object does not
   have (:meth:`ClickSelector._apart`: the table under the tools), it carves the part apart
-  within its own cell, as the clicks do where the masks hold the scene (below), what its view
-  hides too;
+  on the negative clicks' side of the graph, as the clicks do where the masks hold the scene
+  (below), what its view hides too;
 - **a later positive click**, the same mirrored (:meth:`ClickSelector._grown`): over the
   Gaussians nearer, along the graph, to its seeds that lie beside the selection than to those
   the views hold off the object, the click's word replaces the rest, where its view shows
@@ -570,7 +570,7 @@ class ClickSelector:
             own = np.setdiff1d(seeds[-1][0], both)
             within = self._yielding(clicks[-1:], own, voted_regions, share, weight > 0) > 0.5
             within &= self._alike(own, before) > 0
-            return self._carved(clicks, own, positive, negative, before, False, within)
+            return self._carved(clicks, negative, positive, negative, before, False, within)
         posterior = self._labelled(share, weight, seeds[0][0])
         cost = o.evidence * np.where(weight > 0, log_odds(posterior), -1.0)  # > 0: the object's
         if o.appearance_rounds:
@@ -709,10 +709,11 @@ class ClickSelector:
         click on, the ceiling goes).
 
         Where ``within`` (N,) bool is given, a negative click carves apart a part the masks
-        joined to an object that does not fill the scene (:meth:`_apart`): its cell alone,
-        those of its Gaussians ``within`` it (held no more firmly than the clicked part, and
-        not out of its reach by colour: :meth:`_alike`), hidden or not (the table behind the
-        tools on it), and no unseen Gaussians beyond it."""
+        joined to an object that does not fill the scene (:meth:`_apart`; ``clicked``: all
+        the negative seeds): the Gaussians nearer to a negative seed than to any positive
+        one, what an earlier click left there of another colour too, and of those the ones
+        ``within`` (N,) it (held no more firmly than the clicked part, and not out of its reach
+        by colour: :meth:`_alike`), hidden or not (the table behind the tools on it)."""
         o = self.options
         to_positive, to_negative = self.graph.distances(positive), self.graph.distances(negative)
         with np.errstate(invalid="ignore"):
@@ -832,7 +833,7 @@ class ClickSelector:
     def _apart(self, clicks: Sequence[ClickEvidence], positive: np.ndarray) -> list[int]:
         """The indices in ``clicks`` of the negative clicks that carve their part apart from
         the object where the views' vote does not hold the scene (:meth:`_carved`, within the
-        click's own cell): those whose seeds the first click's vote holds by at least
+        negative clicks' side of the graph): those whose seeds the first click's vote holds by at least
         :attr:`ClickOptions.carve_share` (the masks joined the clicked part to the object, and
         the vote cannot tell the two apart) and whose colour (their mean in CIE Lab, by the
         click's weight) lies at least :attr:`ClickOptions.apart_colour` from that of every
