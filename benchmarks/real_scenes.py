@@ -528,21 +528,17 @@ def report(r: dict) -> tuple[str, str]:
             f"{x['scene']} {x['clicks_alone']['miou_by_clicks'][-1]:.3f}" for x in posed if "clicks_alone" in x
         )
 
-    if any("half_given_away" in x for x in posed):
-        headline += "; half the object given away, mIoU after the 1st / 10th click: " + ", ".join(
-            f"{x['scene']} {x['half_given_away']['miou_by_clicks'][0]:.3f} / "
-            f"{x['half_given_away']['miou_by_clicks'][-1]:.3f}"
-            for x in posed
-            if "half_given_away" in x
-        )
-    if any("joined_to_surroundings" in x for x in posed):
-        headline += "; joined to its surroundings, mIoU after the 1st / 10th click, largest fall: " + ", ".join(
-            f"{x['scene']} {x['joined_to_surroundings']['miou_by_clicks'][0]:.3f} / "
-            f"{x['joined_to_surroundings']['miou_by_clicks'][-1]:.3f}, "
-            f"{x['joined_to_surroundings']['largest_fall']:.3f}"
-            for x in posed
-            if "joined_to_surroundings" in x
-        )
+    for key, title in (
+        ("half_given_away", "half the object given away"),
+        ("joined_to_surroundings", "joined to its surroundings"),
+    ):
+        if any(key in x for x in posed):
+            headline += f"; {title}, mIoU after the 1st / 10th click, largest fall: " + ", ".join(
+                f"{x['scene']} {x[key]['miou_by_clicks'][0]:.3f} / {x[key]['miou_by_clicks'][-1]:.3f}, "
+                f"{x[key]['largest_fall']:.3f}"
+                for x in posed
+                if key in x
+            )
     if any("alternating" in x for x in posed):
         headline += "; clicks alternating with a second view, NoC@90 with the masks / alone: " + ", ".join(
             f"{x['scene']} {noc(x['alternating']['masks'])} / {noc(x['alternating']['alone'])}"

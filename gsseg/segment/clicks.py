@@ -58,7 +58,7 @@ max-flow solver (PyMaxflow), with a cost per Gaussian from six kinds of evidence
 Where the views' vote of the first click holds the scene (masks that read the object and its
 surroundings as one region: :meth:`RegionVote.holds_the_scene`), neither the views nor the
 labels say where the object ends, and from the first negative click on a part the vote holds
-firmly (:meth:`ClickSelector._carving`: the masks joined it to the object) the clicks carve it
+firmly (:meth:`ClickSelector._firm`: the masks joined it to the object) the clicks carve it
 alone (:meth:`ClickSelector._carved`): the graph's geodesic split between the positive and
 negative seeds, colour models learned from the cut, and each click changing only its own cell
 (the first to carve: the cells of all negative clicks so far) and what no click's view shows
@@ -173,7 +173,7 @@ class ClickOptions:
             (:meth:`ClickSelector._alike`).
         carve_share: where the first click's vote holds the scene, the clicks carve from the
             first negative click whose seeds the vote holds by at least this share
-            (:meth:`ClickSelector._carving`).
+            (:meth:`ClickSelector._firm`).
         apart_colour: elsewhere, a negative click whose seeds the vote holds by at least
             ``carve_share`` (the masks joined the clicked part to the object) and whose colour
             lies at least this far (CIE76 distance in Lab) from every positive seed's carves
@@ -539,7 +539,7 @@ class ClickSelector:
         """Whether ``clicks``, none of them against, select the scene: the views' vote of the
         first holds it (:meth:`RegionVote.holds_the_scene`), as where the masks read the clicked
         object and its surroundings as one; from the first negative click on a part the vote
-        holds firmly on (:meth:`_carving`), the clicks carve the object alone."""
+        holds firmly on (:meth:`_firm`), the clicks carve the object alone."""
         if not clicks or not all(click.positive for click in clicks):
             return False
         share, _, _ = self.views_vote(clicks[:1], None)
@@ -560,12 +560,11 @@ class ClickSelector:
         negative = negative.astype(np.int64)
         both = np.intersect1d(positive, negative)
         positive, negative = np.setdiff1d(positive, both), np.setdiff1d(negative, both)
-        if before is not None and len(negative) and self.vote.holds_the_scene(share, clicks[0], o.seen_share):
-            carving = self._carving(clicks)
-            if carving is not None:
-                first = carving == len(clicks) - 1
-                return self._carved(clicks, np.setdiff1d(seeds[-1][0], both), positive, negative, before, first)
-        apart = self._apart(clicks, positive) if before is not None and len(negative) else []
+        firm = self._firm(clicks) if before is not None and len(negative) else []
+        if firm and self.vote.holds_the_scene(share, clicks[0], o.seen_share):
+            first = firm[0] == len(clicks) - 1
+            return self._carved(clicks, np.setdiff1d(seeds[-1][0], both), positive, negative, before, first)
+        apart = self._apart(clicks, firm, positive)
         if apart and apart[-1] == len(clicks) - 1:  # the masks joined the clicked part to the object
             own = np.setdiff1d(seeds[-1][0], both)
             within = self._yielding(clicks[-1:], own, voted_regions, share, weight > 0) > 0.5
@@ -702,7 +701,7 @@ class ClickSelector:
         any other click's, and those no click's view shows (:meth:`_unseen`), which no click
         speaks of and every cut decides: so a click on the wall behind a plant takes the wall
         off, and a later click on the plant brings back none of it. The ``first`` click that
-        carves (:meth:`_carving`) decides the unseen Gaussians free of ``before`` (the first
+        carves (:meth:`_firm`) decides the unseen Gaussians free of ``before`` (the first
         click's selection of the scene is the vote's, no choice of the user's) and the cells
         of all negative clicks so far (those before it spoke as with masks: a click on the
         fern's ceiling, held at one half, took 191 Gaussians; with the carving from the next
@@ -810,32 +809,29 @@ class ClickSelector:
         held = self._seeds_share(click, share)
         return held is not None and held < self.options.off_share
 
-    def _carving(self, clicks: Sequence[ClickEvidence]) -> int | None:
-        """The index in ``clicks`` of the first negative click whose seeds the first click's
-        vote holds firmly (their share, :meth:`_seeds_share`, at least
+    def _firm(self, clicks: Sequence[ClickEvidence]) -> list[int]:
+        """The indices in ``clicks`` of the negative clicks whose seeds the first click's vote
+        holds firmly (their share, :meth:`_seeds_share`, at least
         :attr:`ClickOptions.carve_share`; the first click's, so that the carving, once begun,
-        starts at the same click whatever the later ones add), from which the clicks carve
-        where the vote holds the scene (:meth:`_carved`); None where there is none. Such a
-        click tells the object from a part the masks joined to it (the wall behind a plant),
-        which only the clicks can cut.
+        starts at the same click whatever the later ones add). Where the vote holds the scene
+        the clicks carve from the first of them (:meth:`_carved`). Such a click tells the
+        object from a part the masks joined to it (the wall behind a plant), which only the
+        clicks can cut.
         One on what the vote holds loosely tells the object from its spill: on DTU's house,
         which fills most of every view, a click in the view's corner lands on large Gaussians
         of the house drawn over the background, held at 0.52; carving from there took the back
         of the house, 2 508 Gaussians the clicked view does not show (mIoU 0.959 -> 0.889),
         the cut with the vote took 6 Gaussians of the spill (0.959 -> 0.959)."""
         share, _, _ = self.views_vote(clicks[:1], None)
-        for k, click in enumerate(clicks):
-            held = None if click.positive else self._seeds_share(click, share)
-            if held is not None and held >= self.options.carve_share:
-                return k
-        return None
+        held = [None if click.positive else self._seeds_share(click, share) for click in clicks]
+        return [k for k, h in enumerate(held) if h is not None and h >= self.options.carve_share]
 
-    def _apart(self, clicks: Sequence[ClickEvidence], positive: np.ndarray) -> list[int]:
+    def _apart(self, clicks: Sequence[ClickEvidence], firm: list[int], positive: np.ndarray) -> list[int]:
         """The indices in ``clicks`` of the negative clicks that carve their part apart from
         the object where the views' vote does not hold the scene (:meth:`_carved`, within the
-        negative clicks' side of the graph): those whose seeds the first click's vote holds by at least
-        :attr:`ClickOptions.carve_share` (the masks joined the clicked part to the object, and
-        the vote cannot tell the two apart) and whose colour (their mean in CIE Lab, by the
+        negative clicks' side of the graph): of the ``firm`` ones (:meth:`_firm`: the masks
+        joined the clicked part to the object, and the vote cannot tell the two apart), those
+        whose colour (their mean in CIE Lab, by the
         click's weight) lies at least :attr:`ClickOptions.apart_colour` from that of every
         ``positive`` (S,) seed. A click on the edge of a bronze head whose colour the head
         has is a negative click as with masks: carved, the graph's split took 215-495 of the
@@ -847,14 +843,10 @@ class ClickSelector:
         o = self.options
         if not len(positive):
             return []
-        share, _, _ = self.views_vote(clicks[:1], None)
         apart = []
-        for k, click in enumerate(clicks):
-            held = None if click.positive else self._seeds_share(click, share)
-            if held is None or held < o.carve_share:
-                continue
-            seeds = click.seeds(o.seed_share, o.seed_local)
-            colour = np.average(self.colours.lab[seeds], axis=0, weights=click.weights[seeds])
+        for k in firm:
+            seeds = clicks[k].seeds(o.seed_share, o.seed_local)
+            colour = np.average(self.colours.lab[seeds], axis=0, weights=clicks[k].weights[seeds])
             if np.linalg.norm(self.colours.lab[positive] - colour, axis=1).min() >= o.apart_colour:
                 apart.append(k)
         return apart
