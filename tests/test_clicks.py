@@ -425,7 +425,8 @@ def test_a_positive_click_deep_in_a_part_the_masks_gave_to_the_surroundings_adds
     """A red column and a blue wall just behind it; every view's masks hold the column's
     bottom half as the object and its top half under the background with the wall (a box's
     lid joined to the bench). The first click takes the bottom; a click at the column's top,
-    far from the bottom, adds the top and nothing of the wall, and a negative click on the
+    far from the bottom, adds the top, its side the clicked view hides too, and nothing of
+    the wall, and a negative click on the
     wall then keeps it. Bounded by all the views hold off (the rule for a part beside the
     selection, here with a reach that takes the seeds in) it would add little more than its
     five seeds."""
@@ -441,7 +442,8 @@ def test_a_positive_click_deep_in_a_part_the_masks_gave_to_the_surroundings_adds
     labels = np.zeros(n, np.uint8)
     labels[a] = 1
     tip = t[np.argsort(-g.means.numpy()[t, 2])]  # the click at the top's far end
-    clicks = [_click(n, a), _click(n, tip)]
+    front = (g.means.numpy()[:, 1] < 0) | (np.arange(n) >= 400)  # its view shows the top's front half
+    clicks = [_click(n, a), _click(n, tip, shown=front.astype(float))]
     selector = ClickSelector(g, labels, _regions(n, [a]))
     first = selector.select(clicks[:1])
     assert first[a].all() and not first[t].any() and not first[w].any()
@@ -453,6 +455,34 @@ def test_a_positive_click_deep_in_a_part_the_masks_gave_to_the_surroundings_adds
     assert np.array_equal(again, after)
     beside = ClickSelector(g, labels, _regions(n, [a]), ClickOptions(part_reach=100.0))
     assert beside.cut(clicks, first)[t].sum() < 20
+
+
+def test_a_negative_click_takes_out_what_its_word_reaches_not_all_the_views_hold_off():
+    """The column of the test above with a red flap standing out of its top (a cloth hung on
+    a box's lid): the views hold the top and the flap off the object, a click at the top's
+    far end adds both, and a negative click on the flap beside the column then takes the
+    flap. What the earlier click added goes only where the negative click's word reaches: the
+    views' vote, which holds the whole top off, took 55 of its Gaussians with the flap."""
+    rng = np.random.default_rng(0)
+    bottom = np.c_[rng.normal(0, 0.15, (200, 2)), rng.uniform(0, 1, 200)]
+    top = np.c_[rng.normal(0, 0.15, (200, 2)), rng.uniform(1, 2, 200)]
+    flap = np.c_[rng.uniform(0.2, 0.8, 100), rng.normal(0, 0.03, 100), rng.normal(1.5, 0.05, 100)]
+    wall = np.c_[rng.uniform(-1, 1, 300), np.full(300, 0.35), rng.uniform(0, 2, 300)]
+    rgb = np.repeat(np.array([[200, 30, 30], [30, 30, 200]]), [500, 300], axis=0)
+    rgb = np.clip(rgb + rng.normal(0, 8, rgb.shape), 0, 255).astype(np.uint8)
+    g = gaussians_from_points(np.concatenate([bottom, top, flap, wall]), rgb, initial_opacity=0.9)
+    n, means = len(g), g.means.numpy()
+    a, t, f = np.arange(200), np.arange(200, 400), np.arange(400, 500)
+    labels = np.zeros(n, np.uint8)
+    labels[a] = 1
+    clicks = [_click(n, a), _click(n, t[np.argsort(-means[t, 2])])]
+    selector = ClickSelector(g, labels, _regions(n, [a]))
+    after = selector.cut(clicks, selector.select(clicks[:1]))
+    assert after[t].mean() > 0.9 and after[f].all()
+    against = _click(n, f[np.argsort(np.abs(means[f, 0] - 0.3))], positive=False)
+    again = selector.cut([*clicks, against], after)
+    assert not again[f].any() and again[a].all()
+    assert (after[t] & ~again[t]).sum() < 25
 
 
 def _column_on_a_table(table_rgb: list[int]):

@@ -29,7 +29,9 @@ max-flow solver (PyMaxflow), with a cost per Gaussian from six kinds of evidence
   selection only where its evidence outweighs :attr:`ClickOptions.stickiness`, and only its
   way: a positive click adds to the selection and takes nothing out, a negative click takes
   out and adds nothing, and only from its side of the graph (the Gaussians nearer its seeds
-  than any positive seed), so that a click never undoes what the earlier clicks fixed;
+  than any positive seed), and there only what its word reaches, not what the views alone
+  hold off (a part a positive click grew against them), so that a click never undoes what
+  the earlier clicks fixed;
 - **a negative click**: over the Gaussians nearer, along the graph (edge lengths from
   position, colour and feature), to its seeds than to any positive seed, in proportion to how
   much nearer, the click's word replaces the rest (:meth:`GaussianGraph.split`): a part the
@@ -51,7 +53,7 @@ max-flow solver (PyMaxflow), with a cost per Gaussian from six kinds of evidence
   as a region of its own comes in whole. A click whose seeds all lie away from the
   selection, deep inside a part the masks gave to the surroundings (a box's lid joined to
   the bench under it), grows its part up to the Gaussians held off whose colour the object
-  does not have. Its seeds leave out the large hazy Gaussians the views see much of
+  does not have, what its view hides of the part too. Its seeds leave out the large hazy Gaussians the views see much of
   (:meth:`ClickSelector._hazy`): a click on a head's rim where such a Gaussian shows does
   not bring the blur it draws beside the head.
 
@@ -178,7 +180,8 @@ class ClickOptions:
             ``carve_share`` (the masks joined the clicked part to the object) and whose colour
             lies at least this far (CIE76 distance in Lab) from every positive seed's carves
             its part out (:meth:`ClickSelector._apart`).
-        stickiness: weight of the selection before the click.
+        stickiness: weight of the selection before the click; under a negative click, the
+            least cost of a selected Gaussian (it goes by the click's word alone).
         carve_stickiness: the same where the clicks carve the object alone
             (:meth:`ClickSelector._carved`).
         smoothness: weight of the graph's edges.
@@ -580,6 +583,8 @@ class ClickSelector:
                 added = np.setdiff1d(seeds[-1][0], negative)
                 side = self._grown(clicks[-1], added, negative, share, weight, hazy, before)
                 cost = (1 - side) * cost + o.split_weight * side
+            else:  # what the earlier clicks selected goes by this click's word alone, never the views'
+                cost = np.where(before, np.maximum(cost, o.stickiness), cost)
         if len(negative):  # deep on a negative click's side its word outweighs all else
             side = np.clip(self.graph.split(negative, positive) / o.split_full, 0, 1)
             side *= self._yielding(clicks, negative, voted_regions, share, weight > 0)
@@ -780,7 +785,9 @@ class ClickSelector:
         bench under it: the vote cannot tell the two apart). The part is then every Gaussian
         nearer along the graph to the seeds than to those of the Gaussians held off whose
         colour the object (the selection and the seeds) does not have
-        (:attr:`ClickOptions.far_colour`), and alike means alike to the object."""
+        (:attr:`ClickOptions.far_colour`), alike means alike to the object, and what the
+        click's view hides of the part comes too: bounded by colour, its far side is as much
+        the part as its front."""
         o = self.options
         seeds = seeds[~before[seeds]]  # what the click adds, not what it lands on of the selection
         if not before.any() or not len(seeds):
@@ -801,7 +808,8 @@ class ClickSelector:
         bound = np.setdiff1d(np.union1d(np.flatnonzero(off), negative), seeds)
         side = self.graph.split(seeds, bound)
         side = np.clip(side / o.split_full, 0, 1) if near else (side > 0).astype(float)
-        return side * self._shown_by(click) * alike
+        shown = self._shown_by(click) if near else 1.0  # deep inside, the part's hidden side too
+        return side * shown * alike
 
     def _held_off(self, click: ClickEvidence, share: np.ndarray) -> bool:
         """Whether the views' vote holds what ``click`` lands on off the object: its seeds'
