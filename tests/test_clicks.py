@@ -525,15 +525,16 @@ def test_a_negative_click_carves_apart_a_surface_the_masks_joined_to_the_object(
 
 
 def test_a_later_positive_click_does_not_pin_a_large_hazy_gaussian():
-    """A large hazy Gaussian H beside A, drawn in every view over A and over the background
-    alike with 20 times A's weight each: a later positive click that lands on H alone adds
-    nothing (it would bring the blur H draws beside A); where no Gaussian counts as hazy, the
-    same click pins H and adds it."""
+    """A hazy Gaussian H beside A, drawn in every view over A and over the background alike
+    with 20 times A's weight each. Where H is also ten times the median size, a later positive
+    click that lands on H alone adds nothing (it would bring the blur H draws beside A); where
+    nothing counts as hazy or large, the same click pins H and adds it. Of the median size,
+    H is pinned all the same: the click has no other seed, and an object near the camera is
+    drawn by Gaussians each as heavy in the views."""
     g, a, b = _two_blobs()
     xyz = np.concatenate([g.means.numpy(), [[0.8, 0.0, 0.0]]])
     rgb = np.concatenate([np.tile([200, 30, 30], (200, 1)), np.tile([30, 30, 200], (200, 1)), [[120, 120, 120]]])
-    g = gaussians_from_points(xyz, rgb.astype(np.uint8), initial_opacity=0.9)
-    n, hazy = len(g), 400
+    n, hazy = len(xyz), 400
     regions = _regions(n, [a])
     matrix = regions.matrix.tolil()
     matrix[:, hazy] = 20.0  # in A's region and in the background of every view
@@ -542,7 +543,13 @@ def test_a_later_positive_click_does_not_pin_a_large_hazy_gaussian():
     labels[a] = 1
     first_only = [_click(n, a)]
     on_hazy = ClickEvidence(np.eye(n)[hazy], True)
-    for options, pinned in ((ClickOptions(), False), (ClickOptions(off_weight=1e9), True)):
+    for size, options, pinned in (
+        (10.0, ClickOptions(), False),
+        (10.0, ClickOptions(off_weight=1e9, large_size=1e9), True),
+        (1.0, ClickOptions(), True),
+    ):
+        g = gaussians_from_points(xyz, rgb.astype(np.uint8), initial_opacity=0.9)
+        g.log_scales[hazy] = g.log_scales.max(1).values.median() + np.log(size)
         selector = ClickSelector(g, labels, regions, options)
         first = selector.select(first_only)
         assert first[a].all() and not first[b].any() and not first[hazy]

@@ -53,9 +53,11 @@ max-flow solver (PyMaxflow), with a cost per Gaussian from six kinds of evidence
   as a region of its own comes in whole. A click whose seeds all lie away from the
   selection, deep inside a part the masks gave to the surroundings (a box's lid joined to
   the bench under it), grows its part up to the Gaussians held off whose colour the object
-  does not have, what its view hides of the part too. Its seeds leave out the large hazy Gaussians the views see much of
-  (:meth:`ClickSelector._hazy`): a click on a head's rim where such a Gaussian shows does
-  not bring the blur it draws beside the head.
+  does not have, what its view hides of the part too. Its seeds leave out the large hazy
+  Gaussians the views see much of (:meth:`ClickSelector._hazy`): a click on a head's rim
+  where such a Gaussian shows does not bring the blur it draws beside the head; where all
+  its seeds are heavy in the views, those of them not many times the median size stay
+  (:meth:`ClickSelector._pinned`: an object near the camera).
 
 Where the views' vote of the first click holds the scene (masks that read the object and its
 surroundings as one region: :meth:`RegionVote.holds_the_scene`), neither the views nor the
@@ -155,7 +157,8 @@ class ClickOptions:
             under this share of their weight in the object's regions, ...
         off_weight: ... or under one half of a weight at least this many times the median
             Gaussian's: large hazy ones seen much) or a negative click's seeds; such hazy
-            Gaussians are no seeds of a later positive click (:meth:`ClickSelector._hazy`).
+            Gaussians are no seeds of a later positive click (:meth:`ClickSelector._hazy`),
+            unless all its seeds are (:meth:`ClickSelector._pinned`).
             The regions under a later positive click join the vote only where its seeds'
             share is under ``off_share`` (:meth:`ClickSelector.views_vote`).
         large_size: Gaussians whose longest axis is at least this many times the median
@@ -557,7 +560,7 @@ class ClickSelector:
         share, weight, voted_regions = self.views_vote(clicks, before)
         hazy = self._hazy(weight)
         seeds = [(c.seeds(o.seed_share, o.seed_local), c.positive) for c in clicks]
-        seeds = [(k[~hazy[k]] if i and on else k, on) for i, (k, on) in enumerate(seeds)]  # later positive: no haze
+        seeds = [(self._pinned(k, hazy) if i and on else k, on) for i, (k, on) in enumerate(seeds)]
         positive = np.unique(np.concatenate([k for k, is_positive in seeds if is_positive]))
         negative = np.unique(np.concatenate([k for k, is_positive in seeds if not is_positive] or [[]]))
         negative = negative.astype(np.int64)
@@ -883,6 +886,16 @@ class ClickSelector:
         seen = weight > 0
         heavy = weight >= self.options.off_weight * float(np.median(weight[seen])) if seen.any() else seen
         return heavy | self.large
+
+    def _pinned(self, seeds: np.ndarray, hazy: np.ndarray) -> np.ndarray:
+        """The seeds a later positive click pins, of its ``seeds`` (S,): those not ``hazy`` (N,)
+        (:meth:`_hazy`), or where all are, those of them under
+        :attr:`ClickOptions.large_size` times the median Gaussian's size. An object near the
+        camera is drawn by Gaussians each heavy in the views: on the synthetic forward path
+        (``benchmarks.edit_quality``, seed 1) all five seeds of a click on such an object were
+        heavy, and on it, and the click added nothing."""
+        kept = seeds[~hazy[seeds]]
+        return kept if len(kept) else seeds[~self.large[seeds]]
 
     def _shown_by(self, click: ClickEvidence) -> np.ndarray:
         """(N,) in [0, 1]: how much of each Gaussian the ``click``'s view shows, in shares of
