@@ -566,13 +566,13 @@ class ClickSelector:
         negative = negative.astype(np.int64)
         both = np.intersect1d(positive, negative)
         positive, negative = np.setdiff1d(positive, both), np.setdiff1d(negative, both)
+        own = np.setdiff1d(seeds[-1][0], both)  # the last click's seeds
         firm = self._firm(clicks) if before is not None and len(negative) else []
         if firm and self.vote.holds_the_scene(share, clicks[0], o.seen_share):
             first = firm[0] == len(clicks) - 1
-            return self._carved(clicks, np.setdiff1d(seeds[-1][0], both), positive, negative, before, first)
+            return self._carved(clicks, own, positive, negative, before, first)
         apart = self._apart(clicks, firm, positive)
         if apart and apart[-1] == len(clicks) - 1:  # the masks joined the clicked part to the object
-            own = np.setdiff1d(seeds[-1][0], both)
             within = self._yielding(clicks[-1:], own, voted_regions, share, weight > 0) > 0.5
             within &= self._alike(own, before) > 0
             return self._carved(clicks, negative, positive, negative, before, False, within)
@@ -603,8 +603,7 @@ class ClickSelector:
                 carved = np.setdiff1d(np.concatenate([seeds[k][0] for k in apart]), positive)
                 cut &= before | (self.graph.split(carved, positive) <= 0)
             return before | cut
-        own = np.setdiff1d(seeds[-1][0], both)  # a negative click takes out only what lies on its side
-        return before & (cut | (self.graph.split(own, positive) <= 0))
+        return before & (cut | (self.graph.split(own, positive) <= 0))  # only from its side
 
     def _labelled(self, share: np.ndarray, weight: np.ndarray, first_seeds: np.ndarray) -> np.ndarray:
         """(N,) the views' ``share`` (N,) with the label under the first click's seeds
@@ -842,11 +841,11 @@ class ClickSelector:
         the object where the views' vote does not hold the scene (:meth:`_carved`, within the
         negative clicks' side of the graph): of the ``firm`` ones (:meth:`_firm`: the masks
         joined the clicked part to the object, and the vote cannot tell the two apart), those
-        whose colour (their mean in CIE Lab, by the
-        click's weight) lies at least :attr:`ClickOptions.apart_colour` from that of every
-        ``positive`` (S,) seed. A click on the edge of a bronze head whose colour the head
-        has is a negative click as with masks: carved, the graph's split took 215-495 of the
-        head's Gaussians a click (the head's curve 0.931 -> 0.878 over ten clicks), where
+        whose colour (their mean in CIE Lab, by the click's weight) lies at least
+        :attr:`ClickOptions.apart_colour` from that of every ``positive`` (S,) seed. A click
+        on the edge of a bronze head whose colour the head has is a negative click as with
+        masks: carved, the graph's split took 215-495 of the head's Gaussians a click (the
+        head's curve 0.931 -> 0.878 over ten clicks), where
         clicks on the ground the masks joined to a statue take the ground, what their view
         hides of it too. Over the three captures' forced clicks (``benchmarks.real_scenes``)
         the colour lay 0.1-5.5 from a positive seed's where carving took the object's
