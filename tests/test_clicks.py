@@ -15,6 +15,7 @@ import pytest
 import scipy.sparse as sp
 import torch
 from helpers import script
+from scipy.spatial import cKDTree
 
 from dataset_tools.cameras import CameraPose, PinholeCamera
 from dataset_tools.image_files import encode_png
@@ -455,6 +456,63 @@ def test_a_positive_click_deep_in_a_part_the_masks_gave_to_the_surroundings_adds
     assert np.array_equal(again, after)
     beside = ClickSelector(g, labels, _regions(n, [a]), ClickOptions(part_reach=100.0))
     assert beside.cut(clicks, first)[t].sum() < 20
+
+
+def _column_given_half_away(apart: np.ndarray | None = None):
+    """The column of the test above and its wall, the masks holding the bottom and giving the
+    top to the background; with Gaussians of the column's colour at ``apart`` (M, 3) too. The
+    model and the bottom, top and ``apart`` indices."""
+    rng = np.random.default_rng(0)
+    apart = np.zeros((0, 3)) if apart is None else apart
+    bottom = np.c_[rng.normal(0, 0.15, (200, 2)), rng.uniform(0, 1, 200)]
+    top = np.c_[rng.normal(0, 0.15, (200, 2)), rng.uniform(1, 2, 200)]
+    wall = np.c_[rng.uniform(-1, 1, 300), np.full(300, 0.35), rng.uniform(0, 2, 300)]
+    rgb = np.repeat(np.array([[200, 30, 30], [30, 30, 200], [200, 30, 30]]), [400, 300, len(apart)], axis=0)
+    rgb = np.clip(rgb + rng.normal(0, 8, rgb.shape), 0, 255).astype(np.uint8)
+    g = gaussians_from_points(np.concatenate([bottom, top, wall, apart]), rgb, initial_opacity=0.9)
+    return g, np.arange(200), np.arange(200, 400), np.arange(700, 700 + len(apart))
+
+
+def test_a_positive_click_deep_in_a_part_adds_it_though_a_seed_touches_the_selection():
+    """A click at the column's top, far from the bottom, one of whose four seeds lies in the
+    top just over the bottom: most of its weight lands deep inside the top, and the top comes
+    whole. Read as a click beside the selection (any seed there), the part held off all
+    around its near seed added a few Gaussians."""
+    g, a, t, _ = _column_given_half_away()
+    n, z = len(g), g.means.numpy()[:, 2]
+    labels = np.zeros(n, np.uint8)
+    labels[a] = 1
+    selector = ClickSelector(g, labels, _regions(n, [a]))
+    first = selector.select([_click(n, a)])
+    left = t[~first[t]]
+    weights = np.zeros(n)
+    weights[t[np.argsort(-z[t])[:3]]] = 1.0
+    weights[left[np.argmin(cKDTree(g.means.numpy()[first]).query(g.means.numpy()[left])[0])]] = 1.0
+    after = selector.cut([_click(n, a), ClickEvidence(weights, True)], first)
+    assert after[a].all() and after[t].mean() > 0.95
+
+
+def test_a_positive_click_adds_nothing_the_graph_does_not_join_to_the_selection():
+    """The column and, far behind it, a ball of its colour; a click on the bottom's rim whose
+    pixel the ball's edge draws too (three of its five seeds: a ball behind a box of its
+    colour) adds nothing of the ball, whose Gaussians the graph joins to nothing selected: an
+    object is one piece. The ball came whole, each of its Gaussians grown from the seeds deep
+    inside. A click at the top's far end still adds the top, and none of the ball."""
+    ball = np.random.default_rng(3).normal(0, 0.2, (150, 3)) + [0.0, 4.0, 1.0]
+    g, a, t, b = _column_given_half_away(ball)
+    n, z = len(g), g.means.numpy()[:, 2]
+    labels = np.zeros(n, np.uint8)
+    labels[a] = 1
+    weights = np.zeros(n)
+    weights[a[np.argsort(-z[a])[:2]]] = 1.0
+    weights[b[:3]] = 1.0
+    selector = ClickSelector(g, labels, _regions(n, [a]))
+    clicks = [_click(n, a), ClickEvidence(weights, True)]
+    first = selector.select(clicks[:1])
+    rim = selector.cut(clicks, first)
+    assert rim[a].all() and not rim[b].any()
+    after = selector.cut([*clicks, _click(n, t[np.argsort(-z[t])])], rim)
+    assert after[t].mean() > 0.95 and not after[b].any()
 
 
 def test_a_negative_click_takes_out_what_its_word_reaches_not_all_the_views_hold_off():
