@@ -790,21 +790,21 @@ class ClickSelector:
         before: np.ndarray,
     ) -> tuple[np.ndarray, np.ndarray]:
         """(N,) in [0, 1]: how far each Gaussian lies in the part a later positive ``click``
-        adds, and the indices of its ``seeds`` (S,) the click pins. The part is a negative
-        click's side mirrored: over the graph, nearer to the seeds that lie beside the
-        selection ``before`` (N,) (within :attr:`ClickOptions.part_reach` spacings of a
-        selected Gaussian; the click lands beside it where these hold most of its unselected
-        seeds' weight) than to the Gaussians the views hold off the object
-        (unselected, seen, with a ``share`` (N,) of their ``weight`` (N,) in the object's
-        regions under :attr:`ClickOptions.off_share`, or under one half where ``hazy`` (N,):
-        :meth:`_hazy`) and the ``negative`` (S',) seeds; shown by the click's view and alike in
-        colour to the seeds rather than to the rest of the unselected Gaussians. A highlight on a
-        bronze head that the masks hold as a region of its own, and the views therefore vote off
-        the head, comes in whole with a click on it.
+        adds, and the indices of its ``seeds`` (S,) the click pins: those of the selection and
+        those the part grows from. The part is a negative click's side mirrored: over the
+        graph, nearer to the seeds that lie beside the selection ``before`` (N,) (within
+        :attr:`ClickOptions.part_reach` spacings of a selected Gaussian; the click lands
+        beside it where these hold most of its unselected seeds' weight) than to the Gaussians
+        the views hold off the object (unselected, seen, with a ``share`` (N,) of their
+        ``weight`` (N,) in the object's regions under :attr:`ClickOptions.off_share`, or under
+        one half where ``hazy`` (N,): :meth:`_hazy`) and the ``negative`` (S',) seeds; shown by
+        the click's view and alike in colour to the seeds rather than to the rest of the
+        unselected Gaussians. A highlight on a bronze head that the masks hold as a region of
+        its own, and the views therefore vote off the head, comes in whole with a click on it.
 
-        Where most of the seeds do not lie beside the selection, the click lands deep inside a
-        part the views hold off the object with its surroundings (masks that gave a box's lid to the
-        bench under it: the vote cannot tell the two apart). The part is then every Gaussian
+        Where most of the seeds do not lie beside the selection, the click lands deep inside
+        a part the views hold off the object with its surroundings (masks that gave a box's
+        lid to the bench under it: the vote cannot tell the two apart). The part is then every Gaussian
         nearer along the graph to the seeds than to those of the Gaussians held off whose
         colour the object (the selection and the seeds) does not have
         (:attr:`ClickOptions.far_colour`), alike means alike to the object, and what the
