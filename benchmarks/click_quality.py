@@ -30,7 +30,15 @@ import numpy as np
 
 from benchmarks import record
 from benchmarks.edit_quality import TRAIN_IMAGES, masks_for
-from benchmarks.real_scenes import MAX_CLICKS, TARGET, TrueObject, half_given_away, interactive, joined_to_surroundings
+from benchmarks.real_scenes import (
+    CURVE,
+    MAX_CLICKS,
+    TARGET,
+    TrueObject,
+    half_given_away,
+    interactive,
+    joined_to_surroundings,
+)
 from dataset_tools.scene import GT_MASKS, View
 from eval.report import markdown_table
 from gsseg.run.loaded import Run, load_run
@@ -50,7 +58,6 @@ PROTOCOLS: dict[str, tuple[bool, Given | None]] = {  # name: (the clicks alone, 
     "joined": (False, joined_to_surroundings),
     "alone": (True, None),
 }
-CURVE = ("miou_by_clicks", "noc90", "largest_fall")
 
 
 def object_truth(views: list[View], obj: int) -> dict[str, np.ndarray]:

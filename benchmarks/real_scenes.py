@@ -89,6 +89,7 @@ from pipeline.demo_options import DemoOptions
 
 TARGET = 0.90
 MAX_CLICKS = 10
+CURVE = ("miou_by_clicks", "noc90", "largest_fall")  # what each protocol keeps of a click curve
 
 
 def people_masks(scene_dir: Path, images: str, drawn: Path) -> dict[str, np.ndarray]:
@@ -449,15 +450,14 @@ def run_scene(
     obj = TrueObject.of(run, views, truth)
     half = interactive(run, views, truth, past_target=True, given=half_given_away(run, views, truth, obj))
     joined = interactive(run, views, truth, past_target=True, given=joined_to_surroundings(run, views, truth, obj))
-    curve = ("miou_by_clicks", "noc90", "largest_fall")
     alternating = {}
     if len(views) > 2:  # a view to score besides the two clicked
         masked = interactive(run, views, truth, past_target=True, alternate=True)
         unmasked = interactive(run, views, truth, past_target=True, alone=True, alternate=True)
         alternating = {
             "second_view": masked["second_view"],
-            "masks": {k: masked[k] for k in curve},
-            "alone": {k: unmasked[k] for k in curve},
+            "masks": {k: masked[k] for k in CURVE},
+            "alone": {k: unmasked[k] for k in CURVE},
         }
     return {
         "scene": name,
@@ -468,9 +468,9 @@ def run_scene(
         "gaussians": len(run.gaussians),
         "iters": run.config.timing.iters,
         **clicks,
-        "clicks_alone": {k: alone[k] for k in curve},
-        "half_given_away": {k: half[k] for k in curve},
-        "joined_to_surroundings": {k: joined[k] for k in curve},
+        "clicks_alone": {k: alone[k] for k in CURVE},
+        "half_given_away": {k: half[k] for k in CURVE},
+        "joined_to_surroundings": {k: joined[k] for k in CURVE},
         **({"alternating": alternating} if alternating else {}),
         "ceiling_miou": obj.ceiling(run, views, truth),
         "object_left": removal_left(run, views, truth, obj),
