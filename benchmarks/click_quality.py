@@ -60,10 +60,10 @@ PROTOCOLS: dict[str, tuple[bool, Given | None]] = {  # name: (the clicks alone, 
 }
 
 
-def object_truth(views: list[View], obj: int) -> dict[str, np.ndarray]:
+def object_truth(ids: dict[str, np.ndarray], obj: int) -> dict[str, np.ndarray]:
     """(H, W) bool the exact mask of object ``obj`` in each view where it covers at least
-    :data:`MIN_COVER` of the frame, by view name."""
-    truth = {v.name: v.load_mask() == obj for v in views}
+    :data:`MIN_COVER` of the frame, by view name, of the views' exact ID maps ``ids``."""
+    truth = {name: mask == obj for name, mask in ids.items()}
     return {name: mask for name, mask in truth.items() if mask.mean() >= MIN_COVER}
 
 
@@ -105,10 +105,11 @@ def run_scene(path: str, seed: int, work: Path, iters: int, protocols: list[str]
     segment_run(run_dir, scene, options=DEMO_LABELS, masks=masks, backend="cpu", progress=False)
     run = load_run(run_dir)
     views = run.scene(scene, masks=GT_MASKS).views
-    present = sorted({int(i) for v in views for i in np.unique(v.load_mask())} - {0})
+    ids = {v.name: v.load_mask() for v in views}
+    present = sorted({int(i) for mask in ids.values() for i in np.unique(mask)} - {0})
     result = {"path": path, "seed": seed, "gaussians": len(run.gaussians), "train_s": train_s, "objects": {}}
     for obj in objects or present:
-        truth = object_truth(views, obj)
+        truth = object_truth(ids, obj)
         if len(truth) < 2:  # nothing to score besides the clicked view
             continue
         start = time.perf_counter()

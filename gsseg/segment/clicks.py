@@ -55,11 +55,11 @@ max-flow solver (PyMaxflow), with a cost per Gaussian from six kinds of evidence
   the bench under it), grows its part up to the Gaussians held off whose colour the object
   does not have, what its view hides of the part too, and only what the graph joins to the
   selection (an object is one piece: a box of the object's colour whose edge draws a pixel
-  of the object's rim stays out, :meth:`GaussianGraph.joined`). Its seeds leave out the large hazy
-  Gaussians the views see much of (:meth:`ClickSelector._hazy`): a click on a head's rim
-  where such a Gaussian shows does not bring the blur it draws beside the head; where all
-  its seeds are heavy in the views, those of them not many times the median size stay
-  (:meth:`ClickSelector._pinned`: an object near the camera).
+  of the object's rim stays out, :meth:`GaussianGraph.joined`). Its seeds leave out the
+  large hazy Gaussians the views see much of (:meth:`ClickSelector._hazy`): a click on a
+  head's rim where such a Gaussian shows does not bring the blur it draws beside the head;
+  where all its seeds are heavy in the views, those of them not many times the median size
+  stay (:meth:`ClickSelector._pinned`: an object near the camera).
 
 Where the views' vote of the first click holds the scene (masks that read the object and its
 surroundings as one region: :meth:`RegionVote.holds_the_scene`), neither the views nor the
@@ -573,9 +573,9 @@ class ClickSelector:
         hazy = self._hazy(weight)
         seeds = [(c.seeds(o.seed_share, o.seed_local), c.positive) for c in clicks]
         seeds = [(self._pinned(k, hazy) if i and on else k, on) for i, (k, on) in enumerate(seeds)]
+        positive = np.unique(np.concatenate([k for k, is_positive in seeds if is_positive]))
         negative = np.unique(np.concatenate([k for k, is_positive in seeds if not is_positive] or [[]]))
         negative = negative.astype(np.int64)
-        positive = np.unique(np.concatenate([k for k, is_positive in seeds if is_positive]))
         both = np.intersect1d(positive, negative)
         positive, negative = np.setdiff1d(positive, both), np.setdiff1d(negative, both)
         own = np.setdiff1d(seeds[-1][0], both)  # the last click's seeds
@@ -588,13 +588,14 @@ class ClickSelector:
             within = self._yielding(clicks[-1:], own, voted_regions, share, weight > 0) > 0.5
             within &= self._alike(own, before) > 0
             return self._carved(clicks, negative, positive, negative, before, False, within)
-        side = np.zeros(len(self.labels))
+        grown = np.zeros(len(self.labels))  # the last click's part, where it is a later positive one
         if before is not None:  # a later positive click pins only the seeds of the part it adds
             for i, (k, on) in enumerate(seeds):
                 if i and on:
                     added = np.setdiff1d(k, negative)
-                    side, pinned = self._grown(clicks[i], added, negative, share, weight, hazy, before)
+                    part, pinned = self._grown(clicks[i], added, negative, share, weight, hazy, before)
                     seeds[i] = (np.union1d(np.setdiff1d(k, added), pinned), on)
+                    grown = part if i == len(clicks) - 1 else grown
             positive = np.setdiff1d(np.concatenate([k for k, is_positive in seeds if is_positive]), both)
         posterior = self._labelled(share, weight, seeds[0][0])
         cost = o.evidence * np.where(weight > 0, log_odds(posterior), -1.0)  # > 0: the object's
@@ -603,7 +604,7 @@ class ClickSelector:
         if before is not None:
             cost += o.stickiness * np.where(before, 1.0, -1.0)
             if clicks[-1].positive:  # deep in a later positive click's part its word outweighs all else
-                cost = (1 - side) * cost + o.split_weight * side
+                cost = (1 - grown) * cost + o.split_weight * grown
             else:  # what the earlier clicks selected goes by this click's word alone, never the views'
                 cost = np.where(before, np.maximum(cost, o.stickiness), cost)
         if len(negative):  # deep on a negative click's side its word outweighs all else
