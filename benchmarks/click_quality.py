@@ -39,6 +39,8 @@ from benchmarks.real_scenes import (
     interactive,
     joined_to_surroundings,
 )
+from dataset_tools.infra.errors import InputError
+from dataset_tools.infra.overlap import refuse_overlap
 from dataset_tools.scene import GT_MASKS, View
 from eval.report import markdown_table
 from gsseg.run.loaded import Run, load_run
@@ -134,6 +136,10 @@ def main() -> None:
     if unknown:
         parser.error(f"--protocols: {', '.join(unknown)} unknown; choose from {', '.join(PROTOCOLS)}.")
     objects = [int(k) for k in args.objects.split(",")] if args.objects else None
+    try:  # the JSON is written after each scene: never into the scenes and runs it reads
+        refuse_overlap(record.out_path("click_quality", tag=args.tag, out=args.out), [("the work folder", args.work)])
+    except InputError as err:
+        parser.error(str(err))
     results: dict = {"scenes": [], "protocols": protocols}
     for path in args.paths.split(","):
         for seed in (int(s) for s in args.seeds.split(",")):

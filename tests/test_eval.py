@@ -310,6 +310,20 @@ def test_edit_quality_never_writes_its_json_over_the_lpips_network(tmp_path, mon
     assert net.read_bytes() == before
 
 
+def test_click_quality_never_writes_its_json_into_the_runs_it_reads(tmp_path, monkeypatch, capsys):
+    from benchmarks import click_quality
+
+    run = tmp_path / "work" / "orbit-0" / "run"
+    run.mkdir(parents=True)
+    (run / "gaussians.ply").write_bytes(b"model")
+    out = run / "gaussians.ply"
+    monkeypatch.setattr("sys.argv", ["click_quality", "--work", str(tmp_path / "work"), "--out", str(out)])
+    with pytest.raises(SystemExit) as exit_:
+        click_quality.main()
+    assert exit_.value.code != 0 and out.read_bytes() == b"model"
+    assert "lies inside the work folder" in capsys.readouterr().err
+
+
 @pytest.mark.slow
 def test_demo_plumbing_runs_every_stage_with_few_iterations(tmp_path):
     """Plumbing only: 20 training iterations, so the scores mean nothing; every stage runs and
