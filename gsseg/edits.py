@@ -146,10 +146,10 @@ def select(
     if selector.holds_the_scene(evidence):
         warnings.warn(
             SceneHeld(
-                "the masks hold the clicked object and its surroundings as one region, so the click "
-                "selects most of the scene; clicks against what is not the object carve it out "
-                "(--exclude-click VIEW U V), in two views or more: a click reaches only what its "
-                "view shows (docs/segmentation.md, Clicks)."
+                "the masks hold the clicked object and its surroundings as one region and do not say "
+                "where it ends: the clicks do, for it (--click VIEW U V) and against what is not it "
+                "(--exclude-click VIEW U V), in two views or more: a click reaches only what its view "
+                "shows (docs/segmentation.md, Clicks)."
             ),
             stacklevel=2,
         )

@@ -172,6 +172,63 @@ def test_clicks_carve_the_object_alone_where_the_masks_hold_the_whole_scene():
     assert not kept.vote.holds_the_scene(share, _click(len(g), a), kept.options.seen_share)
 
 
+def _bar_in_a_frame():
+    """A bar of 900 Gaussians along x from -3 to 3, one region in every view (the views' vote
+    holds the scene): A (red, |x| <= 1) in the middle, green from 1 to 2, blue beyond; and the
+    weights of a view whose frame shows the bar's ends (|x| > 2.5): (Gaussians, x, A, frame)."""
+    rng = np.random.default_rng(0)
+    x = rng.uniform(-3, 3, 900)
+    xyz = np.stack([x, rng.normal(0, 0.2, 900), rng.normal(0, 0.2, 900)], 1)
+    rgb = np.where(
+        (np.abs(x) <= 1)[:, None], [200, 30, 30], np.where(((x > 1) & (x <= 2))[:, None], [30, 200, 30], [30, 30, 200])
+    )
+    g = gaussians_from_points(xyz, rgb.astype(np.uint8), initial_opacity=0.9)
+    return g, x, np.flatnonzero(np.abs(x) <= 1), np.where(np.abs(x) > 2.5, 1.0, 0.0)
+
+
+def test_a_first_click_where_the_masks_hold_the_scene_is_cut_from_its_views_frame():
+    """The masks hold the bar as one region, so neither the views nor the labels say where A
+    ends. A click on A whose view's frame shows the bar's ends selects A alone, as GrabCut
+    cuts an object from the frame of its box; a click without a view (a 3D point) selects
+    the scene, and so does one whose frame has A's colours (A fills its view), or whose frame
+    the masks hold apart from A (they say where it ends)."""
+    g, x, a, frame = _bar_in_a_frame()
+    selector = ClickSelector(g, np.full(900, 7, np.uint8), _regions(900, [np.arange(900)]))
+    centre = a[np.argsort(np.abs(x[a]))]
+    first = replace(_click(900, centre), frame=frame)
+    share, _, _ = selector.views_vote([first], None)
+    assert selector.vote.holds_the_scene(share, first, selector.options.seen_share)
+    np.testing.assert_array_equal(selector.select([first]), np.abs(x) <= 1)
+    assert selector.select([_click(900, centre)]).all()
+    assert selector.select([replace(first, frame=np.where(np.abs(x) < 0.5, 1.0, 0.0))]).all()
+    wide = np.flatnonzero(np.abs(x) <= 2.2)  # the masks' region: most of every view, not its frame
+    told = ClickSelector(g, np.full(900, 7, np.uint8), _regions(900, [wide]))
+    share, _, _ = told.views_vote([first], None)
+    assert told.vote.holds_the_scene(share, first, told.options.seen_share)
+    assert told.select([first])[wide].all()
+
+
+def test_a_click_on_the_edge_of_a_framed_selection_moves_it_by_its_seeds_alone():
+    """A is selected (:func:`test_a_first_click_where_the_masks_hold_the_scene_is_cut_from_its_views_frame`);
+    clicks whose pixels A and the green beside it share (a blurred rim) change the selection by
+    their own seeds alone: a positive one adds none of the green (colours A lacks), a negative
+    one takes none of A's red. A positive click on the green, away from A, adds the green,
+    and one on a blue end, of the frame's colours which A lacks, adds nothing."""
+    g, x, a, frame = _bar_in_a_frame()
+    selector = ClickSelector(g, np.full(900, 7, np.uint8), _regions(900, [np.arange(900)]))
+    first = replace(_click(900, a[np.argsort(np.abs(x[a]))]), frame=frame)
+    selected = selector.select([first])
+    rim = np.concatenate([a[np.argsort(-x[a])][:3], np.flatnonzero(x > 1)[np.argsort(x[x > 1])][:3]])
+    for positive in (True, False):
+        edge = ClickEvidence(np.isin(np.arange(900), rim).astype(float), positive)
+        np.testing.assert_array_equal(selector.cut([first, edge], selected), selected)
+    green = np.flatnonzero((x > 1) & (x <= 2))
+    grown = selector.cut([first, _click(900, green[np.argsort(np.abs(x[green] - 1.5))])], selected)
+    np.testing.assert_array_equal(grown, selected | ((x > 1) & (x <= 2)))
+    blue_end = np.flatnonzero(x > 2)[np.argsort(x[x > 2])]
+    np.testing.assert_array_equal(selector.cut([first, _click(900, blue_end)], selected), selected)
+
+
 def test_carving_decides_what_no_clicked_view_shows_by_the_cut():
     """A bar along x, one region in every view: C (x < -1.5), A (red, the middle) and B (x >
     1.5); the clicked view shows A and B, not C. A click on A, a negative one on B's far end:
@@ -912,15 +969,17 @@ def test_the_viewers_clicks_select_what_gsseg_edit_selects(segmented, tmp_path):
 @pytest.mark.slow
 def test_a_click_where_the_masks_hold_the_scene_says_so(segmented, small_scene, tmp_path):
     """Masks of one region over every view (weight-free masks that read a plant and the room
-    behind it as one): a click on an object selects most of the scene, and ``gsseg edit``'s
-    selection and the viewer say that clicks against the rest carve it out. With the run's own
-    masks, or once a click is against, they say nothing."""
+    behind it as one): a click on an object is cut from its view's frame, most of the object
+    and little of the rest, and ``gsseg edit``'s selection and the viewer say that the clicks
+    decide where it ends. With the run's own masks, or once a click is against, they say
+    nothing."""
     from gsseg.edits import select
     from gsseg.viewer.session import ViewCamera, ViewerSession
 
     run = load_run(segmented)
     seg = run.labels()
     a, b = (int(o) for o in np.argsort(-np.bincount(seg.labels, minlength=256)[1:])[:2] + 1)
+    on_object = seg.labels == a
     on_a, on_b = (object_click(run.gaussians, seg.labels == o, run.scene().split("train")) for o in (a, b))
     with warnings.catch_warnings():
         warnings.simplefilter("error", SceneHeld)
@@ -934,7 +993,8 @@ def test_a_click_where_the_masks_hold_the_scene_says_so(segmented, small_scene, 
     run = load_run(run_dir)
     seg, scene = run.labels(), run.scene(one)
     with pytest.warns(SceneHeld, match="exclude-click"):
-        assert select(run, seg, scene, clicks=[on_a], backend="cpu").mask.mean() > 0.5
+        framed = select(run, seg, scene, clicks=[on_a], backend="cpu").mask
+    assert (framed & on_object).sum() > 0.5 * on_object.sum() and (framed & ~on_object).sum() < on_object.sum()
     with warnings.catch_warnings():
         warnings.simplefilter("error", SceneHeld)
         select(run, seg, scene, clicks=[on_a, replace(on_b, positive=False)], backend="cpu")

@@ -63,7 +63,13 @@ max-flow solver (PyMaxflow), with a cost per Gaussian from six kinds of evidence
 
 Where the views' vote of the first click holds the scene (masks that read the object and its
 surroundings as one region: :meth:`RegionVote.holds_the_scene`), neither the views nor the
-labels say where the object ends, and from the first negative click on a part the vote holds
+labels say where the object ends. Where the vote holds even the border of the clicked view
+(:attr:`ClickOptions.frame_held`: masks that say nothing), the view's frame does, as a box's
+does in GrabCut: the first click is cut from the Gaussians drawn along the view's border
+(:meth:`ClickSelector._framed`), and each later click moves the selection's edge by its seeds
+where it lands on that edge, or carves its own cell (:meth:`ClickSelector._reframed`).
+Elsewhere (an object that fills most of every view, its masks saying where it ends), from
+the first negative click on a part the vote holds
 firmly (:meth:`ClickSelector._firm`: the masks joined it to the object) the clicks carve it
 alone (:meth:`ClickSelector._carved`): the graph's geodesic split between the positive and
 negative seeds, colour models learned from the cut, and each click changing only its own cell
@@ -105,8 +111,8 @@ HARD = 1e9  # the capacity that pins a seed to its side of the cut
 
 
 class SceneHeld(UserWarning):
-    """The masks hold the clicked object and its surroundings as one region: the click selected
-    most of the scene (:meth:`ClickSelector.holds_the_scene`)."""
+    """The masks hold the clicked object and its surroundings as one region: the clicks alone say
+    where the object ends (:meth:`ClickSelector.holds_the_scene`)."""
 
 
 @dataclass(frozen=True)
@@ -190,6 +196,9 @@ class ClickOptions:
             least cost of a selected Gaussian (it goes by the click's word alone).
         carve_stickiness: the same where the clicks carve the object alone
             (:meth:`ClickSelector._carved`).
+        frame_held: where the first click's vote holds the scene and this share of the weight
+            of its view's frame (masks that say nothing, not even of the view's border), the
+            click is cut from the frame (:meth:`ClickSelector._framed`).
         smoothness: weight of the graph's edges.
         appearance_rounds: rounds of the colour models (:class:`ColourModel`), each learned from
             the cut before it (0: none).
@@ -226,6 +235,7 @@ class ClickOptions:
     apart_colour: float = 10.0
     stickiness: float = 3.0
     carve_stickiness: float = 0.75
+    frame_held: float = 0.9
     smoothness: float = 1.0
     appearance_rounds: int = 2
     appearance_weight: float = 1.0
@@ -267,6 +277,7 @@ class ClickOptions:
             "shown_share",
             "appearance_firm",
             "carve_share",
+            "frame_held",
         ):
             if not 0 < getattr(self, name) <= 1:
                 raise OptionError(f"{{{name}}}: give a share in (0, 1].", **{name: getattr(self, name)})
@@ -278,13 +289,15 @@ class ClickEvidence:
     pixels, whether the click is for (``positive``) or against the selection, ``shown``
     (N,) in [0, 1] how much of each Gaussian the clicked view shows (its blended weight over
     the view over what it would give unoccluded), and ``local`` (N,) in [0, 1] the share of
-    its blended weight in the view that falls at the clicked pixels (both None: a prompt
-    without a view, a 3D point)."""
+    its blended weight in the view that falls at the clicked pixels, ``frame`` (N,) its blended
+    weight over the view's frame, the pixels along its border (all None: a prompt without a
+    view, a 3D point)."""
 
     weights: np.ndarray
     positive: bool
     shown: np.ndarray | None = None
     local: np.ndarray | None = None
+    frame: np.ndarray | None = None
 
     def seeds(self, share: float, least_local: float = 0.0) -> np.ndarray:
         """Indices of the Gaussians that carry ``share`` of the click's weight, heaviest first,
@@ -554,10 +567,13 @@ class ClickSelector:
         return selected
 
     def holds_the_scene(self, clicks: Sequence[ClickEvidence]) -> bool:
-        """Whether ``clicks``, none of them against, select the scene: the views' vote of the
-        first holds it (:meth:`RegionVote.holds_the_scene`), as where the masks read the clicked
-        object and its surroundings as one; from the first negative click on a part the vote
-        holds firmly on (:meth:`_firm`), the clicks carve the object alone."""
+        """Whether ``clicks``, none of them against, began where the masks do not say where the
+        object ends: the views' vote of the first holds the scene
+        (:meth:`RegionVote.holds_the_scene`), as where the masks read the clicked object and its
+        surroundings as one. The first click is then cut from its view's frame where the vote
+        holds that too (:meth:`_framed`), and selects the scene elsewhere; from the first
+        negative click on a part the vote holds firmly on (:meth:`_firm`), the clicks carve the
+        object alone."""
         if not clicks or not all(click.positive for click in clicks):
             return False
         share, _, _ = self.views_vote(clicks[:1], None)
@@ -580,7 +596,14 @@ class ClickSelector:
         positive, negative = np.setdiff1d(positive, both), np.setdiff1d(negative, both)
         own = np.setdiff1d(seeds[-1][0], both)  # the last click's seeds
         firm = self._firm(clicks) if before is not None and len(negative) else []
-        if firm and self.vote.holds_the_scene(share, clicks[0], o.seen_share):
+        scene = self.vote.holds_the_scene(share, clicks[0], o.seen_share)
+        frame = self._frame(clicks[0], seeds[0][0], share) if scene else None
+        if frame is not None:  # the clicks carve the object alone, framed by the first click's view
+            if before is None:
+                return self._framed(positive, frame)
+            if clicks[-1].positive or firm:
+                return self._reframed(clicks, seeds, frame, before)
+        elif firm and scene:
             first = firm[0] == len(clicks) - 1
             return self._carved(clicks, own, positive, negative, before, first)
         apart = self._apart(clicks, firm, positive)
@@ -715,6 +738,7 @@ class ClickSelector:
         before: np.ndarray,
         first: bool,
         within: np.ndarray | None = None,
+        framed: bool = False,
     ) -> np.ndarray:
         """(N,) bool: the selection after the last of ``clicks`` where the views' vote holds the
         scene (:meth:`RegionVote.holds_the_scene`), carved by the clicks alone, as seeded
@@ -738,17 +762,21 @@ class ClickSelector:
         the negative seeds): the Gaussians nearer to a negative seed than to any positive
         one, what an earlier click left there of another colour too, and of those the ones
         ``within`` (N,) it (held no more firmly than the clicked part, and not out of its reach
-        by colour: :meth:`_alike`), hidden or not (the table behind the tools on it)."""
+        by colour: :meth:`_alike`), hidden or not (the table behind the tools on it).
+
+        Where ``framed`` (the first click's view frames the object: :meth:`_reframed`), the
+        object's colours are learned from the Gaussians selected ``before`` that lie at least
+        :attr:`ClickOptions.split_full` nearer to a positive seed (a click beside the object
+        does not teach them the ground's), and the unseen are no click's: the first click's
+        cut decided them."""
         o = self.options
-        to_positive, to_negative = self.graph.distances(positive), self.graph.distances(negative)
-        with np.errstate(invalid="ignore"):
-            nearer = (to_negative - to_positive) / np.maximum(to_negative + to_positive, 1e-12)
-        nearer = np.where(np.isinf(to_negative), 1.0, np.where(np.isinf(to_positive), -1.0, nearer))
-        unseen = self._unseen(clicks) if within is None else np.zeros(len(before), bool)
+        nearer = self._nearer(positive, negative)
+        unseen = self._unseen(clicks) if within is None and not framed else np.zeros(len(before), bool)
         stickiness = np.where(unseen & first, 0.0, o.carve_stickiness)
         cost = o.split_weight * nearer + stickiness * np.where(before, 1.0, -1.0)
         if o.appearance_rounds:
-            cost += o.appearance_weight * self._appearance(cost, positive, np.ones(len(cost), bool), negative)
+            firm = before & (nearer >= o.split_full) if framed else np.ones(len(cost), bool)
+            cost += o.appearance_weight * self._appearance(cost, positive, firm, negative)
         cut = self._min_cut(cost, positive, negative)
         clicked = negative if first else clicked
         others = np.setdiff1d(np.union1d(positive, negative), clicked)
@@ -756,6 +784,131 @@ class ClickSelector:
         if within is not None:
             cell &= within
         return before | (cut & cell) if clicks[-1].positive else before & (cut | ~cell)
+
+    def _nearer(self, positive: np.ndarray, negative: np.ndarray) -> np.ndarray:
+        """(N,) in [-1, 1]: how much nearer, along the graph, each Gaussian lies to a ``positive``
+        (S,) seed than to a ``negative`` (S',) one, (d- - d+) / (d- + d+); 1 where no negative
+        seed is reached, -1 where only a negative one is."""
+        to_positive, to_negative = self.graph.distances(positive), self.graph.distances(negative)
+        with np.errstate(invalid="ignore"):
+            nearer = (to_negative - to_positive) / np.maximum(to_negative + to_positive, 1e-12)
+        return np.where(np.isinf(to_negative), 1.0, np.where(np.isinf(to_positive), -1.0, nearer))
+
+    def _frame(self, click: ClickEvidence, positive: np.ndarray, share: np.ndarray | None = None) -> np.ndarray | None:
+        """The Gaussians that frame the object in the view of the first ``click``: those
+        carrying :attr:`ClickOptions.seed_share` of its frame's weight
+        (:attr:`ClickEvidence.frame`), less the ``positive`` (S,) seeds and those whose colour
+        lies within :attr:`ClickOptions.apart_colour` (CIE76 in Lab) of a positive seed's (the
+        object where it reaches the frame); None where the click has no view, where the views'
+        vote (``share`` (N,), where given) holds under :attr:`ClickOptions.frame_held` of the
+        frame's weight (masks that say where the object ends, though it fills most of every
+        view), or where none is left (an object that fills its view)."""
+        if click.frame is None or click.frame.sum() <= 0:
+            return None
+        if share is not None and click.frame[share > 0.5].sum() < self.options.frame_held * click.frame.sum():
+            return None
+        frame = np.setdiff1d(ClickEvidence(click.frame, False).seeds(self.options.seed_share), positive)
+        lab = self.colours.lab
+        apart = [np.linalg.norm(lab[positive] - lab[k], axis=1).min() >= self.options.apart_colour for k in frame]
+        frame = frame[np.asarray(apart, bool)]
+        return frame if len(frame) else None
+
+    def _unlike(self, selected: np.ndarray, off: np.ndarray) -> np.ndarray:
+        """(N,) bool: the Gaussians whose colour is at least :attr:`ClickOptions.far_colour`
+        log-units likelier under the colours of the ``off`` (S,) Gaussians (the frame, the
+        negative seeds) than under those of the ``selected`` (N,) bool ones: colours the object
+        does not have and the rest does. A later positive click whose pixel shows the backdrop
+        through a gap in the statue pins none of the backdrop."""
+        mask = np.zeros(len(selected), bool)
+        mask[off] = True
+        return self.colours.ratio(selected, mask & ~selected) <= -self.options.far_colour
+
+    def _reframed(
+        self,
+        clicks: Sequence[ClickEvidence],
+        seeds: list[tuple[np.ndarray, bool]],
+        frame: np.ndarray,
+        before: np.ndarray,
+    ) -> np.ndarray:
+        """(N,) bool: the selection after the last of ``clicks`` where the first click's view
+        frames the object (:meth:`_framed`), from the selection ``before`` (N,). A click on the
+        selection's edge (:meth:`_on_edge`) moves the edge by its seeds alone: a positive one
+        adds those beside the selection (:meth:`_beside`) whose colour is likelier under the
+        selection's colours than under the rest's, a negative one takes out those likelier
+        under the rest's. Elsewhere the clicks carve (:meth:`_carved`, the object's colours
+        learned from the selection), each changing its own cell: the first click's seeds
+        (``seeds``: each click's, and whether it is positive) and those of the later ones on
+        the side the selection put them on are pinned, the last click's too, less, for a
+        positive one, those from elsewhere beside the selection's rim (:meth:`_beside`) and
+        those of colours the object lacks and the frame has (:meth:`_unlike`); the ``frame``
+        (S,) holds the rest out, less the Gaussians of a pinned seed's colour and
+        those nearer along the graph to a positive click's new seeds than the first click's
+        seeds are (the object reaches the frame where a click says so)."""
+        o = self.options
+        last, (own, _) = clicks[-1], seeds[-1]
+        ratio = self.colours.ratio(before, ~before)
+        index = np.arange(len(before))
+        edge = last.seeds(o.seed_share, o.seed_local)
+        if self._on_edge(last, edge, before):
+            if not last.positive:
+                return before & ~np.isin(index, edge[ratio[edge] < 0])
+            edge = self._beside(last, edge, before)
+            return before | np.isin(index, edge[ratio[edge] > 0])
+        earlier = seeds[1:-1]
+        positive = np.concatenate([seeds[0][0], *(k[before[k]] for k, on in earlier if on)])
+        negative = np.concatenate([np.zeros(0, np.int64), *(k[~before[k]] for k, on in earlier if not on)])
+        if last.positive:
+            held_off = np.flatnonzero(~before & self._unlike(before, np.union1d(negative, frame)))
+            own = np.setdiff1d(self._beside(last, own, before), held_off)
+            if before[own].all():
+                return before
+            positive = np.union1d(positive, own)
+            to_own = self.graph.distances(np.setdiff1d(own, np.flatnonzero(before)))
+            frame = frame[to_own[frame] >= to_own[seeds[0][0]].min()]  # the object reaches the frame there
+        else:
+            negative = np.union1d(negative, own)
+        positive = np.setdiff1d(positive, negative)
+        reframed = self._frame(clicks[0], positive)
+        frame = frame if reframed is None else np.intersect1d(frame, reframed)
+        off = np.setdiff1d(np.union1d(negative, frame), positive)
+        return self._carved(clicks, own, positive, off, before, False, framed=True)
+
+    def _on_edge(self, click: ClickEvidence, seeds: np.ndarray, before: np.ndarray) -> bool:
+        """Whether ``click`` lands on the edge of the selection ``before`` (N,): its ``seeds``
+        (S,) selected and those not each hold at least :attr:`ClickOptions.seen_share` of
+        their weight."""
+        weights = click.weights[seeds]
+        held = weights[before[seeds]].sum() / max(float(weights.sum()), 1e-12)
+        return bool(self.options.seen_share <= held <= 1 - self.options.seen_share)
+
+    def _beside(self, click: ClickEvidence, seeds: np.ndarray, before: np.ndarray) -> np.ndarray:
+        """The ``seeds`` (S,) a later positive ``click`` pins where the clicks carve alone: all,
+        or where the selection ``before`` (N,) holds at least :attr:`ClickOptions.seen_share` of
+        their weight (the click lands on its edge), the selected ones and those within
+        :attr:`ClickOptions.part_reach` spacings of a selected Gaussian: what shows through the
+        selection's rim, or lies over it, from elsewhere stays out."""
+        if not before[seeds].any():
+            return seeds
+        gap = cKDTree(self.means[before]).query(self.means[seeds])[0]
+        return seeds[before[seeds] | (gap <= self.options.part_reach * self.graph.spacing)]
+
+    def _framed(self, positive: np.ndarray, frame: np.ndarray) -> np.ndarray:
+        """(N,) bool: the first click's selection where the views' vote holds the scene and its
+        view frames the object: each Gaussian is the object's in proportion to how much nearer,
+        along the graph, it lies to a ``positive`` (S,) seed than to one of the ``frame`` (S',)
+        (:meth:`_frame`), times :attr:`ClickOptions.split_weight`, with colour models learned
+        from the cut (:meth:`_appearance`), the object's from the Gaussians at least
+        :attr:`ClickOptions.split_full` nearer to it (the cut's reach halfway to the frame
+        does not teach them the ground's colours); what the graph joins to the seeds. As
+        GrabCut cuts the object from the frame of a box, without masks."""
+        o = self.options
+        nearer = self._nearer(positive, frame)
+        cost = o.split_weight * nearer
+        if o.appearance_rounds:
+            cost += o.appearance_weight * self._appearance(cost, positive, nearer >= o.split_full, frame)
+        seeds = np.zeros(len(cost), bool)
+        seeds[positive] = True
+        return self.graph.joined(self._min_cut(cost, positive, frame), seeds)
 
     def _unseen(self, clicks: Sequence[ClickEvidence]) -> np.ndarray:
         """(N,) bool: the Gaussians that no click's view shows :attr:`ClickOptions.shown_share`

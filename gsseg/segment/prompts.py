@@ -177,13 +177,15 @@ def click_evidence(
     positive: bool = True,
     *,
     radius: int = 1,
+    band: int = 4,
     backend: str | Backend = "cpu",
 ) -> ClickEvidence:
     """What a click at pixel (u, v) of a view saw: each Gaussian's blended weight alpha_i T_i
     summed over the pixels within ``radius`` of it (a (2 radius + 1)^2 window), how much
     of it the view shows (its weight over the whole view over what its footprint would give
-    unoccluded, o_i 2 pi sqrt(det Sigma2D_i); 0: hidden or off screen, 1: in full view), and
-    the share of its weight over the view that falls in the window.
+    unoccluded, o_i 2 pi sqrt(det Sigma2D_i); 0: hidden or off screen, 1: in full view), the
+    share of its weight over the view that falls in the window, and its weight over the
+    view's frame (the pixels within ``band`` of the border, the window left out).
 
     Raises:
         InputError: the click lies outside the view, or less than half opaque is rendered there.
@@ -192,13 +194,14 @@ def click_evidence(
         raise InputError(f"click ({u}, {v}) is outside the {camera.width}x{camera.height} view; click inside it.")
     backend = get_backend(backend)
     g = gaussians.detach().to(backend.device)
-    rows = np.zeros((camera.height, camera.width), np.int64)
+    rows = np.full((camera.height, camera.width), 2, np.int64)  # 0: inside, 1: the window, 2: the frame
+    rows[band : camera.height - band, band : camera.width - band] = 0
     row, col = int(v), int(u)
     window = rows[max(0, row - radius) : row + radius + 1, max(0, col - radius) : col + radius + 1]
     window[:] = 1
     pose = torch.as_tensor(cam_from_world, dtype=torch.float32, device=backend.device)
     weights = (
-        backend.contributions(g.means, g.quats, g.scales, g.opacities, pose, camera, rows, 2).double().cpu().numpy()
+        backend.contributions(g.means, g.quats, g.scales, g.opacities, pose, camera, rows, 3).double().cpu().numpy()
     )
     alpha = weights[1].sum() / window.size
     if alpha < 0.5:
@@ -211,7 +214,7 @@ def click_evidence(
         footprint = torch.where(proj.radii > 0, footprint, torch.inf).double().cpu().numpy()
     in_view = weights.sum(0)
     local = weights[1] / np.maximum(in_view, 1e-12)
-    return ClickEvidence(weights[1], positive, shown=np.clip(in_view / footprint, 0, 1), local=local)
+    return ClickEvidence(weights[1], positive, np.clip(in_view / footprint, 0, 1), local, weights[2])
 
 
 def point_evidence(gaussians: Gaussians, point: np.ndarray, k: int = 20) -> ClickEvidence:

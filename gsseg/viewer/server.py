@@ -195,8 +195,9 @@ class Viewer:
             return
         clicks = len(self.session.clicks)
         held = (
-            " The masks hold this object and its surroundings as one region: shift-click what is not "
-            "the object to carve it out, and turn the model to click what this view does not show."
+            " The masks hold this object and its surroundings as one region and do not say where it ends: "
+            "ctrl-click what the selection missed, shift-click what is not the object, and turn the model "
+            "to click what this view does not show."
             if self.session.scene_held()
             else ""
         )

@@ -207,7 +207,7 @@ class ViewerSession:
     def scene_held(self) -> bool:
         """Whether the clicks selecting now, none of them against, began on an object the masks
         hold as one region with its surroundings (:meth:`ClickSelector.holds_the_scene`): the
-        selection is most of the scene until shift-clicks carve the object out."""
+        clicks alone say where the object ends."""
         with self._lock:
             return bool(self.clicks) and self._click_selector().holds_the_scene(self.clicks)
 
