@@ -39,8 +39,6 @@ from benchmarks.real_scenes import (
     interactive,
     joined_to_surroundings,
 )
-from dataset_tools.infra.errors import InputError
-from dataset_tools.infra.overlap import refuse_overlap
 from dataset_tools.scene import GT_MASKS, View
 from eval.report import markdown_table
 from gsseg.run.loaded import Run, load_run
@@ -136,10 +134,7 @@ def main() -> None:
     if unknown:
         parser.error(f"--protocols: {', '.join(unknown)} unknown; choose from {', '.join(PROTOCOLS)}.")
     objects = [int(k) for k in args.objects.split(",")] if args.objects else None
-    try:  # the JSON is written after each scene: never into the scenes and runs it reads
-        refuse_overlap(record.out_path("click_quality", tag=args.tag, out=args.out), [("the work folder", args.work)])
-    except InputError as err:
-        parser.error(str(err))
+    record.refuse_out_inside(parser, "click_quality", args.work, tag=args.tag, out=args.out)
     results: dict = {"scenes": [], "protocols": protocols}
     for path in args.paths.split(","):
         for seed in (int(s) for s in args.seeds.split(",")):

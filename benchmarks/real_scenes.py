@@ -498,6 +498,7 @@ def main() -> None:
     parser.add_argument("--tag", default="", help="Suffix of the JSON file's name.")
     parser.add_argument("--out", default=None, help="JSON file (default: benchmarks/results/real_scenes.json).")
     args = parser.parse_args()
+    record.refuse_out_inside(parser, "real_scenes", args.work, tag=args.tag, out=args.out)
     results = {"scenes": []}
     for name in args.scenes.split(","):
         scene = run_scene(

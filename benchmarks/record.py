@@ -5,6 +5,7 @@ commit. ``python -m benchmarks.results`` renders ``benchmarks/RESULTS.md`` from 
 
 from __future__ import annotations
 
+import argparse
 import datetime
 import json
 import os
@@ -17,6 +18,8 @@ from pathlib import Path
 import torch
 
 from dataset_tools.infra.atomic import write_bytes_atomic
+from dataset_tools.infra.errors import InputError
+from dataset_tools.infra.overlap import refuse_overlap
 
 RESULTS = Path(__file__).resolve().parent / "results"
 
@@ -79,6 +82,18 @@ def provenance() -> dict:
 def out_path(benchmark: str, *, tag: str = "", out: str | Path | None = None) -> Path:
     """Where :func:`save` writes: ``out``, or ``benchmarks/results/<benchmark>[-tag].json``."""
     return Path(out) if out else RESULTS / f"{benchmark}{'-' + tag if tag else ''}.json"
+
+
+def refuse_out_inside(
+    parser: argparse.ArgumentParser, benchmark: str, work: Path, *, tag: str = "", out: str | Path | None = None
+) -> None:
+    """Stop the command line of ``parser`` (exit 2, one sentence) where :func:`out_path` lies
+    inside the folder ``work`` of the scenes and runs the benchmark reads: a benchmark never
+    writes over what it reads."""
+    try:
+        refuse_overlap(out_path(benchmark, tag=tag, out=out), [("the work folder", work)])
+    except InputError as err:
+        parser.error(str(err))
 
 
 def save(benchmark: str, results: dict, *, tag: str = "", out: str | Path | None = None) -> Path:

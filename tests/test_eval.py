@@ -310,16 +310,17 @@ def test_edit_quality_never_writes_its_json_over_the_lpips_network(tmp_path, mon
     assert net.read_bytes() == before
 
 
-def test_click_quality_never_writes_its_json_into_the_runs_it_reads(tmp_path, monkeypatch, capsys):
-    from benchmarks import click_quality
+@pytest.mark.parametrize("benchmark", ["click_quality", "real_scenes"])
+def test_a_benchmark_never_writes_its_json_into_the_runs_it_reads(benchmark, tmp_path, monkeypatch, capsys):
+    import importlib
 
     run = tmp_path / "work" / "orbit-0" / "run"
     run.mkdir(parents=True)
     (run / "gaussians.ply").write_bytes(b"model")
     out = run / "gaussians.ply"
-    monkeypatch.setattr("sys.argv", ["click_quality", "--work", str(tmp_path / "work"), "--out", str(out)])
+    monkeypatch.setattr("sys.argv", [benchmark, "--work", str(tmp_path / "work"), "--out", str(out)])
     with pytest.raises(SystemExit) as exit_:
-        click_quality.main()
+        importlib.import_module(f"benchmarks.{benchmark}").main()
     assert exit_.value.code != 0 and out.read_bytes() == b"model"
     assert "lies inside the work folder" in capsys.readouterr().err
 
