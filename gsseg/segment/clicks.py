@@ -135,7 +135,9 @@ class ClickOptions:
             its weight.
         iterations: rounds of the views' vote.
         seen_share: a click is seen in a view where its Gaussians show at least this share of
-            the weight they show in the view that shows them most.
+            the weight they show in the view that shows them most; a later click lands on the
+            selection's edge where its selected seeds and the others each hold at least this
+            share of its seeds' weight (:meth:`ClickSelector._on_edge`).
         seed_share: the seeds are the Gaussians carrying this share of the click's weight ...
         seed_local: ... of those with at least this share of their weight in the clicked view
             at the click (:meth:`ClickEvidence.seeds`).
@@ -161,7 +163,8 @@ class ClickOptions:
             same for a later positive click's part.
         part_reach: a later positive click grows a part from its seeds that lie within this
             many times the Gaussians' median spacing of a selected one (a part beside it),
-            where these hold most of its unselected seeds' weight.
+            where these hold most of its unselected seeds' weight; where the frame bounds the
+            object, it pins no seed beyond it (:meth:`ClickSelector._beside`).
         off_share: ... up to the Gaussians the views hold off the object (unselected, with
             under this share of their weight in the object's regions, ...
         off_weight: ... or under one half of a weight at least this many times the median
@@ -882,11 +885,12 @@ class ClickSelector:
         return bool(self.options.seen_share <= held <= 1 - self.options.seen_share)
 
     def _beside(self, click: ClickEvidence, seeds: np.ndarray, before: np.ndarray) -> np.ndarray:
-        """The ``seeds`` (S,) a later positive ``click`` pins where the clicks carve alone: all,
-        or where the selection ``before`` (N,) holds at least :attr:`ClickOptions.seen_share` of
-        their weight (the click lands on its edge), the selected ones and those within
-        :attr:`ClickOptions.part_reach` spacings of a selected Gaussian: what shows through the
-        selection's rim, or lies over it, from elsewhere stays out."""
+        """The ``seeds`` (S,) a later positive ``click`` pins where its view's frame bounds the
+        object (:meth:`_reframed`): all, or where the selection ``before`` (N,) holds one of
+        them (the click lands on it in part), the selected ones and those within
+        :attr:`ClickOptions.part_reach` spacings of a selected Gaussian: what shows through a
+        gap in the selection, or lies over its rim, from elsewhere stays out (a click on a
+        statue whose pixel shows the building 150 units behind it)."""
         if not before[seeds].any():
             return seeds
         gap = cKDTree(self.means[before]).query(self.means[seeds])[0]
