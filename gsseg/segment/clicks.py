@@ -811,10 +811,13 @@ class ClickSelector:
         if share is not None and click.frame[share > 0.5].sum() < self.options.frame_held * click.frame.sum():
             return None
         frame = np.setdiff1d(ClickEvidence(click.frame, False).seeds(self.options.seed_share), positive)
-        lab = self.colours.lab
-        apart = [np.linalg.norm(lab[positive] - lab[k], axis=1).min() >= self.options.apart_colour for k in frame]
-        frame = frame[np.asarray(apart, bool)]
+        frame = frame[self._apart_in_colour(self.colours.lab[frame], positive)]
         return frame if len(frame) else None
+
+    def _apart_in_colour(self, lab: np.ndarray, positive: np.ndarray) -> np.ndarray:
+        """(K,) bool: whether each of the colours ``lab`` (K, 3) (CIE Lab) lies at least
+        :attr:`ClickOptions.apart_colour` (CIE76) from every ``positive`` (S,) seed's colour."""
+        return cKDTree(self.colours.lab[positive]).query(lab)[0] >= self.options.apart_colour
 
     def _unlike(self, selected: np.ndarray, off: np.ndarray) -> np.ndarray:
         """(N,) bool: the Gaussians whose colour is at least :attr:`ClickOptions.far_colour`
@@ -849,10 +852,9 @@ class ClickSelector:
         seeds are (the object reaches the frame where a click says so)."""
         o = self.options
         last, (own, _) = clicks[-1], seeds[-1]
-        ratio = self.colours.ratio(before, ~before)
-        index = np.arange(len(before))
         edge = last.seeds(o.seed_share, o.seed_local)
         if self._on_edge(last, edge, before):
+            ratio, index = self.colours.ratio(before, ~before), np.arange(len(before))
             if not last.positive:
                 return before & ~np.isin(index, edge[ratio[edge] < 0])
             edge = self._beside(last, edge, before)
@@ -1042,7 +1044,7 @@ class ClickSelector:
         for k in firm:
             seeds = clicks[k].seeds(o.seed_share, o.seed_local)
             colour = np.average(self.colours.lab[seeds], axis=0, weights=clicks[k].weights[seeds])
-            if np.linalg.norm(self.colours.lab[positive] - colour, axis=1).min() >= o.apart_colour:
+            if self._apart_in_colour(colour[None], positive)[0]:
                 apart.append(k)
         return apart
 
