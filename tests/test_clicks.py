@@ -644,8 +644,9 @@ def test_a_later_positive_click_does_not_pin_a_large_hazy_gaussian():
     with 20 times A's weight each. Where H is also ten times the median size, a later positive
     click that lands on H alone adds nothing (it would bring the blur H draws beside A); where
     nothing counts as hazy or large, the same click pins H and adds it. Of the median size,
-    H is pinned all the same: the click has no other seed, and an object near the camera is
-    drawn by Gaussians each as heavy in the views."""
+    H is pinned all the same where the click lands on a tenth of its weight in the view: the
+    click has no other seed, and an object near the camera is drawn by Gaussians each as
+    heavy in the views; not where it lands on a sliver of it (a hundredth)."""
     g, a, b = _two_blobs()
     xyz = np.concatenate([g.means.numpy(), [[0.8, 0.0, 0.0]]])
     rgb = np.concatenate([np.tile([200, 30, 30], (200, 1)), np.tile([30, 30, 200], (200, 1)), [[120, 120, 120]]])
@@ -657,12 +658,14 @@ def test_a_later_positive_click_does_not_pin_a_large_hazy_gaussian():
     labels = np.zeros(n, np.uint8)
     labels[a] = 1
     first_only = [_click(n, a)]
-    on_hazy = ClickEvidence(np.eye(n)[hazy], True)
-    for size, options, pinned in (
-        (10.0, ClickOptions(), False),
-        (10.0, ClickOptions(off_weight=1e9, large_size=1e9), True),
-        (1.0, ClickOptions(), True),
+    for size, options, local, pinned in (
+        (10.0, ClickOptions(), None, False),
+        (10.0, ClickOptions(off_weight=1e9, large_size=1e9), None, True),
+        (1.0, ClickOptions(), None, True),
+        (1.0, ClickOptions(), 0.1, True),
+        (1.0, ClickOptions(), 0.01, False),
     ):
+        on_hazy = ClickEvidence(np.eye(n)[hazy], True, local=None if local is None else np.full(n, local))
         g = gaussians_from_points(xyz, rgb.astype(np.uint8), initial_opacity=0.9)
         g.log_scales[hazy] = g.log_scales.max(1).values.median() + np.log(size)
         selector = ClickSelector(g, labels, regions, options)
