@@ -229,6 +229,34 @@ def test_a_click_on_the_edge_of_a_framed_selection_moves_it_by_its_seeds_alone()
     np.testing.assert_array_equal(selector.cut([first, _click(900, blue_end)], selected), selected)
 
 
+def test_a_negative_click_on_the_selections_rim_takes_out_its_seeds_of_the_rests_colour_alone():
+    """The masks hold A (red) apart from B (blue), and the selection holds A and five of B's
+    Gaussians nearest to A (a spill over the background). A negative click whose pixel A's
+    rim and B's near edge share (each half of its weight) takes out none of A: the graph
+    beyond its seeds says nothing of where A ends. One whose pixel the spill and the rest of
+    B share takes out the spill it lands on, of B's colour, and nothing else. A negative
+    click on A alone still takes out its side of A."""
+    g, a, b = _two_blobs_on_a_backdrop()
+    n = len(g)
+    x = g.means[:, 0].numpy()
+    selector = ClickSelector(g, np.full(n, 7, np.uint8), _regions(n, [a, b]))
+    first = _click(n, a[np.argsort(x[a])])
+    spill = b[np.argsort(x[b])][:5]
+    before = selector.select([first])
+    before[spill] = True
+    rim = np.concatenate([a[np.argsort(-x[a])][:5], b[np.argsort(x[b])][5:10]])
+    on_rim = ClickEvidence(np.isin(np.arange(n), rim).astype(float), False)
+    np.testing.assert_array_equal(selector.cut([first, on_rim], before), before)
+    on_spill = np.zeros(n)
+    on_spill[spill[:3]], on_spill[b[np.argsort(x[b])][10:13]] = 2.0, 1.0
+    on_spill = ClickEvidence(on_spill, False)
+    expected = before.copy()
+    expected[spill[:3]] = False
+    np.testing.assert_array_equal(selector.cut([first, on_spill], before), expected)
+    on_a = _click(n, a[np.argsort(-x[a])], positive=False)
+    assert not selector.cut([first, on_a], before)[a[np.argsort(-x[a])][:5]].any()
+
+
 def test_carving_decides_what_no_clicked_view_shows_by_the_cut():
     """A bar along x, one region in every view: C (x < -1.5), A (red, the middle) and B (x >
     1.5); the clicked view shows A and B, not C. A click on A, a negative one on B's far end:

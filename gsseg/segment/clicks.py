@@ -45,7 +45,9 @@ max-flow solver (PyMaxflow), with a cost per Gaussian from six kinds of evidence
   next to it stays). On a part the masks joined to the object, of a colour the object does not
   have (:meth:`ClickSelector._apart`: the table under the tools), it carves the part apart
   on the negative clicks' side of the graph, as the clicks do where the masks hold the scene
-  (below), what its view hides too;
+  (below), what its view hides too. On the selection's blurred rim, whose pixel its selected
+  and unselected seeds share (:meth:`ClickSelector._on_edge`), it takes out only those of
+  its seeds of the rest's colours (:meth:`ClickSelector._edge_moved`);
 - **a later positive click**, the same mirrored (:meth:`ClickSelector._grown`): over the
   Gaussians nearer, along the graph, to its seeds that lie beside the selection than to those
   the views hold off the object, the click's word replaces the rest, where its view shows
@@ -616,6 +618,8 @@ class ClickSelector:
         elif firm and scene:
             first = firm[0] == len(clicks) - 1
             return self._carved(clicks, own, positive, negative, before, first)
+        if before is not None and not clicks[-1].positive and self._on_edge(clicks[-1], own, before):
+            return self._edge_moved(clicks[-1], own, before)  # a negative click on the selection's rim
         apart = self._apart(clicks, firm, positive)
         if apart and apart[-1] == len(clicks) - 1:  # the masks joined the clicked part to the object
             within = self._yielding(clicks[-1:], own, voted_regions, share, weight > 0) > 0.5
@@ -861,11 +865,7 @@ class ClickSelector:
         last, (own, _) = clicks[-1], seeds[-1]
         edge = last.seeds(o.seed_share, o.seed_local)
         if self._on_edge(last, edge, before):
-            ratio, index = self.colours.ratio(before, ~before), np.arange(len(before))
-            if not last.positive:
-                return before & ~np.isin(index, edge[ratio[edge] < 0])
-            edge = self._beside(last, edge, before)
-            return before | np.isin(index, edge[ratio[edge] > 0])
+            return self._edge_moved(last, edge, before)
         earlier = seeds[1:-1]
         positive = np.concatenate([seeds[0][0], *(k[before[k]] for k, on in earlier if on)])
         negative = np.concatenate([np.zeros(0, np.int64), *(k[~before[k]] for k, on in earlier if not on)])
@@ -888,10 +888,23 @@ class ClickSelector:
     def _on_edge(self, click: ClickEvidence, seeds: np.ndarray, before: np.ndarray) -> bool:
         """Whether ``click`` lands on the edge of the selection ``before`` (N,): its ``seeds``
         (S,) selected and those not each hold at least :attr:`ClickOptions.seen_share` of
-        their weight."""
+        their weight (a pixel the selection's blurred rim and what lies beside it draw)."""
         weights = click.weights[seeds]
         held = weights[before[seeds]].sum() / max(float(weights.sum()), 1e-12)
         return bool(self.options.seen_share <= held <= 1 - self.options.seen_share)
+
+    def _edge_moved(self, click: ClickEvidence, seeds: np.ndarray, before: np.ndarray) -> np.ndarray:
+        """(N,) bool: the selection ``before`` (N,) with its edge moved by a ``click`` on it
+        (:meth:`_on_edge`) and its ``seeds`` (S,) alone: a positive click adds those beside the
+        selection (:meth:`_beside`) whose colour is likelier under the selection's colours
+        than under the rest's, a negative one takes out those likelier under the rest's. The
+        pixel is drawn by the selection's blurred rim and what lies beside it at once: the
+        graph beyond the seeds says nothing of where the object ends."""
+        ratio, index = self.colours.ratio(before, ~before), np.arange(len(before))
+        if not click.positive:
+            return before & ~np.isin(index, seeds[ratio[seeds] < 0])
+        seeds = self._beside(click, seeds, before)
+        return before | np.isin(index, seeds[ratio[seeds] > 0])
 
     def _beside(self, click: ClickEvidence, seeds: np.ndarray, before: np.ndarray) -> np.ndarray:
         """The ``seeds`` (S,) a later positive ``click`` pins where its view's frame bounds the
