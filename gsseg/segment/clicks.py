@@ -709,6 +709,12 @@ class ClickSelector:
             share, regions = np.maximum(share, more), regions | more_regions
         return share, weight, regions
 
+    def _mask(self, indices: np.ndarray) -> np.ndarray:
+        """(N,) bool: true at the Gaussians ``indices`` (S,)."""
+        mask = np.zeros(len(self.labels), bool)
+        mask[indices] = True
+        return mask
+
     def _min_cut(self, cost: np.ndarray, positive: np.ndarray, negative: np.ndarray) -> np.ndarray:
         """(N,) bool: the source's side of the minimum cut of the graph's edges (times
         :attr:`ClickOptions.smoothness`) and the costs ``cost`` (N,) (> 0: the selection's), the
@@ -836,9 +842,7 @@ class ClickSelector:
         negative seeds) than under those of the ``selected`` (N,) bool ones: colours the object
         does not have and the rest does. A later positive click whose pixel shows the backdrop
         through a gap in the statue pins none of the backdrop."""
-        mask = np.zeros(len(selected), bool)
-        mask[off] = True
-        return self.colours.ratio(selected, mask & ~selected) <= -self.options.far_colour
+        return self.colours.ratio(selected, self._mask(off) & ~selected) <= -self.options.far_colour
 
     def _reframed(
         self,
@@ -900,11 +904,11 @@ class ClickSelector:
         than under the rest's, a negative one takes out those likelier under the rest's. The
         pixel is drawn by the selection's blurred rim and what lies beside it at once: the
         graph beyond the seeds says nothing of where the object ends."""
-        ratio, index = self.colours.ratio(before, ~before), np.arange(len(before))
+        ratio = self.colours.ratio(before, ~before)
         if not click.positive:
-            return before & ~np.isin(index, seeds[ratio[seeds] < 0])
+            return before & ~self._mask(seeds[ratio[seeds] < 0])
         seeds = self._beside(click, seeds, before)
-        return before | np.isin(index, seeds[ratio[seeds] > 0])
+        return before | self._mask(seeds[ratio[seeds] > 0])
 
     def _beside(self, click: ClickEvidence, seeds: np.ndarray, before: np.ndarray) -> np.ndarray:
         """The ``seeds`` (S,) a later positive ``click`` pins where its view's frame bounds the
@@ -932,9 +936,7 @@ class ClickSelector:
         cost = o.split_weight * nearer
         if o.appearance_rounds:
             cost += o.appearance_weight * self._appearance(cost, positive, nearer >= o.split_full, frame)
-        seeds = np.zeros(len(cost), bool)
-        seeds[positive] = True
-        return self.graph.joined(self._min_cut(cost, positive, frame), seeds)
+        return self.graph.joined(self._min_cut(cost, positive, frame), self._mask(positive))
 
     def _unseen(self, clicks: Sequence[ClickEvidence]) -> np.ndarray:
         """(N,) bool: the Gaussians that no click's view shows :attr:`ClickOptions.shown_share`
@@ -950,8 +952,7 @@ class ClickSelector:
         between. For a negative click the others are the selection: a floater beside a head
         goes, the head's own side next to it, of the head's colours, stays; where the clicked
         part looks like the object, the graph alone decides."""
-        mask = np.zeros(len(self.labels), bool)
-        mask[seeds] = True
+        mask = self._mask(seeds)
         return self._likeness(self.colours.ratio(mask, others & ~mask))
 
     def _likeness(self, ratio: np.ndarray) -> np.ndarray:
