@@ -1009,8 +1009,7 @@ class ClickSelector:
             seeds = seeds[reached]
             alike = self._alike(seeds, ~before)
         else:
-            obj = before.copy()
-            obj[seeds] = True
+            obj = before | self._mask(seeds)
             ratio = self.colours.ratio(obj, ~obj)
             off &= ratio <= -o.far_colour
             alike = self._likeness(ratio)
