@@ -257,6 +257,29 @@ def test_a_negative_click_on_the_selections_rim_takes_out_its_seeds_of_the_rests
     assert not selector.cut([first, on_a], before)[a[np.argsort(-x[a])][:5]].any()
 
 
+def test_a_positive_click_on_the_selections_rim_brings_back_nothing_a_negative_click_took():
+    """The masks join A and B, of one colour, where they touch; a negative click on B's far end
+    takes out B's far part. A positive click whose pixel the selection's rim and the part taken
+    out share (each half of its weight) adds at most its own seeds: the graph beyond them says
+    nothing of where the object ends, and what the negative click fixed stays fixed."""
+    rng = np.random.default_rng(0)
+    xyz = np.concatenate([rng.normal(0, 0.3, (200, 3)), rng.normal(0, 0.3, (200, 3)) + [1.2, 0, 0]])
+    a, b = np.arange(200), np.arange(200, 400)
+    g = _on_a_backdrop(xyz, np.tile([200, 30, 30], (400, 1)))
+    n = len(g)
+    x = g.means[:, 0].numpy()
+    selector = ClickSelector(g, np.full(n, 7, np.uint8), _regions(n, [np.concatenate([a, b])]))
+    first = _click(n, a[np.argsort(x[a])])
+    against = _click(n, b[np.argsort(-x[b])], positive=False)
+    before = selector.select([first, against])
+    taken = np.flatnonzero(~before[b]) + 200
+    assert before[a].all() and len(taken) > 100
+    kept = np.flatnonzero(before)
+    rim = np.concatenate([kept[np.argsort(-x[kept])][:5], taken[np.argsort(x[taken])][:5]])
+    after = selector.cut([first, against, ClickEvidence(np.isin(np.arange(n), rim).astype(float), True)], before)
+    assert after[before].all() and np.isin(np.flatnonzero(after & ~before), rim).all()
+
+
 def test_carving_decides_what_no_clicked_view_shows_by_the_cut():
     """A bar along x, one region in every view: C (x < -1.5), A (red, the middle) and B (x >
     1.5); the clicked view shows A and B, not C. A click on A, a negative one on B's far end:

@@ -48,7 +48,9 @@ max-flow solver (PyMaxflow), with a cost per Gaussian from six kinds of evidence
   (below), what its view hides too. On the selection's blurred rim, whose pixel its selected
   and unselected seeds share (:meth:`ClickSelector._on_edge`), it takes out only those of
   its seeds of the rest's colours (:meth:`ClickSelector._edge_moved`);
-- **a later positive click**, the same mirrored (:meth:`ClickSelector._grown`): over the
+- **a later positive click**, the same mirrored (:meth:`ClickSelector._grown`; on the rim it
+  adds only those of its seeds of the selection's colours, so that what a negative click took
+  out beside the rim stays out): over the
   Gaussians nearer, along the graph, to its seeds that lie beside the selection than to those
   the views hold off the object, the click's word replaces the rest, where its view shows
   them and they look like the clicked part: a highlight on a bronze head that the masks hold
@@ -618,8 +620,8 @@ class ClickSelector:
         elif firm and scene:
             first = firm[0] == len(clicks) - 1
             return self._carved(clicks, own, positive, negative, before, first)
-        if before is not None and not clicks[-1].positive and self._on_edge(clicks[-1], own, before):
-            return self._edge_moved(clicks[-1], own, before)  # a negative click on the selection's rim
+        if before is not None and self._on_edge(clicks[-1], own, before):
+            return self._edge_moved(clicks[-1], own, before)  # a click on the selection's rim
         apart = self._apart(clicks, firm, positive)
         if apart and apart[-1] == len(clicks) - 1:  # the masks joined the clicked part to the object
             within = self._yielding(clicks[-1:], own, voted_regions, share, weight > 0) > 0.5
