@@ -229,6 +229,34 @@ def test_a_click_on_the_edge_of_a_framed_selection_moves_it_by_its_seeds_alone()
     np.testing.assert_array_equal(selector.cut([first, _click(900, blue_end)], selected), selected)
 
 
+def test_a_positive_click_of_a_colour_at_the_frame_cuts_the_object_again_to_the_frame():
+    """The object is red (-1 < x <= 0.5), yellow (to 1.5) and green (to 3), beside blue, and
+    the clicked view's frame shows both ends of the bar (|x| > 2.5): the object reaches the
+    frame on the right, as DTU's house does. The selection holds the red and a quarter of the
+    rest. A positive click on the green, whose colour the frame holds, says that the object
+    reaches the frame there: cut again from all the seeds, it takes all of the object, the
+    yellow nearer the first click too, and none of the blue. Where the frame shows the blue
+    end alone, the same click carves its cell, and the yellow nearer the first click's
+    seeds than its own stays out."""
+    rng = np.random.default_rng(0)
+    x = rng.uniform(-3, 3, 900)
+    xyz = np.stack([x, rng.normal(0, 0.2, 900), rng.normal(0, 0.2, 900)], 1)
+    bands = [(x <= -1)[:, None], (x <= 0.5)[:, None], (x <= 1.5)[:, None]]
+    rgb = np.select(bands, [np.array([30, 30, 200]), np.array([200, 30, 30]), np.array([200, 200, 30])], [30, 200, 30])
+    g = gaussians_from_points(xyz, rgb.astype(np.uint8), initial_opacity=0.9)
+    selector = ClickSelector(g, np.full(900, 7, np.uint8), _regions(900, [np.arange(900)]))
+    red, quarter = np.flatnonzero((x > -1) & (x <= 0.5)), np.arange(900) % 4 == 0
+    first = replace(_click(900, red[np.argsort(np.abs(x[red]))]), frame=np.where(np.abs(x) > 2.5, 1.0, 0.0))
+    np.testing.assert_array_equal(selector.select([first]), (x > -1) & (x <= 0.5))
+    before = (x > -1) & ((x <= 0.5) | quarter)
+    green = np.flatnonzero((x > 1.5) & ~quarter)
+    on_green = _click(900, green[np.argsort(np.abs(x[green] - 2.0))])
+    np.testing.assert_array_equal(selector.cut([first, on_green], before), x > -1)
+    inside = replace(first, frame=np.where(x < -2.5, 1.0, 0.0))
+    carved = selector.cut([inside, on_green], before)
+    assert carved[x > 1.5].all() and not carved[(x > 0.5) & (x <= 1.0)].all() and not carved[x <= -1].any()
+
+
 def test_a_negative_click_on_the_selections_rim_takes_out_its_seeds_of_the_rests_colour_alone():
     """The masks hold A (red) apart from B (blue), and the selection holds A and five of B's
     Gaussians nearest to A (a spill over the background). A negative click whose pixel A's
