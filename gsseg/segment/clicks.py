@@ -940,11 +940,13 @@ class ClickSelector:
         return seeds[before[seeds] | (gap <= self.options.part_reach * self.graph.spacing)]
 
     def _framed(self, positive: np.ndarray, frame: np.ndarray) -> np.ndarray:
-        """(N,) bool: the first click's selection where the views' vote holds the scene and its
-        view frames the object: each Gaussian is the object's in proportion to how much nearer,
-        along the graph, it lies to a ``positive`` (S,) seed than to one of the ``frame`` (S',)
-        (:meth:`_frame`), times :attr:`ClickOptions.split_weight`, with colour models learned
-        from the cut (:meth:`_appearance`), the object's from the Gaussians at least
+        """(N,) bool: the object cut from the frame where the views' vote holds the scene and
+        the first click's view frames the object (the first click's selection, and that of a
+        later positive one of a colour the frame holds: :meth:`_reframed`): each Gaussian is
+        the object's in proportion to how much nearer, along the graph, it lies to a
+        ``positive`` (S,) seed than to one of the ``frame`` (S',) (:meth:`_frame`), times
+        :attr:`ClickOptions.split_weight`, with colour models learned from the cut
+        (:meth:`_appearance`), the object's from the Gaussians at least
         :attr:`ClickOptions.split_full` nearer to it (the cut's reach halfway to the frame
         does not teach them the ground's colours); what the graph joins to the seeds. As
         GrabCut cuts the object from the frame of a box, without masks."""
