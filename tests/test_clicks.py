@@ -718,6 +718,30 @@ def test_a_negative_click_carves_apart_a_surface_the_masks_joined_to_the_object(
             assert after[back].mean() > 0.9
 
 
+def test_a_positive_click_at_the_objects_foot_does_not_bring_back_the_part_carved_apart():
+    """The masks join a red column to the grey table under it (a third of every view), and a
+    negative click on the table's front carves the table apart. A positive click at the column's foot whose pixel
+    the table beside it draws (five grey seeds, and a tenth as much of one red) adds none of
+    the table: grey is a colour the column lacks and the negative click's seeds have, and
+    the click, though of the table's colour, does not undo the carving."""
+    g, c, t, _ = _column_on_a_table([128, 128, 128])
+    n = len(g)
+    regions = _regions(n, [np.r_[c, t]])
+    regions = replace(regions, matrix=regions.matrix @ sp.diags(np.where(np.arange(n) < 600, 1.0, 2.0)))
+    selector = ClickSelector(g, np.isin(np.arange(n), np.r_[c, t]).astype(np.uint8), regions)
+    xyz = g.means.numpy()
+    front = t[np.argsort(xyz[t, 1])]
+    clicks = [_click(n, c), _click(n, front, positive=False)]
+    carved = selector.select(clicks)
+    assert not selector.holds_the_scene(clicks[:1]) and carved[c].all() and carved[t].mean() < 0.05
+    foot = c[np.argmin(xyz[c, 2])]
+    beside = t[np.argsort(np.linalg.norm(xyz[t] - xyz[foot], axis=1))][:5]
+    weights = np.zeros(n)
+    weights[beside], weights[foot] = 1.0, 0.1
+    after = selector.cut([*clicks, ClickEvidence(weights, True)], carved)
+    np.testing.assert_array_equal(after, carved)
+
+
 def test_a_later_positive_click_does_not_pin_a_large_hazy_gaussian():
     """A hazy Gaussian H beside A, drawn in every view over A and over the background alike
     with 20 times A's weight each. Where H is also ten times the median size, a later positive

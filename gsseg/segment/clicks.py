@@ -46,7 +46,8 @@ max-flow solver (PyMaxflow), with a cost per Gaussian from six kinds of evidence
   have (:meth:`ClickSelector._apart`: the table under the tools), it carves the part apart
   on the negative clicks' side of the graph, as the clicks do where the masks hold the scene
   (below), what its view hides too. On the selection's blurred rim, whose pixel its selected
-  and unselected seeds share (:meth:`ClickSelector._on_edge`), it takes out only those of
+  and unselected seeds share (:meth:`ClickSelector._on_edge`: the seeds it pins, or all of
+  them, a large hazy Gaussian of the object among them), it takes out only those of
   its seeds of the rest's colours (:meth:`ClickSelector._edge_moved`);
 - **a later positive click**, the same mirrored (:meth:`ClickSelector._grown`; on the rim it
   adds only those of its seeds of the selection's colours, so that what a negative click took
@@ -64,7 +65,11 @@ max-flow solver (PyMaxflow), with a cost per Gaussian from six kinds of evidence
   head's rim where such a Gaussian shows does not bring the blur it draws beside the head;
   where all its seeds are heavy in the views, those of them not many times the median size
   that it lands on more than a sliver of stay (:meth:`ClickSelector._pinned`: an object near
-  the camera, not the floor a heavy Gaussian draws beside a head's cheek).
+  the camera, not the floor a heavy Gaussian draws beside a head's cheek). Once a negative
+  click carved a part apart, the seeds of a later positive click off the selection whose colour
+  the object lacks and the negative clicks' seeds have (:meth:`ClickSelector._unlike`) are
+  not pinned: a click on the object's rim whose pixel the ground carved off beside it draws
+  does not bring the ground back.
 
 Where the views' vote of the first click holds the scene (masks that read the object and its
 surroundings as one region: :meth:`RegionVote.holds_the_scene`), neither the views nor the
@@ -622,19 +627,26 @@ class ClickSelector:
         elif firm and scene:
             first = firm[0] == len(clicks) - 1
             return self._carved(clicks, own, positive, negative, before, first)
-        if before is not None and self._on_edge(clicks[-1], own, before):
-            return self._edge_moved(clicks[-1], own, before)  # a click on the selection's rim
-        apart = self._apart(clicks, firm, positive)
+        if before is not None:  # a click on the selection's rim, by the seeds it pins or by all
+            # of them (a hazy Gaussian of the object that draws the pixel is no seed it pins)
+            for edge in (own, clicks[-1].seeds(o.seed_share, o.seed_local)):
+                if self._on_edge(clicks[-1], edge, before):
+                    return self._edge_moved(clicks[-1], edge, before)
+        apart = self._apart(clicks, firm, seeds)
         if apart and apart[-1] == len(clicks) - 1:  # the masks joined the clicked part to the object
             within = self._yielding(clicks[-1:], own, voted_regions, share, weight > 0) > 0.5
             within &= self._alike(own, before) > 0
             return self._carved(clicks, negative, positive, negative, before, False, within)
         grown = np.zeros(len(self.labels))  # the last click's part, where it is a later positive one
         if before is not None:  # a later positive click pins only the seeds of the part it adds
+            # once a part was carved apart, what looks like it and not like the object stays out
+            held_off = np.flatnonzero(~before & self._unlike(before, negative)) if apart else []
             for i, (k, on) in enumerate(seeds):
                 if i and on:
                     added = np.setdiff1d(k, negative)
-                    part, pinned = self._grown(clicks[i], added, negative, share, weight, hazy, before)
+                    part, pinned = self._grown(
+                        clicks[i], np.setdiff1d(added, held_off), negative, share, weight, hazy, before
+                    )
                     seeds[i] = (np.union1d(np.setdiff1d(k, added), pinned), on)
                     grown = part if i == len(clicks) - 1 else grown
             positive = np.setdiff1d(np.concatenate([k for k, is_positive in seeds if is_positive]), both)
@@ -1062,13 +1074,18 @@ class ClickSelector:
         held = [None if click.positive else self._seeds_share(click, share) for click in clicks]
         return [k for k, h in enumerate(held) if h is not None and h >= self.options.carve_share]
 
-    def _apart(self, clicks: Sequence[ClickEvidence], firm: list[int], positive: np.ndarray) -> list[int]:
+    def _apart(
+        self, clicks: Sequence[ClickEvidence], firm: list[int], seeds: list[tuple[np.ndarray, bool]]
+    ) -> list[int]:
         """The indices in ``clicks`` of the negative clicks that carve their part apart from
         the object where the views' vote does not hold the scene (:meth:`_carved`, within the
         negative clicks' side of the graph): of the ``firm`` ones (:meth:`_firm`: the masks
         joined the clicked part to the object, and the vote cannot tell the two apart), those
         whose colour (their mean in CIE Lab, by the click's weight) lies at least
-        :attr:`ClickOptions.apart_colour` from that of every ``positive`` (S,) seed. A click
+        :attr:`ClickOptions.apart_colour` from that of every positive seed of the clicks before
+        it (``seeds``: each click's, and whether it is positive), so that a later click never
+        undoes the carving (a positive click at an object's foot whose pixel the table carved
+        off draws does not make the table the object's colour). A click
         on the edge of a bronze head whose colour the head has is a negative click as with
         masks: carved, the graph's split took 215-495 of the head's Gaussians a click (the
         head's curve 0.931 -> 0.878 over ten clicks), where
@@ -1079,13 +1096,12 @@ class ClickSelector:
         meet (the head's rim with its own masks 13.0-15.9, carved at a loss; the statue's
         joined ground 12.6-13.6, carved at a gain: docs/segmentation.md)."""
         o = self.options
-        if not len(positive):
-            return []
         apart = []
         for k in firm:
-            seeds = clicks[k].seeds(o.seed_share, o.seed_local)
-            colour = np.average(self.colours.lab[seeds], axis=0, weights=clicks[k].weights[seeds])
-            if self._apart_in_colour(colour[None], positive)[0]:
+            positive = np.concatenate([np.zeros(0, np.int64), *(s for s, on in seeds[:k] if on)])
+            own = clicks[k].seeds(o.seed_share, o.seed_local)
+            colour = np.average(self.colours.lab[own], axis=0, weights=clicks[k].weights[own])
+            if len(positive) and self._apart_in_colour(colour[None], positive)[0]:
                 apart.append(k)
         return apart
 
