@@ -720,10 +720,11 @@ def test_a_negative_click_carves_apart_a_surface_the_masks_joined_to_the_object(
 
 def test_a_positive_click_at_the_objects_foot_does_not_bring_back_the_part_carved_apart():
     """The masks join a red column to the grey table under it (a third of every view), and a
-    negative click on the table's front carves the table apart. A positive click at the column's foot whose pixel
-    the table beside it draws (five grey seeds, and a tenth as much of one red) adds none of
-    the table: grey is a colour the column lacks and the negative click's seeds have, and
-    the click, though of the table's colour, does not undo the carving."""
+    negative click on the table's front carves the table apart. A positive click at the
+    column's foot whose pixel the table beside it draws (five grey seeds, and a tenth as much
+    of one red) adds none of the table: grey is a colour the column lacks and the negative
+    click's seeds have, and the click, though of the table's colour, does not undo the
+    carving."""
     g, c, t, _ = _column_on_a_table([128, 128, 128])
     n = len(g)
     regions = _regions(n, [np.r_[c, t]])
@@ -740,6 +741,28 @@ def test_a_positive_click_at_the_objects_foot_does_not_bring_back_the_part_carve
     weights[beside], weights[foot] = 1.0, 0.1
     after = selector.cut([*clicks, ClickEvidence(weights, True)], carved)
     np.testing.assert_array_equal(after, carved)
+
+
+def test_a_positive_click_on_the_rim_a_large_gaussian_of_the_object_draws_adds_none_of_the_neighbour():
+    """The masks hold A (red) and B (blue, touching it) apart; A's outermost Gaussian is ten
+    times the median size. A positive click whose pixel that large Gaussian (selected) and
+    B's near edge (not) share lands on the selection's rim, although the seeds it pins,
+    the large one left out, are B's alone: it adds only seeds of A's colours, none of B."""
+    rng = np.random.default_rng(0)
+    xyz = np.concatenate([rng.normal(0, 0.3, (200, 3)), rng.normal(0, 0.3, (200, 3)) + [1.2, 0, 0]])
+    a, b = np.arange(200), np.arange(200, 400)
+    g = _on_a_backdrop(xyz, np.repeat(np.array([[200, 30, 30], [30, 30, 200]]), 200, axis=0))
+    n = len(g)
+    x = g.means[:, 0].numpy()
+    rim = a[np.argmax(x[a])]
+    g.log_scales[rim] = g.log_scales.max(1).values.median() + np.log(10.0)
+    selector = ClickSelector(g, np.full(n, 7, np.uint8), _regions(n, [a, b]))
+    first = _click(n, a[np.argsort(x[a])])
+    before = selector.select([first])
+    assert before[a].all() and not before[b].any()
+    weights = np.zeros(n)
+    weights[rim], weights[b[np.argsort(x[b])][:5]] = 1.0, 0.2
+    np.testing.assert_array_equal(selector.cut([first, ClickEvidence(weights, True)], before), before)
 
 
 def test_a_later_positive_click_does_not_pin_a_large_hazy_gaussian():
