@@ -25,6 +25,7 @@ from dataset_tools.scene import load_scene
 from gsseg.model.gaussians import gaussians_from_points
 from gsseg.model.ply import read_ply
 from gsseg.render.contributions import RegionWeights
+from gsseg.render.projection import EPS_2D
 from gsseg.run.loaded import load_run
 from gsseg.segment.clicks import ClickEvidence, ClickOptions, ClickSelector, ColourModel, RegionVote, SceneHeld
 from gsseg.segment.prompts import click_evidence, framed_object, object_click
@@ -283,6 +284,46 @@ def test_a_negative_click_on_the_selections_rim_takes_out_its_seeds_of_the_rests
     np.testing.assert_array_equal(selector.cut([first, on_spill], before), expected)
     on_a = _click(n, a[np.argsort(-x[a])], positive=False)
     assert not selector.cut([first, on_a], before)[a[np.argsort(-x[a])][:5]].any()
+
+
+def test_a_negative_click_within_the_blur_of_the_selections_rim_takes_out_none_of_the_object():
+    """The masks hold A (red) apart and the selection is A. A negative click on A's far end,
+    its seeds all A's, lands where the selection draws A's rim: one pixel inside the edge of
+    what it draws, where its seeds' footprints spread three (the model draws A's rim as a blur
+    beyond A's edge in the photo): it takes out none of A. The same click ten pixels inside
+    the edge takes out its side of A, as a click on a part the masks joined to A does; so does
+    a click without a view to measure it in."""
+    g, a, b = _two_blobs_on_a_backdrop()
+    n = len(g)
+    x = g.means[:, 0].numpy()
+    selector = ClickSelector(g, np.full(n, 7, np.uint8), _regions(n, [a, b]))
+    first = _click(n, a[np.argsort(x[a])])
+    before = selector.select([first])
+    assert before[a].all() and not before[b].any()
+    far_end = _click(n, a[np.argsort(-x[a])], positive=False)
+    blurred = replace(far_end, spread=np.full(n, 3.0), inside=lambda selected: 1.0)
+    np.testing.assert_array_equal(selector.cut([first, blurred], before), before)
+    for deep in (replace(blurred, inside=lambda selected: 10.0), far_end):
+        assert not selector.cut([first, deep], before)[a[np.argsort(-x[a])][:5]].any()
+
+
+def test_a_click_measures_how_deep_it_lies_inside_a_selection_and_its_seeds_blur():
+    """Known answers of ``spread`` and ``inside``: a Gaussian of standard deviation 0.5 at depth
+    5 on the axis of a focal length of 100 spreads 10 pixels, one of 0.2 at depth 8, off the
+    axis by 3 and 3, 2.5 stretched by the perspective's slant (1 + 18 / 64), each widened by the
+    projection's low-pass filter (``EPS_2D`` pixels squared). A click at the nearer one's centre
+    lies as deep inside what it draws as the disc where its alpha (0.99 at the centre) is at
+    least one half reaches, and nowhere inside what the other or nothing draws."""
+    g = gaussians_from_points(
+        np.array([[0.0, 0.0, 5.0], [3.0, -3.0, 8.0]]), np.full((2, 3), 128, np.uint8), initial_opacity=0.99
+    )
+    g.log_scales = torch.log(torch.tensor([0.5, 0.2]))[:, None].repeat(1, 3)
+    camera = PinholeCamera(128, 128, 100.0, 100.0, 64.0, 64.0)
+    seen = click_evidence(g, camera, np.eye(4)[:3], 64.0, 64.0, positive=False)
+    np.testing.assert_allclose(seen.spread, np.sqrt(np.array([10.0**2, 2.5**2 * (1 + 18 / 64)]) + EPS_2D), rtol=1e-5)
+    half_alpha = seen.spread[0] * np.sqrt(2 * np.log(2 * 0.99))
+    assert seen.inside(np.array([True, False])) == pytest.approx(half_alpha, abs=1.0)
+    assert seen.inside(np.array([False, True])) == 0 and seen.inside(np.zeros(2, bool)) == 0
 
 
 def test_a_positive_click_on_the_selections_rim_brings_back_nothing_a_negative_click_took():

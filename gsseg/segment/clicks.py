@@ -104,7 +104,7 @@ views' masks give to the bush beside it).
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import maxflow
@@ -211,6 +211,10 @@ class ClickOptions:
             ``carve_share`` (the masks joined the clicked part to the object) and whose colour
             lies at least this far (CIE76 distance in Lab) from every positive seed's carves
             its part out (:meth:`ClickSelector._apart`).
+        rim_spread: a later negative click lands on the selection's blurred rim where it lies
+            on what the selection draws in its view within this many times its seeds' footprint
+            (their weighted standard deviation) of the edge of what it draws
+            (:meth:`ClickSelector._in_blur`).
         stickiness: weight of the selection before the click; under a negative click, the
             least cost of a selected Gaussian (it goes by the click's word alone).
         carve_stickiness: the same where the clicks carve the object alone
@@ -253,6 +257,7 @@ class ClickOptions:
     against_colour: float = 1.0
     carve_share: float = 0.6
     apart_colour: float = 10.0
+    rim_spread: float = 1.0
     stickiness: float = 3.0
     carve_stickiness: float = 0.75
     frame_held: float = 0.9
@@ -279,6 +284,8 @@ class ClickOptions:
             )
         if self.apart_colour <= 0:
             raise OptionError("{apart_colour}: give a colour distance above 0.", apart_colour=self.apart_colour)
+        if self.rim_spread < 0:
+            raise OptionError("{rim_spread}: give 0 (no such rim) or more.", rim_spread=self.rim_spread)
         if self.appearance_rounds < 0 or self.appearance_bins < 2:
             raise OptionError(
                 "{appearance_rounds}: give 0 or more; {appearance_bins}: 2 or more.",
@@ -311,14 +318,19 @@ class ClickEvidence:
     (N,) in [0, 1] how much of each Gaussian the clicked view shows (its blended weight over
     the view over what it would give unoccluded), and ``local`` (N,) in [0, 1] the share of
     its blended weight in the view that falls at the clicked pixels, ``frame`` (N,) its blended
-    weight over the view's frame, the pixels along its border (all None: a prompt without a
-    view, a 3D point)."""
+    weight over the view's frame, the pixels along its border, ``spread`` (N,) the standard
+    deviation of its footprint in the view along its longest axis, in pixels, and ``inside``,
+    which gives for a selection ((N,) bool) how far the clicked pixel lies inside what the
+    selection draws in the view (pixels to the nearest one it does not win; 0 where it does not
+    win the clicked one) (all None: a prompt without a view, a 3D point)."""
 
     weights: np.ndarray
     positive: bool
     shown: np.ndarray | None = None
     local: np.ndarray | None = None
     frame: np.ndarray | None = None
+    spread: np.ndarray | None = None
+    inside: Callable[[np.ndarray], float] | None = None
 
     def seeds(self, share: float, least_local: float = 0.0) -> np.ndarray:
         """Indices of the Gaussians that carry ``share`` of the click's weight, heaviest first,
@@ -606,6 +618,8 @@ class ClickSelector:
         if not clicks or not clicks[0].positive:
             raise InputError("a selection starts with a click on the object; click on it first.")
         o = self.options
+        if before is not None and self._in_blur(clicks[-1], before):
+            return self._edge_moved(clicks[-1], clicks[-1].seeds(o.seed_share, o.seed_local), before)
         share, weight, voted_regions = self.views_vote(clicks, before)
         hazy = self._hazy(weight)
         seeds = [(c.seeds(o.seed_share, o.seed_local), c.positive) for c in clicks]
@@ -917,6 +931,22 @@ class ClickSelector:
         if reaches_frame:
             return before | self._framed(positive, off)
         return self._carved(clicks, own, positive, off, before, False, framed=True)
+
+    def _in_blur(self, click: ClickEvidence, before: np.ndarray) -> bool:
+        """Whether a negative ``click`` lands on what the selection ``before`` (N,) draws in its
+        view within :attr:`ClickOptions.rim_spread` times its seeds' footprint (their standard
+        deviation in the view, :attr:`ClickEvidence.spread`, weighted by the click's weights)
+        of the edge of what it draws (:attr:`ClickEvidence.inside`): a pixel the selection's
+        rim draws as a blur beyond the object's edge (a model fitted no sharper than its
+        photos), whose Gaussians are the object's own; taken out, they would cut the object's
+        rim in this view and its side in the others. A part the masks joined to the object
+        lies deeper inside what the selection draws than its Gaussians' blur."""
+        if click.positive or click.inside is None or click.spread is None:
+            return False
+        seeds = click.seeds(self.options.seed_share, self.options.seed_local)
+        weights = click.weights[seeds]
+        blur = float(weights @ click.spread[seeds]) / max(float(weights.sum()), 1e-12)
+        return 0 < click.inside(before) < self.options.rim_spread * blur
 
     def _on_edge(self, click: ClickEvidence, seeds: np.ndarray, before: np.ndarray) -> bool:
         """Whether ``click`` lands on the edge of the selection ``before`` (N,): its ``seeds``

@@ -184,8 +184,10 @@ def click_evidence(
     summed over the pixels within ``radius`` of it (a (2 radius + 1)^2 window), how much
     of it the view shows (its weight over the whole view over what its footprint would give
     unoccluded, o_i 2 pi sqrt(det Sigma2D_i); 0: hidden or off screen, 1: in full view), the
-    share of its weight over the view that falls in the window, and its weight over the
-    view's frame (the pixels within ``band`` of the border, the window left out).
+    share of its weight over the view that falls in the window, its weight over the
+    view's frame (the pixels within ``band`` of the border, the window left out), the standard
+    deviation of its footprint along the longest axis, and how far the click lies inside what
+    a selection draws in the view (:attr:`ClickEvidence.inside`, a render of the selection).
 
     Raises:
         InputError: the click lies outside the view, or less than half opaque is rendered there.
@@ -208,13 +210,22 @@ def click_evidence(
         raise InputError(f"nothing opaque is rendered at ({u}, {v}) (alpha {alpha:.2f}); click on an object.")
     with torch.no_grad():
         proj = project_gaussians(g.means, g.quats, g.scales, pose, camera, g.opacities)
-        footprint = (
-            g.opacities * 2 * math.pi / torch.sqrt(proj.conics[:, 0] * proj.conics[:, 2] - proj.conics[:, 1] ** 2)
-        )
-        footprint = torch.where(proj.radii > 0, footprint, torch.inf).double().cpu().numpy()
+        a, b, c = proj.conics.double().cpu().unbind(-1)
+        det = a * c - b**2  # the conic is the inverse of the 2D covariance
+        on_screen = (proj.radii > 0).cpu()
+        footprint = torch.where(on_screen, g.opacities.double().cpu() * 2 * math.pi / torch.sqrt(det), torch.inf)
+        half_trace = (a + c) / (2 * det)  # the covariance's largest eigenvalue, its longest axis's variance
+        longest = half_trace + torch.sqrt(torch.clamp(half_trace**2 - 1 / det, min=0))
+        spread = torch.where(on_screen, torch.sqrt(longest), 0.0).numpy()
     in_view = weights.sum(0)
     local = weights[1] / np.maximum(in_view, 1e-12)
-    return ClickEvidence(weights[1], positive, np.clip(in_view / footprint, 0, 1), local, weights[2])
+
+    def inside(selected: np.ndarray) -> float:
+        won = segment_pixels(g, selected.astype(np.uint8), camera, pose, backend=backend) == 1
+        return float(ndimage.distance_transform_edt(won)[row, col])
+
+    shown = np.clip(in_view / footprint.numpy(), 0, 1)
+    return ClickEvidence(weights[1], positive, shown, local, weights[2], spread, inside)
 
 
 def point_evidence(gaussians: Gaussians, point: np.ndarray, k: int = 20) -> ClickEvidence:
