@@ -48,7 +48,10 @@ max-flow solver (PyMaxflow), with a cost per Gaussian from six kinds of evidence
   (below), what its view hides too. On the selection's blurred rim, whose pixel its selected
   and unselected seeds share (:meth:`ClickSelector._on_edge`: the seeds it pins, or all of
   them, a large hazy Gaussian of the object among them), it takes out only those of
-  its seeds of the rest's colours (:meth:`ClickSelector._edge_moved`);
+  its seeds of the rest's colours (:meth:`ClickSelector._edge_moved`), and so it does where
+  it lands on what the selection draws within its seeds' blur of the edge of it
+  (:meth:`ClickSelector._in_blur`: a model fitted no sharper than its photos draws a head's
+  rim a few pixels beyond the head, with the head's own Gaussians);
 - **a later positive click**, the same mirrored (:meth:`ClickSelector._grown`; on the rim it
   adds only those of its seeds of the selection's colours, so that what a negative click took
   out beside the rim stays out): over the
@@ -257,7 +260,7 @@ class ClickOptions:
     against_colour: float = 1.0
     carve_share: float = 0.6
     apart_colour: float = 10.0
-    rim_spread: float = 1.0
+    rim_spread: float = 0.75
     stickiness: float = 3.0
     carve_stickiness: float = 0.75
     frame_held: float = 0.9
