@@ -217,7 +217,7 @@ class ClickOptions:
         rim_spread: a later negative click lands on the selection's blurred rim where it lies
             on what the selection draws in its view within this many times its seeds' footprint
             (their weighted standard deviation) of the edge of what it draws
-            (:meth:`ClickSelector._in_blur`).
+            (:meth:`ClickSelector._in_blur`; 0: never).
         stickiness: weight of the selection before the click; under a negative click, the
             least cost of a selected Gaussian (it goes by the click's word alone).
         carve_stickiness: the same where the clicks carve the object alone
