@@ -621,8 +621,9 @@ class ClickSelector:
         if not clicks or not clicks[0].positive:
             raise InputError("a selection starts with a click on the object; click on it first.")
         o = self.options
-        if before is not None and self._in_blur(clicks[-1], before):
-            return self._edge_moved(clicks[-1], clicks[-1].seeds(o.seed_share, o.seed_local), before)
+        last = clicks[-1].seeds(o.seed_share, o.seed_local)  # the last click's seeds, none pinned
+        if before is not None and self._in_blur(clicks[-1], last, before):
+            return self._edge_moved(clicks[-1], last, before)
         share, weight, voted_regions = self.views_vote(clicks, before)
         hazy = self._hazy(weight)
         seeds = [(c.seeds(o.seed_share, o.seed_local), c.positive) for c in clicks]
@@ -646,7 +647,7 @@ class ClickSelector:
             return self._carved(clicks, own, positive, negative, before, first)
         if before is not None:  # a click on the selection's rim, by the seeds it pins or by all
             # of them (a hazy Gaussian of the object that draws the pixel is no seed it pins)
-            for edge in (own, clicks[-1].seeds(o.seed_share, o.seed_local)):
+            for edge in (own, last):
                 if self._on_edge(clicks[-1], edge, before):
                     return self._edge_moved(clicks[-1], edge, before)
         apart = self._apart(clicks, firm, seeds)
@@ -935,18 +936,17 @@ class ClickSelector:
             return before | self._framed(positive, off)
         return self._carved(clicks, own, positive, off, before, False, framed=True)
 
-    def _in_blur(self, click: ClickEvidence, before: np.ndarray) -> bool:
+    def _in_blur(self, click: ClickEvidence, seeds: np.ndarray, before: np.ndarray) -> bool:
         """Whether a negative ``click`` lands on what the selection ``before`` (N,) draws in its
-        view within :attr:`ClickOptions.rim_spread` times its seeds' footprint (their standard
-        deviation in the view, :attr:`ClickEvidence.spread`, weighted by the click's weights)
-        of the edge of what it draws (:attr:`ClickEvidence.inside`): a pixel the selection's
+        view within :attr:`ClickOptions.rim_spread` times the footprint of its ``seeds`` (S,)
+        (their standard deviation in the view, :attr:`ClickEvidence.spread`, weighted by the
+        click's weights) of the edge of what it draws (:attr:`ClickEvidence.inside`): a pixel the selection's
         rim draws as a blur beyond the object's edge (a model fitted no sharper than its
         photos), whose Gaussians are the object's own; taken out, they would cut the object's
         rim in this view and its side in the others. A part the masks joined to the object
         lies deeper inside what the selection draws than its Gaussians' blur."""
         if click.positive or click.inside is None or click.spread is None:
             return False
-        seeds = click.seeds(self.options.seed_share, self.options.seed_local)
         weights = click.weights[seeds]
         blur = float(weights @ click.spread[seeds]) / max(float(weights.sum()), 1e-12)
         return 0 < click.inside(before) < self.options.rim_spread * blur
