@@ -230,6 +230,34 @@ def test_a_click_on_the_edge_of_a_framed_selection_moves_it_by_its_seeds_alone()
     np.testing.assert_array_equal(selector.cut([first, _click(900, blue_end)], selected), selected)
 
 
+def test_a_positive_click_on_the_edge_adds_the_part_the_first_cut_missed_beyond_a_gap():
+    """A red bar (-1 < x <= 2) between blue ends, the clicked view's frame on the blue
+    (|x| > 2.5), with no Gaussian over ``gap`` beyond A's end (x = 1): the first click on A
+    selects A alone, and P (the red beyond the gap) is missed, as the first cut missed a
+    bronze head's crown. A positive click whose pixel A's end and P's start share adds none of
+    its seeds by the edge's rule (they lie beyond ``part_reach``), so it carves P from them:
+    all of P, none of the blue. Where the gap is wider than ``missed_reach`` spacings, the
+    click adds nothing (what lies that far beyond the edge may show through from behind)."""
+    for gap, adds in ((0.4, True), (0.9, False)):
+        rng = np.random.default_rng(0)
+        x = rng.uniform(-3, 3, 900)
+        x = np.where((x > 1) & (x <= 1 + gap), x + gap, x)
+        xyz = np.stack([x, rng.normal(0, 0.2, 900), rng.normal(0, 0.2, 900)], 1)
+        red = (x > -1) & (x <= 2)
+        rgb = np.where(red[:, None], [200, 30, 30], [30, 30, 200]).astype(np.uint8)
+        g = gaussians_from_points(xyz, rgb, initial_opacity=0.9)
+        selector = ClickSelector(g, np.full(900, 7, np.uint8), _regions(900, [np.arange(900)]))
+        spacings = gap / selector.graph.spacing
+        assert 4 < spacings < selector.options.missed_reach if adds else spacings > selector.options.missed_reach
+        a, part = np.flatnonzero((x > -1) & (x <= 1)), np.flatnonzero((x > 1) & (x <= 2))
+        first = replace(_click(900, a[np.argsort(np.abs(x[a]))]), frame=np.where(np.abs(x) > 2.5, 1.0, 0.0))
+        selected = selector.select([first])
+        np.testing.assert_array_equal(selected, (x > -1) & (x <= 1))
+        rim = np.concatenate([a[np.argsort(-x[a])][:3], part[np.argsort(x[part])][:3]])
+        on_edge = ClickEvidence(np.isin(np.arange(900), rim).astype(float), True)
+        np.testing.assert_array_equal(selector.cut([first, on_edge], selected), red if adds else selected)
+
+
 def test_a_positive_click_of_a_colour_at_the_frame_cuts_the_object_again_to_the_frame():
     """The object is red (-1 < x <= 0.5), yellow (to 1.5) and green (to 3), beside blue, and
     the clicked view's frame shows both ends of the bar (|x| > 2.5): the object reaches the

@@ -180,6 +180,9 @@ class ClickOptions:
             many times the Gaussians' median spacing of a selected one (a part beside it),
             where these hold most of its unselected seeds' weight; where the frame bounds the
             object, it pins no seed beyond it (:meth:`ClickSelector._beside`).
+        missed_reach: where such a click on the edge of a selection the frame bounds adds none
+            of its seeds, it carves the part the first cut missed from its unselected seeds
+            within this many spacings of a selected one (:meth:`ClickSelector._missed`).
         off_share: ... up to the Gaussians the views hold off the object (unselected, with
             under this share of their weight in the object's regions, ...
         off_weight: ... or under one half of a weight at least this many times the median
@@ -250,6 +253,7 @@ class ClickOptions:
     split_weight: float = 4.0
     split_full: float = 0.5
     part_reach: float = 3.0
+    missed_reach: float = 9.0
     off_share: float = 0.05
     off_weight: float = 16.0
     large_size: float = 8.0
@@ -890,7 +894,11 @@ class ClickSelector:
         selection's edge (:meth:`_on_edge`) moves the edge by its seeds alone: a positive one
         adds those beside the selection (:meth:`_beside`) whose colour is likelier under the
         selection's colours than under the rest's, a negative one takes out those likelier
-        under the rest's. Elsewhere the clicks carve (:meth:`_carved`, the object's colours
+        under the rest's. Where a positive one adds none of them, it lands on a part the first
+        cut missed a few spacings beyond the edge (:meth:`_missed`: the gold crown of a bronze
+        head whose dark face the first click selected): it carves as below from those seeds,
+        and adds of the cut only what has their colours and the graph joins to them.
+        Elsewhere the clicks carve (:meth:`_carved`, the object's colours
         learned from the selection), each changing its own cell: the first click's seeds
         (``seeds``: each click's, and whether it is positive) and those of the later ones on
         the side the selection put them on are pinned, the last click's too, less, for a
@@ -911,16 +919,21 @@ class ClickSelector:
         orbit, seed 1, object 1 with the clicks alone: 0.58 -> 0.37, where its cell gives 0.97)."""
         o = self.options
         last, (own, _) = clicks[-1], seeds[-1]
-        edge = last.seeds(o.seed_share, o.seed_local)
-        if self._on_edge(last, edge, before):
-            return self._edge_moved(last, edge, before)
-        reaches_frame = last.positive and not self._apart_in_colour(self.colours.lab[frame], own).all()
         earlier = seeds[1:-1]
         positive = np.concatenate([seeds[0][0], *(k[before[k]] for k, on in earlier if on)])
         negative = np.concatenate([np.zeros(0, np.int64), *(k[~before[k]] for k, on in earlier if not on)])
+        edge, missed = last.seeds(o.seed_share, o.seed_local), None
+        if self._on_edge(last, edge, before):
+            moved = self._edge_moved(last, edge, before)
+            if not last.positive or (moved & ~before).any():
+                return moved
+            missed = self._missed(edge, before, np.union1d(negative, frame))
+            if not len(missed):
+                return before
+        reaches_frame = last.positive and not self._apart_in_colour(self.colours.lab[frame], own).all()
         if last.positive:
             held_off = np.flatnonzero(~before & self._unlike(before, np.union1d(negative, frame)))
-            own = np.setdiff1d(self._beside(last, own, before), held_off)
+            own = missed if missed is not None else np.setdiff1d(self._beside(last, own, before), held_off)
             if before[own].all():
                 return before
             positive = np.union1d(positive, own)
@@ -933,8 +946,29 @@ class ClickSelector:
         frame = frame if reframed is None else np.intersect1d(frame, reframed)
         off = np.setdiff1d(np.union1d(negative, frame), positive)
         if reaches_frame:
-            return before | self._framed(positive, off)
-        return self._carved(clicks, own, positive, off, before, False, framed=True)
+            grown = before | self._framed(positive, off)
+        else:
+            grown = self._carved(clicks, own, positive, off, before, False, framed=True)
+        if missed is None:
+            return grown
+        added = grown & ~before & (self._alike(missed, ~before) >= 1)  # of the missed seeds' colours
+        return before | self.graph.joined(added, self._mask(missed))
+
+    def _missed(self, seeds: np.ndarray, before: np.ndarray, off: np.ndarray) -> np.ndarray:
+        """The unselected ``seeds`` (S,) of a positive click on the edge of a framed selection
+        ``before`` (N,) that lie on a part the first cut missed: within
+        :attr:`ClickOptions.missed_reach` spacings of a selected Gaussian, and of colours likelier
+        under the selection's colours than under those of the ``off`` (S',) Gaussians (the frame
+        and the negative seeds, which bound the object). A bronze head's gold crown lies 4-6
+        spacings beyond the dark face the first cut selected, and its colours are nearer the
+        face's than the floor's at the frame; the ground that a click beside a thin part lands
+        on has the frame's colours."""
+        missed = seeds[~before[seeds]]
+        if not len(missed):
+            return missed
+        gap = cKDTree(self.means[before]).query(self.means[missed])[0]
+        bounds = self.colours.ratio(before, self._mask(off) & ~before)[missed]
+        return missed[(gap <= self.options.missed_reach * self.graph.spacing) & (bounds > 0)]
 
     def _in_blur(self, click: ClickEvidence, seeds: np.ndarray, before: np.ndarray) -> bool:
         """Whether a negative ``click`` lands on what the selection ``before`` (N,) draws in its
