@@ -80,7 +80,9 @@ labels say where the object ends. Where the vote holds even the border of the cl
 (:attr:`ClickOptions.frame_held`: masks that say nothing), the view's frame does, as a box's
 does in GrabCut: the first click is cut from the Gaussians drawn along the view's border
 (:meth:`ClickSelector._framed`), and each later click moves the selection's edge by its seeds
-where it lands on that edge, or carves its own cell, or, positive and of a colour the frame
+where it lands on that edge (positive, where that adds none of them, it carves the part the
+first cut missed from those a few spacings beyond the edge: :meth:`ClickSelector._missed`),
+or carves its own cell, or, positive and of a colour the frame
 holds (the object reaches the view's border there), cuts the object again from all the
 clicks' seeds (:meth:`ClickSelector._reframed`).
 Elsewhere (an object that fills most of every view, its masks saying where it ends), from
