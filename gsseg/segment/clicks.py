@@ -749,6 +749,11 @@ class ClickSelector:
             share, regions = np.maximum(share, more), regions | more_regions
         return share, weight, regions
 
+    def _gap(self, selected: np.ndarray, seeds: np.ndarray) -> np.ndarray:
+        """(S,) each of the ``seeds`` (S,)' distance to the nearest Gaussian of ``selected`` (N,)
+        bool (not empty)."""
+        return cKDTree(self.means[selected]).query(self.means[seeds])[0]
+
     def _mask(self, indices: np.ndarray) -> np.ndarray:
         """(N,) bool: true at the Gaussians ``indices`` (S,)."""
         mask = np.zeros(len(self.labels), bool)
@@ -882,7 +887,13 @@ class ClickSelector:
         negative seeds) than under those of the ``selected`` (N,) bool ones: colours the object
         does not have and the rest does. A later positive click whose pixel shows the backdrop
         through a gap in the statue pins none of the backdrop."""
-        return self.colours.ratio(selected, self._mask(off) & ~selected) <= -self.options.far_colour
+        return self._against(selected, off) <= -self.options.far_colour
+
+    def _against(self, selected: np.ndarray, off: np.ndarray) -> np.ndarray:
+        """(N,) each Gaussian's colour log-likelihood ratio (:meth:`ColourModel.ratio`) under the
+        colours of the ``selected`` (N,) bool Gaussians against those of the ``off`` (S,) ones
+        not selected (the frame, the negative seeds)."""
+        return self.colours.ratio(selected, self._mask(off) & ~selected)
 
     def _reframed(
         self,
@@ -934,8 +945,11 @@ class ClickSelector:
                 return before
         reaches_frame = last.positive and not self._apart_in_colour(self.colours.lab[frame], own).all()
         if last.positive:
-            held_off = np.flatnonzero(~before & self._unlike(before, np.union1d(negative, frame)))
-            own = missed if missed is not None else np.setdiff1d(self._beside(last, own, before), held_off)
+            if missed is None:
+                held_off = np.flatnonzero(~before & self._unlike(before, np.union1d(negative, frame)))
+                own = np.setdiff1d(self._beside(last, own, before), held_off)
+            else:
+                own = missed
             if before[own].all():
                 return before
             positive = np.union1d(positive, own)
@@ -968,9 +982,8 @@ class ClickSelector:
         missed = seeds[~before[seeds]]
         if not len(missed):
             return missed
-        gap = cKDTree(self.means[before]).query(self.means[missed])[0]
-        bounds = self.colours.ratio(before, self._mask(off) & ~before)[missed]
-        return missed[(gap <= self.options.missed_reach * self.graph.spacing) & (bounds > 0)]
+        near = self._gap(before, missed) <= self.options.missed_reach * self.graph.spacing
+        return missed[near & (self._against(before, off)[missed] > 0)]
 
     def _in_blur(self, click: ClickEvidence, seeds: np.ndarray, before: np.ndarray) -> bool:
         """Whether a negative ``click`` lands on what the selection ``before`` (N,) draws in its
@@ -1017,8 +1030,7 @@ class ClickSelector:
         statue whose pixel shows the building 150 units behind it)."""
         if not before[seeds].any():
             return seeds
-        gap = cKDTree(self.means[before]).query(self.means[seeds])[0]
-        return seeds[before[seeds] | (gap <= self.options.part_reach * self.graph.spacing)]
+        return seeds[before[seeds] | (self._gap(before, seeds) <= self.options.part_reach * self.graph.spacing)]
 
     def _framed(self, positive: np.ndarray, frame: np.ndarray) -> np.ndarray:
         """(N,) bool: the object cut from the frame where the views' vote holds the scene and
@@ -1100,7 +1112,7 @@ class ClickSelector:
         seeds = seeds[~before[seeds]]
         if not before.any() or not len(seeds):
             return np.zeros(len(self.labels)), kept
-        beside = cKDTree(self.means[before]).query(self.means[seeds])[0]
+        beside = self._gap(before, seeds)
         off = ~before & (weight > 0) & ((share < o.off_share) | hazy & (share < 0.5))
         reached = beside <= o.part_reach * self.graph.spacing
         weights = click.weights[seeds]
