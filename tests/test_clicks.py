@@ -659,7 +659,7 @@ def test_a_positive_click_deep_in_a_part_the_masks_gave_to_the_surroundings_adds
     # although the views' vote holds it off the object
     again = selector.cut([*clicks, _click(n, w[np.argsort(g.means.numpy()[w, 2])], positive=False)], after)
     assert np.array_equal(again, after)
-    beside = ClickSelector(g, labels, _regions(n, [a]), ClickOptions(missed_reach=100.0))
+    beside = ClickSelector(g, labels, _regions(n, [a]), ClickOptions(part_reach=100.0))
     assert beside.cut(clicks, first)[t].sum() < 20
 
 

@@ -178,15 +178,13 @@ class ClickOptions:
         split_full: how far on a negative click's side (:meth:`GaussianGraph.split`) its word
             replaces all else (0.5: three times as near to it as to a positive click); the
             same for a later positive click's part.
-        part_reach: where the frame bounds the object, a later positive click pins no seed
-            beyond this many times the Gaussians' median spacing from a selected one
-            (:meth:`ClickSelector._beside`).
-        missed_reach: a later positive click grows a part from its seeds that lie within this
-            many spacings of a selected one (a part beside it), where these hold most of its
-            unselected seeds' weight (:meth:`ClickSelector._grown`); where such a click on the
-            edge of a selection the frame bounds adds none of its seeds, it carves the part the
-            first cut missed from its unselected seeds within this reach
-            (:meth:`ClickSelector._missed`).
+        part_reach: a later positive click grows a part from its seeds that lie within this
+            many times the Gaussians' median spacing of a selected one (a part beside it),
+            where these hold most of its unselected seeds' weight; where the frame bounds the
+            object, it pins no seed beyond it (:meth:`ClickSelector._beside`).
+        missed_reach: where such a click on the edge of a selection the frame bounds adds none
+            of its seeds, it carves the part the first cut missed from its unselected seeds
+            within this many spacings of a selected one (:meth:`ClickSelector._missed`).
         off_share: ... up to the Gaussians the views hold off the object (unselected, with
             under this share of their weight in the object's regions, ...
         off_weight: ... or under one half of a weight at least this many times the median
@@ -201,7 +199,7 @@ class ClickOptions:
             at least this share of their weight in the clicked view at the click
             (:attr:`ClickEvidence.local`): what it lands on of the rest is a sliver of what
             they draw (:meth:`ClickSelector._pinned`).
-        far_colour: where most of a later positive click's seeds lie beyond ``missed_reach``
+        far_colour: where most of a later positive click's seeds lie beyond ``part_reach``
             (a part the masks gave to the surroundings, clicked deep inside), its part is
             bounded only by the Gaussians the views hold off the object whose colour is at
             least this many log-units likelier under the rest's colours than under the
@@ -1088,7 +1086,7 @@ class ClickSelector:
         adds, and the indices of its ``seeds`` (S,) the click pins: those of the selection and
         those the part grows from. The part is a negative click's side mirrored: over the
         graph, nearer to the seeds that lie beside the selection ``before`` (N,) (within
-        :attr:`ClickOptions.missed_reach` spacings of a selected Gaussian; the click lands
+        :attr:`ClickOptions.part_reach` spacings of a selected Gaussian; the click lands
         beside it where these hold most of its unselected seeds' weight) than to the Gaussians
         the views hold off the object (unselected, seen, with a ``share`` (N,) of their
         ``weight`` (N,) in the object's regions under :attr:`ClickOptions.off_share`, or under
@@ -1096,11 +1094,6 @@ class ClickSelector:
         the click's view and alike in colour to the seeds rather than to the rest of the
         unselected Gaussians. A highlight on a bronze head that the masks hold as a region of
         its own, and the views therefore vote off the head, comes in whole with a click on it.
-        The reach is the missed part's (9 spacings), not the rim's (3): a click on the grey plate
-        under DTU's house, 3-11 spacings below it, read as deep inside a part, grew over the
-        graph into the black backdrop the clicked view does not show (189 of 468 Gaussians
-        added off the object; mIoU 0.959 -> 0.898 -> 0.853 over three such clicks; beside it,
-        0.959 -> 0.967 over ten).
 
         Where most of the seeds do not lie beside the selection, the click lands deep inside
         a part the views hold off the object with its surroundings (masks that gave a box's
@@ -1121,7 +1114,7 @@ class ClickSelector:
             return np.zeros(len(self.labels)), kept
         beside = self._gap(before, seeds)
         off = ~before & (weight > 0) & ((share < o.off_share) | hazy & (share < 0.5))
-        reached = beside <= o.missed_reach * self.graph.spacing
+        reached = beside <= o.part_reach * self.graph.spacing
         weights = click.weights[seeds]
         near = bool(weights[reached].sum() >= 0.5 * weights.sum()) if weights.sum() > 0 else bool(reached.any())
         if near:
