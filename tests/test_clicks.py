@@ -286,6 +286,33 @@ def test_a_positive_click_of_a_colour_at_the_frame_cuts_the_object_again_to_the_
     assert carved[x > 1.5].all() and not carved[(x > 0.5) & (x <= 1.0)].all() and not carved[x <= -1].any()
 
 
+def test_a_positive_click_on_a_floater_far_from_a_framed_selection_changes_nothing():
+    """The bar of the test above with dark spots all along it and five dark Gaussians floating
+    40 units above its blue end (a floater in front of the object in another view); the
+    clicked view's frame on both ends. The first click, on the red and two of its dark spots,
+    selects the red band. A positive click on the floater, of a colour the selection has,
+    would carve its cell and add it: it lies farther from the selection than the selection is
+    wide, so the click changes nothing."""
+    rng = np.random.default_rng(0)
+    x = np.r_[rng.uniform(-3, 3, 900), np.full(5, -2.8)]
+    y = np.r_[rng.normal(0, 0.2, 900), 40 + rng.normal(0, 0.05, 5)]
+    xyz = np.stack([x + np.r_[np.zeros(900), rng.normal(0, 0.05, 5)], y, rng.normal(0, 0.2, 905)], 1)
+    bar = np.arange(905) < 900
+    bands = [(x <= -1)[:, None], (x <= 0.5)[:, None], (x <= 1.5)[:, None]]
+    rgb = np.select(bands, [np.array([30, 30, 200]), np.array([200, 30, 30]), np.array([200, 200, 30])], [30, 200, 30])
+    dark = (np.arange(905) % 10 == 0) | ~bar
+    rgb[dark] = [20, 20, 20]
+    g = gaussians_from_points(xyz, rgb.astype(np.uint8), initial_opacity=0.9)
+    selector = ClickSelector(g, np.full(905, 7, np.uint8), _regions(905, [np.arange(905)]))
+    band = np.flatnonzero(bar & (x > -1) & (x <= 0.5))
+    near = band[np.argsort(np.abs(x[band]))]
+    seeds = np.r_[near[~dark[near]][:3], near[dark[near]][:2]]
+    first = replace(_click(905, seeds), frame=np.where(bar & (np.abs(x) > 2.5), 1.0, 0.0))
+    before = selector.select([first])
+    assert before[band].mean() > 0.85 and not before[~np.isin(np.arange(905), band)].any()
+    np.testing.assert_array_equal(selector.cut([first, _click(905, np.flatnonzero(~bar))], before), before)
+
+
 def test_a_negative_click_on_the_selections_rim_takes_out_its_seeds_of_the_rests_colour_alone():
     """The masks hold A (red) apart from B (blue), and the selection holds A and five of B's
     Gaussians nearest to A (a spill over the background). A negative click whose pixel A's
