@@ -258,6 +258,14 @@ def test_a_positive_click_on_the_edge_adds_the_part_the_first_cut_missed_beyond_
         np.testing.assert_array_equal(selector.cut([first, on_edge], selected), red if adds else selected)
 
 
+def _bar_colours(x: np.ndarray) -> np.ndarray:
+    """(N, 3) uint8 colours of a bar along ``x`` (N,): blue to -1, red to 0.5, yellow to 1.5,
+    green beyond."""
+    bands = [(x <= -1)[:, None], (x <= 0.5)[:, None], (x <= 1.5)[:, None]]
+    rgb = np.select(bands, [np.array([30, 30, 200]), np.array([200, 30, 30]), np.array([200, 200, 30])], [30, 200, 30])
+    return rgb.astype(np.uint8)
+
+
 def test_a_positive_click_of_a_colour_at_the_frame_cuts_the_object_again_to_the_frame():
     """The object is red (-1 < x <= 0.5), yellow (to 1.5) and green (to 3), beside blue, and
     the clicked view's frame shows both ends of the bar (|x| > 2.5): the object reaches the
@@ -270,9 +278,7 @@ def test_a_positive_click_of_a_colour_at_the_frame_cuts_the_object_again_to_the_
     rng = np.random.default_rng(0)
     x = rng.uniform(-3, 3, 900)
     xyz = np.stack([x, rng.normal(0, 0.2, 900), rng.normal(0, 0.2, 900)], 1)
-    bands = [(x <= -1)[:, None], (x <= 0.5)[:, None], (x <= 1.5)[:, None]]
-    rgb = np.select(bands, [np.array([30, 30, 200]), np.array([200, 30, 30]), np.array([200, 200, 30])], [30, 200, 30])
-    g = gaussians_from_points(xyz, rgb.astype(np.uint8), initial_opacity=0.9)
+    g = gaussians_from_points(xyz, _bar_colours(x), initial_opacity=0.9)
     selector = ClickSelector(g, np.full(900, 7, np.uint8), _regions(900, [np.arange(900)]))
     red, quarter = np.flatnonzero((x > -1) & (x <= 0.5)), np.arange(900) % 4 == 0
     first = replace(_click(900, red[np.argsort(np.abs(x[red]))]), frame=np.where(np.abs(x) > 2.5, 1.0, 0.0))
@@ -298,11 +304,10 @@ def test_a_positive_click_on_a_floater_far_from_a_framed_selection_changes_nothi
     y = np.r_[rng.normal(0, 0.2, 900), 40 + rng.normal(0, 0.05, 5)]
     xyz = np.stack([x + np.r_[np.zeros(900), rng.normal(0, 0.05, 5)], y, rng.normal(0, 0.2, 905)], 1)
     bar = np.arange(905) < 900
-    bands = [(x <= -1)[:, None], (x <= 0.5)[:, None], (x <= 1.5)[:, None]]
-    rgb = np.select(bands, [np.array([30, 30, 200]), np.array([200, 30, 30]), np.array([200, 200, 30])], [30, 200, 30])
+    rgb = _bar_colours(x)
     dark = (np.arange(905) % 10 == 0) | ~bar
     rgb[dark] = [20, 20, 20]
-    g = gaussians_from_points(xyz, rgb.astype(np.uint8), initial_opacity=0.9)
+    g = gaussians_from_points(xyz, rgb, initial_opacity=0.9)
     selector = ClickSelector(g, np.full(905, 7, np.uint8), _regions(905, [np.arange(905)]))
     band = np.flatnonzero(bar & (x > -1) & (x <= 0.5))
     near = band[np.argsort(np.abs(x[band]))]

@@ -926,8 +926,8 @@ class ClickSelector:
         head whose dark face the first click selected): it carves as below from those seeds,
         and adds of the cut only what has their colours and the graph joins to them. A
         positive click whose seeds all lie farther from the selection than it is wide
-        (:meth:`_far_off`) changes nothing. Elsewhere the clicks carve (:meth:`_carved`, the object's colours
-        learned from the selection), each changing its own cell: the first click's seeds
+        (:meth:`_far_off`) changes nothing. Elsewhere the clicks carve (:meth:`_carved`, the
+        object's colours learned from the selection), each changing its own cell: the first click's seeds
         (``seeds``: each click's, and whether it is positive) and those of the later ones on
         the side the selection put them on are pinned, the last click's too, less, for a
         positive one, those from elsewhere beside the selection's rim (:meth:`_beside`) and
