@@ -1116,8 +1116,9 @@ class ClickSelector:
         nearer along the graph to the seeds than to those of the Gaussians held off whose
         colour the object (the selection and the seeds) does not have
         (:attr:`ClickOptions.far_colour`), alike means alike to the object, and what the
-        click's view hides of the part comes too: bounded by colour, its far side is as much
-        the part as its front. An object is one piece: the part holds only what the graph joins
+        click's view hides of the part comes too where it looks like the part's front
+        (:meth:`_like_its_front`): bounded by colour, its far side is as much the part as its
+        front. An object is one piece: the part holds only what the graph joins
         to the selection, and the click pins only its seeds there. A click on a ball's rim where
         the edge of a box of its colour in front of it draws the pixel lands on the box's
         Gaussians, 184 spacings from the ball: the box came whole (mIoU 0.974 -> 0.451 on
@@ -1145,7 +1146,22 @@ class ClickSelector:
         if near:
             return np.clip(side / o.split_full, 0, 1) * self._shown_by(click) * alike, np.union1d(kept, seeds)
         part = self.graph.joined(side > 0, before)  # deep inside, the part's hidden side too
-        return part * alike, np.union1d(kept, seeds[part[seeds]])
+        return part * alike * self._like_its_front(click, part, before), np.union1d(kept, seeds[part[seeds]])
+
+    def _like_its_front(self, click: ClickEvidence, part: np.ndarray, before: np.ndarray) -> np.ndarray:
+        """(N,) in [0, 1]: for a ``part`` (N,) bool that a later positive ``click`` adds from
+        deep inside it, 1 where the click's view shows a Gaussian fully; elsewhere how far it
+        looks like what the view shows of the part rather than like the rest of the unselected
+        Gaussians (``before`` (N,) the selection; :meth:`_likeness`). What the view hides of
+        a part comes where it is of the part's colours, not merely of the object's: a click
+        on the grey plate under a dark model house grew, through the plate, into the black
+        backdrop behind it, which the house's colours hold and the plate's do not (DTU scan
+        24: 189 of the 468 Gaussians the click added, mIoU 0.959 -> 0.898)."""
+        shown = self._shown_by(click) >= 1
+        front = part & shown
+        if not front.any():
+            return np.ones(len(self.labels))
+        return np.where(shown, 1.0, self._likeness(self.colours.ratio(front, ~before & ~front)))
 
     def _held_off(self, click: ClickEvidence, share: np.ndarray) -> bool:
         """Whether the views' vote holds what ``click`` lands on off the object: its seeds'
