@@ -752,6 +752,35 @@ def test_a_positive_click_adds_nothing_the_graph_does_not_join_to_the_selection(
     assert after[t].mean() > 0.95 and not after[b].any()
 
 
+def test_a_part_added_from_deep_inside_keeps_only_the_hidden_side_of_its_fronts_colours():
+    """A house of red, black and grey Gaussians on a grey plate, and a black slab behind the
+    plate; the masks hold the house alone. A click deep in the plate adds the plate, its side
+    the clicked view hides as well, and none of the slab, which the view hides too: black is
+    of the house's colours, not of the plate's front. Alike to the object alone, the plate's
+    hidden side brought the whole slab (a model house's plate and the black backdrop behind
+    it)."""
+    rng = np.random.default_rng(0)
+    house = np.c_[rng.normal(0, 0.15, (200, 2)), rng.uniform(0.25, 1, 200)]
+    plate = np.c_[rng.uniform(-0.6, 0.6, (200, 2)), rng.uniform(0, 0.2, 200)]
+    slab = np.c_[rng.uniform(-0.6, 0.6, 200), rng.uniform(0.65, 0.8, 200), rng.uniform(0, 0.4, 200)]
+    red, black, grey = [200, 30, 30], [20, 20, 20], [128, 128, 128]
+    rgb = np.repeat(np.array([red, black, grey, grey, black]), [20, 90, 90, 200, 200], axis=0)
+    rgb = np.clip(rgb + rng.normal(0, 6, rgb.shape), 0, 255).astype(np.uint8)
+    g = gaussians_from_points(np.concatenate([house, plate, slab]), rgb, initial_opacity=0.9)
+    n, xyz = len(g), g.means.numpy()
+    h, p, s = np.arange(200), np.arange(200, 400), np.arange(400, 600)
+    labels = np.zeros(n, np.uint8)
+    labels[h] = 1
+    shown = (xyz[:, 1] < 0.3) & (np.arange(n) < 400)  # the view shows the plate's front half
+    deep = p[np.argsort(np.linalg.norm(xyz[p] - [0, -0.5, 0.1], axis=1))]  # at the plate's front edge
+    clicks = [_click(n, h), _click(n, deep, shown=shown.astype(float))]
+    selector = ClickSelector(g, labels, _regions(n, [h]))
+    first = selector.select(clicks[:1])
+    assert first[h].all() and not first[p].any() and not first[s].any()
+    after = selector.cut(clicks, first)
+    assert after[h].all() and after[p].all() and not after[s].any()
+
+
 def test_a_negative_click_takes_out_what_its_word_reaches_not_all_the_views_hold_off():
     """The column of the test above with a red flap standing out of its top (a cloth hung on
     a box's lid): the views hold the top and the flap off the object, a click at the top's
