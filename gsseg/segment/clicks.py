@@ -623,9 +623,23 @@ class ClickSelector:
 
     def cut(self, clicks: Sequence[ClickEvidence], before: np.ndarray | None) -> np.ndarray:
         """(N,) bool: the selection of ``clicks`` made from ``before``, the selection of all
-        but the last of them (None for the first click): one step of :meth:`select`."""
+        but the last of them (None for the first click): one step of :meth:`select`.
+
+        A later positive click adds no Gaussian :attr:`ClickOptions.large_size` times the
+        median size or more: such a Gaussian draws haze over what lies around the object,
+        and the first click's cut, with the views' vote, decided it. With the clicks alone on
+        DTU scan 24, alternating between two views, the ninth click re-cut the house from the
+        frame and added 1 120 Gaussians, 988 of them the house's; 34 of the added were that
+        large, and they painted the white table beside the house (mIoU 0.917 -> 0.847)."""
         if not clicks or not clicks[0].positive:
             raise InputError("a selection starts with a click on the object; click on it first.")
+        selected = self._step(clicks, before)
+        if before is not None and clicks[-1].positive:
+            return before | (selected & ~self.large)
+        return selected
+
+    def _step(self, clicks: Sequence[ClickEvidence], before: np.ndarray | None) -> np.ndarray:
+        """(N,) bool: :meth:`cut`'s selection before it leaves out the large Gaussians."""
         o = self.options
         last = clicks[-1].seeds(o.seed_share, o.seed_local)  # the last click's seeds, none pinned
         if before is not None and self._in_blur(clicks[-1], last, before):
@@ -847,7 +861,11 @@ class ClickSelector:
         object's colours are learned from the Gaussians selected ``before`` that lie at least
         :attr:`ClickOptions.split_full` nearer to a positive seed (a click beside the object
         does not teach them the ground's), and the unseen are no click's: the first click's
-        cut decided them."""
+        cut decided them. A negative click there takes out only what its view shows
+        (:meth:`_shown_by` in full): with the clicks alone on a bronze head, a click on a
+        floater at the head's rim, nearer along the graph to the head's far side than the
+        positive clicks on its face are, took 1 969 of the head's Gaussians there, hidden
+        from the clicked view (mIoU 0.895 -> 0.860)."""
         o = self.options
         nearer = self._nearer(positive, negative)
         unseen = self._unseen(clicks) if within is None and not framed else np.zeros(len(before), bool)
@@ -862,6 +880,8 @@ class ClickSelector:
         cell = (self.graph.distances(clicked) < self.graph.distances(others)) | unseen
         if within is not None:
             cell &= within
+        if framed and not clicks[-1].positive:  # a negative click takes what its view shows
+            cell &= self._shown_by(clicks[-1]) >= 1
         return before | (cut & cell) if clicks[-1].positive else before & (cut | ~cell)
 
     def _nearer(self, positive: np.ndarray, negative: np.ndarray) -> np.ndarray:
