@@ -252,31 +252,6 @@ def test_a_later_positive_click_adds_no_gaussian_many_times_the_median_size():
     np.testing.assert_array_equal(grown, expected)
 
 
-def test_a_negative_click_on_a_framed_selection_takes_out_only_what_its_view_shows():
-    """The bar of :func:`_bar_in_a_frame` with A's right end (0.6 < x <= 1) dark grey; the
-    first click selects A, its end too. A negative click on the end's near side (y < 0),
-    whose view shows only that side, takes out that side's dark Gaussians and none of the
-    far side's, which lie as near along the graph to the click and no clicked view shows (a
-    floater at a bronze head's rim, of the head's dark colours, took the side of the head
-    hidden behind it). Carved by the graph and the colours alone it took both sides."""
-    g, x, a, frame = _bar_in_a_frame()
-    xyz, y = g.means.numpy(), g.means[:, 1].numpy()
-    dark = (x > 0.6) & (x <= 1)
-    rgb = np.where(
-        (np.abs(x) <= 1)[:, None], [200, 30, 30], np.where(((x > 1) & (x <= 2))[:, None], [30, 200, 30], [30, 30, 200])
-    )
-    rgb[dark] = [60, 60, 60]
-    g = gaussians_from_points(xyz, rgb.astype(np.uint8), initial_opacity=0.9)
-    selector = ClickSelector(g, np.full(900, 7, np.uint8), _regions(900, [np.arange(900)]))
-    first = replace(_click(900, a[np.argsort(np.abs(x[a]))]), frame=frame)
-    selected = selector.select([first])
-    np.testing.assert_array_equal(selected, np.abs(x) <= 1)
-    end = a[np.argsort(-x[a])]
-    after = selector.cut([first, _click(900, end[y[end] < 0], positive=False, shown=(y < 0).astype(float))], selected)
-    taken = selected & ~after
-    assert (taken <= dark).all() and taken[dark & (y < 0)].mean() > 0.5 and not taken[y >= 0].any()
-
-
 def test_a_positive_click_on_the_edge_adds_the_part_the_first_cut_missed_beyond_a_gap():
     """A red bar (-1 < x <= 2) between blue ends, the clicked view's frame on the blue
     (|x| > 2.5), with no Gaussian over ``gap`` beyond A's end (x = 1): the first click on A

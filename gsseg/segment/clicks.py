@@ -194,7 +194,8 @@ class ClickOptions:
             The regions under a later positive click join the vote only where its seeds'
             share is under ``off_share`` (:meth:`ClickSelector.views_vote`).
         large_size: Gaussians whose longest axis is at least this many times the median
-            Gaussian's count as hazy too.
+            Gaussian's count as hazy too, and a later positive click adds none of them
+            (:meth:`ClickSelector.cut`).
         sliver: where all of a later positive click's seeds are hazy, it pins those that carry
             at least this share of their weight in the clicked view at the click
             (:attr:`ClickEvidence.local`): what it lands on of the rest is a sliver of what
@@ -861,11 +862,7 @@ class ClickSelector:
         object's colours are learned from the Gaussians selected ``before`` that lie at least
         :attr:`ClickOptions.split_full` nearer to a positive seed (a click beside the object
         does not teach them the ground's), and the unseen are no click's: the first click's
-        cut decided them. A negative click there takes out only what its view shows
-        (:meth:`_shown_by` in full): with the clicks alone on a bronze head, a click on a
-        floater at the head's rim, nearer along the graph to the head's far side than the
-        positive clicks on its face are, took 1 969 of the head's Gaussians there, hidden
-        from the clicked view (mIoU 0.895 -> 0.860)."""
+        cut decided them."""
         o = self.options
         nearer = self._nearer(positive, negative)
         unseen = self._unseen(clicks) if within is None and not framed else np.zeros(len(before), bool)
@@ -880,8 +877,6 @@ class ClickSelector:
         cell = (self.graph.distances(clicked) < self.graph.distances(others)) | unseen
         if within is not None:
             cell &= within
-        if framed and not clicks[-1].positive:  # a negative click takes what its view shows
-            cell &= self._shown_by(clicks[-1]) >= 1
         return before | (cut & cell) if clicks[-1].positive else before & (cut | ~cell)
 
     def _nearer(self, positive: np.ndarray, negative: np.ndarray) -> np.ndarray:
@@ -1174,7 +1169,7 @@ class ClickSelector:
         looks like what the view shows of the part rather than like the rest of the unselected
         Gaussians (``before`` (N,) the selection; :meth:`_likeness`). What the view hides of
         a part comes where it is of the part's colours, not merely of the object's: a click
-        on the grey plate under a dark model house grew, through the plate, into the black
+        on the grey plate under a model house grew, through the plate, into the black
         backdrop behind it, which the house's colours hold and the plate's do not (DTU scan
         24: 189 of the 468 Gaussians the click added, mIoU 0.959 -> 0.898)."""
         shown = self._shown_by(click) >= 1
