@@ -234,8 +234,7 @@ def test_a_later_positive_click_adds_no_gaussian_many_times_the_median_size():
     """A is selected (:func:`test_a_first_click_where_the_masks_hold_the_scene_is_cut_from_its_views_frame`)
     and one of the green Gaussians beside it is 20 times the median size: a positive click
     on the green adds the rest of the green and not that one (haze drawn over what lies
-    around an object; the first click's cut decides it), and a negative click takes it out
-    as any other."""
+    around an object; the first click's cut decides it)."""
     g, x, a, frame = _bar_in_a_frame()
     green = np.flatnonzero((x > 1) & (x <= 2))
     large = green[np.argmin(np.abs(x[green] - 1.2))]

@@ -1167,7 +1167,7 @@ class ClickSelector:
         """(N,) in [0, 1]: for a ``part`` (N,) bool that a later positive ``click`` adds from
         deep inside it, 1 where the click's view shows a Gaussian fully; elsewhere how far it
         looks like what the view shows of the part rather than like the rest of the unselected
-        Gaussians (``before`` (N,) the selection; :meth:`_likeness`). What the view hides of
+        Gaussians (``before`` (N,) the selection; :meth:`_alike`). What the view hides of
         a part comes where it is of the part's colours, not merely of the object's: a click
         on the grey plate under a model house grew, through the plate, into the black
         backdrop behind it, which the house's colours hold and the plate's do not (DTU scan
@@ -1176,7 +1176,7 @@ class ClickSelector:
         front = part & shown
         if not front.any():
             return np.ones(len(self.labels))
-        return np.where(shown, 1.0, self._likeness(self.colours.ratio(front, ~before & ~front)))
+        return np.where(shown, 1.0, self._alike(np.flatnonzero(front), ~before))
 
     def _held_off(self, click: ClickEvidence, share: np.ndarray) -> bool:
         """Whether the views' vote holds what ``click`` lands on off the object: its seeds'
