@@ -251,6 +251,31 @@ def test_a_later_positive_click_adds_no_gaussian_many_times_the_median_size():
     np.testing.assert_array_equal(grown, expected)
 
 
+def test_a_positive_click_beyond_reach_lands_on_its_part_where_the_selection_draws_a_sliver():
+    """A is selected (:func:`test_a_first_click_where_the_masks_hold_the_scene_is_cut_from_its_views_frame`).
+    A positive click on the green, beyond ``part_reach`` and within ``missed_reach`` spacings
+    of A's end, whose pixel one of A's Gaussians also draws with a twentieth of the click's
+    weight (a blurred rim), lands on the green: it adds the green and none of the blue. Where
+    A draws most of the pixel, the click lands on A, and what it shows beyond the reach stays
+    out (what a gap in a statue shows behind it)."""
+    g, x, a, frame = _bar_in_a_frame()
+    selector = ClickSelector(g, np.full(900, 7, np.uint8), _regions(900, [np.arange(900)]))
+    first = replace(_click(900, a[np.argsort(np.abs(x[a]))]), frame=frame)
+    selected = selector.select([first])
+    np.testing.assert_array_equal(selected, np.abs(x) <= 1)
+    green = np.flatnonzero((x > 1) & (x <= 2))
+    on_green = green[np.argsort(np.abs(x[green] - 1.45))][:12]
+    gap = selector._gap(selected, on_green) / selector.graph.spacing
+    assert selector.options.part_reach < gap.min() and gap.max() < selector.options.missed_reach
+    rim = a[np.argmax(x[a])]
+    for rim_weight, expected in ((0.3, selected | ((x > 1) & (x <= 2))), (20.0, selected)):
+        weights = np.zeros(900)
+        weights[on_green[:4]], weights[on_green[4:]], weights[rim] = 1.0, 0.2, rim_weight
+        click = ClickEvidence(weights, True)
+        assert rim in click.seeds(selector.options.seed_share)
+        np.testing.assert_array_equal(selector.cut([first, click], selected), expected)
+
+
 def test_a_positive_click_on_the_edge_adds_the_part_the_first_cut_missed_beyond_a_gap():
     """A red bar (-1 < x <= 2) between blue ends, the clicked view's frame on the blue
     (|x| > 2.5), with no Gaussian over ``gap`` beyond A's end (x = 1): the first click on A
