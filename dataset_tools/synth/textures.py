@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Literal
 
+import numba
 import numpy as np
 
 Pattern = Literal["checker", "stripes", "waves", "plain", "speckle"]
@@ -15,35 +16,51 @@ def _smooth_square(x: np.ndarray, sharpness: float = 6.0) -> np.ndarray:
     return 0.5 + 0.5 * np.tanh(sharpness * np.sin(np.pi * x))
 
 
-def _lattice(cells: np.ndarray) -> np.ndarray:
-    """A fixed pseudo-random value in [0, 1) per integer lattice point (an integer hash with
-    xor-shift mixing, so that neighbouring points are unrelated). (N, 3) int -> (N,)."""
-    c = cells.astype(np.uint64) & np.uint64(0xFFFFFFFF)
-    h = (c[:, 0] * np.uint64(0x9E3779B1)) ^ (c[:, 1] * np.uint64(0x85EBCA77)) ^ (c[:, 2] * np.uint64(0xC2B2AE3D))
-    h &= np.uint64(0xFFFFFFFF)
-    for shift, factor in ((15, 0x2C1B3C6D), (12, 0x297A2D39), (15, 1)):
-        h = ((h ^ (h >> np.uint64(shift))) * np.uint64(factor)) & np.uint64(0xFFFFFFFF)
-    return h.astype(np.float64) / 2.0**32
+@numba.njit(cache=True, inline="always")
+def _lattice(x: int, y: int, z: int) -> float:
+    """A fixed pseudo-random value in [0, 1) at the integer lattice point (x, y, z) (an integer
+    hash with xor-shift mixing, so that neighbouring points are unrelated)."""
+    m = np.uint64(0xFFFFFFFF)
+    h = ((np.uint64(x) & m) * np.uint64(0x9E3779B1)) ^ ((np.uint64(y) & m) * np.uint64(0x85EBCA77))
+    h = (h ^ ((np.uint64(z) & m) * np.uint64(0xC2B2AE3D))) & m
+    h = ((h ^ (h >> np.uint64(15))) * np.uint64(0x2C1B3C6D)) & m
+    h = ((h ^ (h >> np.uint64(12))) * np.uint64(0x297A2D39)) & m
+    h = (h ^ (h >> np.uint64(15))) & m
+    return h / 2.0**32
 
 
+@numba.njit(inline="always")
+def _cell(p: float) -> tuple[int, float]:
+    """The lattice cell below ``p`` and the smoothstep weight of ``p`` within it."""
+    base = np.floor(p)
+    f = p - base
+    return np.int64(base), f * f * (3 - 2 * f)
+
+
+@numba.njit(cache=True, parallel=True)
 def value_noise(q: np.ndarray, octaves: int = 4) -> np.ndarray:
     """Multi-octave value noise in [0, 1] at points ``q`` (N, 3): trilinear interpolation
     (smoothstep weights) of lattice values, each octave twice as fine and half as strong.
-    Irregular blobs at every scale: corners for feature matching, unlike periodic patterns."""
-    total, norm = np.zeros(len(q)), 0.0
-    for octave in range(octaves):
-        p = q * 2.0**octave
-        base = np.floor(p).astype(np.int64)
-        f = p - base
-        w = f * f * (3 - 2 * f)
-        value = np.zeros(len(q))
-        for corner in np.ndindex(2, 2, 2):
-            c = np.asarray(corner)
-            weight = np.prod(np.where(c == 1, w, 1 - w), axis=1)
-            value += weight * _lattice(base + c)
-        total += value * 0.5**octave
-        norm += 0.5**octave
-    return total / norm
+    Irregular blobs at every scale: corners for feature matching, unlike periodic patterns.
+    Each point on its own, so the values do not depend on the threads."""
+    out = np.empty(q.shape[0])
+    for i in numba.prange(q.shape[0]):
+        total, norm = 0.0, 0.0
+        for octave in range(octaves):
+            scale = 2.0**octave
+            bx, wx = _cell(q[i, 0] * scale)
+            by, wy = _cell(q[i, 1] * scale)
+            bz, wz = _cell(q[i, 2] * scale)
+            value = 0.0
+            for cx in range(2):
+                for cy in range(2):
+                    for cz in range(2):
+                        weight = (wx if cx else 1 - wx) * (wy if cy else 1 - wy) * (wz if cz else 1 - wz)
+                        value += weight * _lattice(bx + cx, by + cy, bz + cz)
+            total += value * 0.5**octave
+            norm += 0.5**octave
+        out[i] = total / norm
+    return out
 
 
 def _soft_xor(a: np.ndarray, b: np.ndarray) -> np.ndarray:
