@@ -478,6 +478,27 @@ def test_carving_decides_what_no_clicked_view_shows_by_the_cut():
         assert carved[c].all() if c_like_a else not carved[c].any()
 
 
+def test_the_first_carving_click_takes_of_what_no_view_shows_only_what_looks_like_its_part():
+    """A bar along x, one region in every view: A (x <= 1) and B (blue, x > 1); the clicked
+    view hides A's end next to B (0 < x <= 1), as a view of DTU's house hides its back. A
+    click on A's far end, a negative one on B beside the hidden end: the hidden end lies
+    nearer the negative click along the graph, yet red like A it stays; blue like B, it goes
+    with B."""
+    rng = np.random.default_rng(0)
+    x = rng.uniform(-6, 3, 1200)
+    xyz = np.stack([x, rng.normal(0, 0.2, 1200), rng.normal(0, 0.2, 1200)], 1)
+    a, b, hidden = np.flatnonzero(x <= 1), np.flatnonzero(x > 1), np.flatnonzero((x > 0) & (x <= 1))
+    shown = np.where((x > 0) & (x <= 1), 0.0, 1.0)
+    clicks = [_click(1200, a[np.argsort(x[a])], shown=shown), _click(1200, b[np.argsort(x[b])], False, shown)]
+    for hidden_like_a in (True, False):
+        red = x <= (1 if hidden_like_a else 0)
+        rgb = np.where(red[:, None], [200, 30, 30], [30, 30, 200]) + rng.integers(-12, 13, (1200, 3))
+        g = gaussians_from_points(xyz, np.clip(rgb, 0, 255).astype(np.uint8), initial_opacity=0.9)
+        carved = ClickSelector(g, np.full(1200, 7, np.uint8), _regions(1200, [np.arange(1200)])).select(clicks)
+        assert not carved[b].any() and carved[a[x[a] < -1]].all()
+        assert carved[hidden].all() if hidden_like_a else not carved[hidden].any()
+
+
 def test_a_negative_click_on_what_the_vote_holds_loosely_does_not_carve():
     """A (red, x from 0 to 4, its far end x > 3 orange) fills most of every view, and the masks
     hold it apart from a grey backdrop beyond it (x = 5.5), so the vote holds the scene yet

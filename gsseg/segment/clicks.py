@@ -853,7 +853,12 @@ class ClickSelector:
         click's selection of the scene is the vote's, no choice of the user's) and the cells
         of all negative clicks so far (those before it spoke as with masks: a click on the
         fern's ceiling, held at one half, took 191 Gaussians; with the carving from the next
-        click on, the ceiling goes).
+        click on, the ceiling goes). Of the unseen it takes only those that look like the
+        negative seeds rather than like the rest of ``before`` (:meth:`_alike`): no view shows
+        the others, and the graph alone gave them to the click. On DTU scan 24 joined to its
+        surroundings, a click on the white table beside the house took 3 514 of the house's
+        Gaussians, 2 502 of them its back, nearer along the graph to the table than to the
+        click on its front (mIoU 0.959 -> 0.886; with the rule 0.947).
 
         Where ``within`` (N,) bool is given, a negative click carves apart a part the masks
         joined to an object that does not fill the scene (:meth:`_apart`; ``clicked``: all
@@ -881,6 +886,8 @@ class ClickSelector:
         cell = (self.graph.distances(clicked) < self.graph.distances(others)) | unseen
         if within is not None:
             cell &= within
+        elif first:  # of what no view shows it takes only what looks like its part
+            cell &= ~unseen | (self._alike(clicked, before) > 0)
         return before | (cut & cell) if clicks[-1].positive else before & (cut | ~cell)
 
     def _nearer(self, positive: np.ndarray, negative: np.ndarray) -> np.ndarray:
