@@ -476,7 +476,7 @@ def warm_up(backend: Backend, progress: bool = False) -> None:
     kernels = STEP_KERNELS + PROJECTION_KERNELS + SH_KERNELS + SSIM_KERNELS + ENVIRONMENT_KERNELS
     if not compiled_on_disk(kernels):
         if progress:
-            tqdm.write("compiling the CPU kernels (first run only, under a minute)", file=sys.stderr)
+            tqdm.write("compiling the CPU kernels (first run only, one to two minutes)", file=sys.stderr)
         subprocess.run([sys.executable, "-c", "from gsseg.train.trainer import tiny_step; tiny_step()"], check=False)
     tiny_step()
 
