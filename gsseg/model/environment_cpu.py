@@ -93,7 +93,9 @@ def environment_backward(rotation, intrinsics, width, height, coeffs, up, profil
                     for c in range(3):
                         g_profile[block, lo, c] += (1.0 - w) * grad[i, j, c]
                         g_profile[block, hi, c] += w * grad[i, j, c]
-        g_coeffs[block] = acc
+        for k in range(n_k):  # element by element: a block copy compiles a shape check
+            for c in range(3):
+                g_coeffs[block, k, c] = acc[k, c]
     return g_coeffs.sum(0), g_profile.sum(0)
 
 

@@ -106,7 +106,8 @@ def _gather_rows(ids, start, end, values):
     """values[ids[start:end]] as a contiguous block."""
     out = np.empty((end - start, values.shape[1]), values.dtype)
     for j in range(end - start):
-        out[j] = values[ids[start + j]]
+        for c in range(values.shape[1]):  # element by element: a row copy compiles a shape check
+            out[j, c] = values[ids[start + j], c]
     return out
 
 
