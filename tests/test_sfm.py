@@ -201,14 +201,17 @@ def speckled(tmp_path_factory) -> Path:
 
 @pytest.mark.slow
 def test_sfm_recovers_the_exact_cameras_of_a_synthetic_orbit_and_again_the_same(speckled, tmp_path):
-    """A second run on the same photos gives the same cameras (on several threads, COLMAP's CPU
-    SIFT gives slightly different keypoints on this capture from run to run: about 1e-6). To
-    1e-3: the matching runs on every core, and two runs' poses once differed by 4e-5 on a
-    loaded AMD EPYC, once by 3e-4 on an Intel Xeon after the rest of the test suite (another
-    model, from another initial pair or registration order, moves them by far more)."""
-    shutil.copytree(speckled / "images", tmp_path / "photos")
+    """Every second photo of the orbit (20, 18 degrees apart). A second run on the same photos
+    gives the same cameras (on several threads, COLMAP's CPU SIFT gives slightly different
+    keypoints on this capture from run to run: about 1e-6). To 1e-3: the matching runs on
+    every core, and two runs' poses once differed by 4e-5 on a loaded AMD EPYC, once by 3e-4
+    on an Intel Xeon after the rest of the test suite (another model, from another initial
+    pair or registration order, moves them by far more)."""
+    (tmp_path / "photos").mkdir()
+    for path in sorted((speckled / "images").iterdir())[::2]:
+        shutil.copy(path, tmp_path / "photos" / path.name)
     result = run_sfm(tmp_path / "photos", tmp_path / "scene", progress=False)
-    assert result.registered == result.images == 40
+    assert result.registered == result.images == 20
     made, truth = load_scene(result.scene), {v.name: v for v in load_scene(speckled).views}
     rot, ctr = camera_errors([v.cam_from_world for v in made.views], [truth[v.name].cam_from_world for v in made.views])
     assert np.median(rot) < 0.5 and np.median(ctr) < 0.01
