@@ -35,7 +35,7 @@ from dataset_tools.scene import Scene, View, load_scene
 from gsseg.model.environment import Environment, background_image, mean_up, profile_bins
 from gsseg.model.environment_cpu import ENVIRONMENT_KERNELS
 from gsseg.model.gaussians import Gaussians, gaussians_from_points, make_classifier, random_points
-from gsseg.model.sh_cpu import SH_KERNELS
+from gsseg.model.sh_cpu import SH_KERNELS, eval_sh_cpu
 from gsseg.render import Backend, RenderOutput, get_backend, render
 from gsseg.render.cpu_kernels import STEP_KERNELS, compiled_on_disk
 from gsseg.render.cpu_projection import PROJECTION_KERNELS
@@ -469,16 +469,36 @@ def warm_up(backend: Backend, progress: bool = False) -> None:
 
     A kernel compiled in this process and the same kernel loaded from the cache round
     differently (up to 1e-6 in a render, measured on the blending): a machine's first run would
-    not repeat. So a cache that lacks them is filled by another process, and this one loads
-    them from it, as every later run does."""
+    not repeat. So a cache that lacks them is filled by other processes, and this one loads
+    them from it, as every later run does: one runs :func:`tiny_step`, another compiles the
+    kernels that do not need a render (:func:`tiny_parts`) beside it, which the first then
+    loads where they are ready."""
     if backend.name != "cpu":
         return
     kernels = STEP_KERNELS + PROJECTION_KERNELS + SH_KERNELS + SSIM_KERNELS + ENVIRONMENT_KERNELS
     if not compiled_on_disk(kernels):
         if progress:
-            tqdm.write("compiling the CPU kernels (first run only, one to two minutes)", file=sys.stderr)
-        subprocess.run([sys.executable, "-c", "from gsseg.train.trainer import tiny_step; tiny_step()"], check=False)
+            tqdm.write("compiling the CPU kernels (first run only, about a minute)", file=sys.stderr)
+        children = [
+            subprocess.Popen([sys.executable, "-c", f"from gsseg.train.trainer import {step}; {step}()"])
+            for step in ("tiny_parts", "tiny_step")
+        ]
+        for child in children:
+            child.wait()
     tiny_step()
+
+
+def tiny_parts() -> None:
+    """SSIM, the environment and SH colours with their backward passes, called as a training
+    step calls them, without a render: the kernels of a step that the projection and the
+    blending do not need, in the order :func:`tiny_step` reaches them last."""
+    image = torch.rand(16, 16, 3, requires_grad=True)
+    mean_ssim_cpu(image, torch.zeros_like(image)).backward()
+    camera, pose = PinholeCamera(16, 16, 16.0, 16.0, 8.0, 8.0), torch.eye(4)[:3]
+    Environment(up=np.array([0.0, -1.0, 0.0]), bins=4)(camera, pose).sum().backward()
+    sh = torch.rand(4, 16, 3, requires_grad=True)
+    directions = torch.nn.functional.normalize(torch.rand(4, 3), dim=-1).requires_grad_(True)
+    eval_sh_cpu(3, sh, directions).sum().backward()
 
 
 def tiny_step() -> None:
