@@ -226,18 +226,18 @@ def test_sfm_recovers_the_exact_cameras_of_a_synthetic_orbit_and_again_the_same(
 
 @pytest.mark.slow
 def test_retrieval_matching_registers_shuffled_photos_with_fewer_pairs(speckled, tmp_path):
-    """The orbit's 40 photos renamed in a random order: each matched with its 8 most alike
-    (VLAD of its SIFT descriptors), every photo registers with the cameras exhaustive
-    matching finds, from under half of the pairs."""
+    """Two of every three of the orbit's photos (27, 9 and 18 degrees apart) renamed in a
+    random order: each matched with its 8 most alike (VLAD of its SIFT descriptors), every
+    photo registers with the cameras exhaustive matching finds, from under half of the pairs."""
     photos = tmp_path / "photos"
     photos.mkdir()
-    order = np.random.default_rng(0).permutation(40)
-    for rank, path in zip(order, sorted((speckled / "images").iterdir())):
+    kept = [path for k, path in enumerate(sorted((speckled / "images").iterdir())) if k % 3 != 2]
+    for rank, path in zip(np.random.default_rng(0).permutation(len(kept)), kept):
         shutil.copy(path, photos / f"{rank:03d}_{path.name}")
     result = run_sfm(photos, tmp_path / "scene", SfmConfig(matcher="retrieval", neighbours=8), progress=False)
-    assert result.registered == result.images == 40
+    assert result.registered == result.images == 27
     pairs = (tmp_path / "scene" / ".sfm" / "pairs.txt").read_text().splitlines()
-    assert len(pairs) < 0.5 * 40 * 39 / 2
+    assert len(pairs) < 0.5 * 27 * 26 / 2
     made, truth = load_scene(result.scene), {v.name: v for v in load_scene(speckled).views}
     rot, ctr = camera_errors(
         [v.cam_from_world for v in made.views], [truth[v.name[4:]].cam_from_world for v in made.views]
