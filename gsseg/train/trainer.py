@@ -483,8 +483,12 @@ def warm_up(backend: Backend, progress: bool = False) -> None:
             subprocess.Popen([sys.executable, "-c", f"from gsseg.train.trainer import {step}; {step}()"])
             for step in ("tiny_parts", "tiny_step")
         ]
-        for child in children:
-            child.wait()
+        try:
+            for child in children:
+                child.wait()
+        finally:  # interrupted: no compiler left running (numba writes each cache file whole)
+            for child in children:
+                child.kill()
     tiny_step()
 
 
