@@ -498,8 +498,8 @@ def tiny_parts() -> None:
     blending do not need, in the order :func:`tiny_step` reaches them last."""
     image = torch.rand(16, 16, 3, requires_grad=True)
     mean_ssim_cpu(image, torch.zeros_like(image)).backward()
-    camera, pose = PinholeCamera(16, 16, 16.0, 16.0, 8.0, 8.0), torch.eye(4)[:3]
-    Environment(up=np.array([0.0, -1.0, 0.0]), bins=4)(camera, pose).sum().backward()
+    _, _, background = _tiny_view()
+    background.sum().backward()
     sh = torch.rand(4, 16, 3, requires_grad=True)
     directions = torch.nn.functional.normalize(torch.rand(4, 3), dim=-1).requires_grad_(True)
     eval_sh_cpu(3, sh, directions).sum().backward()
@@ -511,18 +511,26 @@ def tiny_step() -> None:
     xyz = np.array([[0.0, 0.0, 2.0], [0.2, 0.0, 2.5], [0.0, 0.2, 3.0], [-0.2, 0.0, 2.2]])
     tiny = gaussians_from_points(xyz, np.full((4, 3), 128, np.uint8), initial_opacity=0.5)
     tiny = Gaussians(**{k: v.clone().requires_grad_(True) for k, v in tiny.tensors().items()})
-    camera, pose = PinholeCamera(16, 16, 16.0, 16.0, 8.0, 8.0), torch.eye(4)[:3]
+    camera, pose, background = _tiny_view()
     out = render(
         tiny,
         camera,
         pose,
-        background=Environment(up=np.array([0.0, -1.0, 0.0]), bins=4)(camera, pose),
+        background=background,
         with_features=True,
         feature_geometry_grad=False,
         feature_pixels=torch.arange(0, 256, 7),
         backend="cpu",
     )
     (mean_ssim_cpu(out.rgb, torch.zeros_like(out.rgb)) + out.features.sum()).backward()
+
+
+def _tiny_view() -> tuple[PinholeCamera, torch.Tensor, torch.Tensor]:
+    """The 16x16 camera of :func:`tiny_step` and :func:`tiny_parts` at the origin, its (3, 4)
+    pose and its (16, 16, 3) background from a fresh environment, differentiable in the
+    environment's parameters."""
+    camera, pose = PinholeCamera(16, 16, 16.0, 16.0, 8.0, 8.0), torch.eye(4)[:3]
+    return camera, pose, Environment(up=np.array([0.0, -1.0, 0.0]), bins=4)(camera, pose)
 
 
 def _loop(
