@@ -3,14 +3,16 @@ that an export looks in other viewers as it looks here: the conventions of the o
 rasterizer (EWA splatting with its 0.3 px low-pass, 3-sigma extents, opacity
 capped at 0.99, alphas under 1/255 skipped, front-to-back compositing by view depth that
 stops below a transmittance of 1e-4, SH evaluated at the direction from the camera centre
-plus 0.5, clamped at 0) written from the paper in NumPy, one Gaussian at a time. It reads the
-file with plyfile alone and shares no code with the project's renderer or PLY reader."""
+plus 0.5, clamped at 0) written from the paper in NumPy, composited one Gaussian at a time
+(compiled by numba). It reads the file with plyfile alone and shares no code with the
+project's renderer or PLY reader."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
 import numpy as np
+from numba import njit
 from plyfile import PlyData
 
 SH_C0 = 0.28209479177387814
@@ -119,24 +121,50 @@ def render_reference(
     center = -Rw.T @ t
     dirs = splats["means"][idx] - center
     colour = _sh_colour(splats["sh"][idx], dirs / np.linalg.norm(dirs, axis=1, keepdims=True))
+    order = np.nonzero(on)[0][np.argsort(z[on], kind="stable")]
+    return _composite(order, u, v, radius, cov, det, splats["opacities"][idx], colour, width, height)
+
+
+@njit(cache=True)
+def _composite(
+    order: np.ndarray,
+    u: np.ndarray,
+    v: np.ndarray,
+    radius: np.ndarray,
+    cov: np.ndarray,
+    det: np.ndarray,
+    opacities: np.ndarray,
+    colour: np.ndarray,
+    width: int,
+    height: int,
+) -> np.ndarray:
+    """(H, W, 3): the Gaussians ``order`` (front to back) composited one at a time, each over
+    its 3-sigma box, every pixel stopping before the Gaussian that takes its transmittance
+    under 1e-4."""
     image = np.zeros((height, width, 3))
     trans = np.ones((height, width))
-    done = np.zeros((height, width), bool)
-    for k in np.nonzero(on)[0][np.argsort(z[on], kind="stable")]:
-        x0, x1 = int(max(0, u[k] - radius[k])), int(min(width, u[k] + radius[k] + 1))
-        y0, y1 = int(max(0, v[k] - radius[k])), int(min(height, v[k] + radius[k] + 1))
-        if x0 >= x1 or y0 >= y1:
-            continue
+    done = np.zeros((height, width), np.bool_)
+    for k in order:
+        x0, x1 = int(max(0.0, u[k] - radius[k])), int(min(width, u[k] + radius[k] + 1))
+        y0, y1 = int(max(0.0, v[k] - radius[k])), int(min(height, v[k] + radius[k] + 1))
         a, b, c = cov[k, 1, 1] / det[k], -cov[k, 0, 1] / det[k], cov[k, 0, 0] / det[k]
-        dx = np.arange(x0, x1) + 0.5 - u[k]
-        dy = (np.arange(y0, y1) + 0.5 - v[k])[:, None]
-        power = -0.5 * (a * dx * dx + c * dy * dy) - b * dx * dy
-        alpha = np.minimum(0.99, splats["opacities"][idx[k]] * np.exp(power))
-        alpha[(power > 0) | (alpha < 1 / 255) | done[y0:y1, x0:x1]] = 0
-        t_patch = trans[y0:y1, x0:x1]
-        finished = t_patch * (1 - alpha) < 1e-4  # that pixel stops before this Gaussian
-        done[y0:y1, x0:x1] |= finished
-        alpha[finished] = 0
-        image[y0:y1, x0:x1] += (t_patch * alpha)[..., None] * colour[k]
-        trans[y0:y1, x0:x1] = t_patch * (1 - alpha)
+        for y in range(y0, y1):
+            dy = y + 0.5 - v[k]
+            for x in range(x0, x1):
+                if done[y, x]:
+                    continue
+                dx = x + 0.5 - u[k]
+                power = -0.5 * (a * dx * dx + c * dy * dy) - b * dx * dy
+                if power > 0:
+                    continue
+                alpha = min(0.99, opacities[k] * np.exp(power))
+                if alpha < 1 / 255:
+                    continue
+                t = trans[y, x]
+                if t * (1 - alpha) < 1e-4:  # that pixel stops before this Gaussian
+                    done[y, x] = True
+                    continue
+                for ch in range(3):
+                    image[y, x, ch] += t * alpha * colour[k, ch]
+                trans[y, x] = t * (1 - alpha)
     return image
