@@ -41,6 +41,7 @@ from eval.edit_scores import edit_rows, summarize_edits
 from eval.evaluate import evaluate
 from eval.lpips import LPIPS
 from eval.report import markdown_table
+from gsseg.fill_options import FillOptions
 from gsseg.run.loaded import load_run
 from gsseg.segment.label_options import LabelOptions
 from gsseg.segment.segment_run import label_gaussians, mask_contributions
@@ -77,7 +78,8 @@ def score_run(run_dir: Path, scene: Path, masks: str, lpips: LPIPS | None = None
         evaluation, _ = evaluate(
             run, segmentation, views, with_truth=True, scene=str(scene), split="test", backend="cpu", progress=False
         )
-        rows = edit_rows(run, segmentation, views, scene, evaluation.id_map, fill=name in FILLED, lpips=lpips)
+        fill = FillOptions() if name in FILLED else None
+        rows = edit_rows(run, segmentation, views, scene, evaluation.id_map, fill=fill, lpips=lpips)
         out[name] = {
             **summarize_edits(rows),
             "miou": evaluation.summary()["visible"]["miou"],

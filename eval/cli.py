@@ -14,9 +14,12 @@ from dataset_tools.infra.cli_support import (
     none_means_off,
     other_scene_option,
     run_cli,
+    switched_fields,
 )
 from dataset_tools.scene import GT_MASKS, Split
 from eval.lpips import NETS, export_lpips
+from gsseg.cli import FILL_STEPS
+from gsseg.fill_options import FillOptions
 
 BACKEND = Registry("gsseg.render.backends:BACKENDS", ("auto",))
 
@@ -62,6 +65,7 @@ def cli() -> None:
     help="Whether the removal shown fills what no training view saw behind the object, as `gsseg edit` does "
     "(by default it does).",
 )
+@FILL_STEPS
 @click.option("--force", is_flag=True, help="Replace --out if it exists.")
 @other_scene_option
 def report(
@@ -75,6 +79,7 @@ def report(
     backend: str,
     lpips: Path | None,
     fill: bool | None,
+    steps: int,
     force: bool,
     other_scene: bool,
 ) -> None:
@@ -93,7 +98,7 @@ def report(
         lpips=lpips,
         overwrite=force,
         other_scene=other_scene,
-        **({} if fill is None else {"fill": fill}),  # report_run's default decides
+        **switched_fields(click.get_current_context(), FillOptions, "fill"),  # report_run's default decides
     )
     s = ev.summary()
     scores = (

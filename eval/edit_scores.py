@@ -17,6 +17,7 @@ from eval.lpips import LPIPS
 from eval.metrics import extraction_scores, removal_scores
 from gsseg.edits import apply_edit
 from gsseg.fill import fill_run_removal
+from gsseg.fill_options import FillOptions
 from gsseg.render import Backend, get_backend, to_uint8
 from gsseg.run.loaded import Run
 from gsseg.segment.reassign import Segmentation
@@ -31,13 +32,13 @@ def edit_rows(
     id_map: dict[int, int],
     *,
     objects: list[int] | None = None,
-    fill: bool = False,
+    fill: FillOptions | None = None,
     lpips: LPIPS | None = None,
     backend: str | Backend = "cpu",
 ) -> list[dict]:
     """One row per (view, ground-truth object) that has edit truth and a predicted label:
     {view, object, label, ghost_share, removal: {...}, extraction: {...}}, and with ``fill``
-    the removal filled (:mod:`gsseg.fill`) too: removal_filled {...}, fill_seconds.
+    the removal filled with those options (:mod:`gsseg.fill`) too: removal_filled {...}, fill_seconds.
     ``ghost_share`` is the share of the selection's weight in the training views that the
     Gaussians left behind carry, before and after those that served it alone join it
     (:func:`gsseg.segment.served.complete_selection`, as ``gsseg edit`` records it). ``id_map``
@@ -60,7 +61,9 @@ def edit_rows(
             selected = completed.mask  # as gsseg edit removes and extracts
             removed = apply_edit(run.gaussians, selected, "remove")
             alone = apply_edit(run.gaussians, selected, "extract")
-            filled = fill_run_removal(run, selected, train, backend=backend, progress=False) if fill else None
+            filled = None
+            if fill is not None:
+                filled = fill_run_removal(run, selected, train, options=fill, backend=backend, progress=False)
             for view in views:
                 truth = read_edit_truth(scene_dir, obj, view.stem)
                 if truth is None:

@@ -27,6 +27,7 @@ from eval.renders import ViewRenders
 from eval.training_curve import psnr_levels
 from gsseg.edits import COMPLETED_OPS, OPS, Selection, apply_edit, edit_background
 from gsseg.fill import fill_run_removal
+from gsseg.fill_options import FillOptions
 from gsseg.model.gaussians import Gaussians
 from gsseg.render import Backend, get_backend
 from gsseg.run.folder import RunFolder
@@ -71,13 +72,13 @@ def edit_panels(
     *,
     train_views: list[View],
     removal: Gaussians | None = None,
-    fill: bool = True,
+    fill: FillOptions | None = FillOptions(),
     progress: bool = True,
 ) -> dict[str, list[np.ndarray]]:
     """Renders of ``views`` after removing and extracting (on white) the (N,) bool ``completed``
     Gaussians (the selection with what served it alone, as ``gsseg edit`` takes them) and
     recolouring the ``selected`` ones; the removal filled from the ``train_views`` as ``gsseg
-    edit`` fills it (:mod:`gsseg.fill`; without ``fill``, the removal alone), or the model
+    edit`` fills it, with the options ``fill`` (:mod:`gsseg.fill`; None: the removal alone), or the model
     ``removal`` where it is given (an edit made already)."""
     backend = get_backend(backend)
     out: dict[str, list[np.ndarray]] = {}
@@ -85,8 +86,9 @@ def edit_panels(
         chosen = completed if op in COMPLETED_OPS else selected
         if op == "remove" and removal is not None:
             edited = removal
-        elif op == "remove" and fill:
-            edited = fill_run_removal(run, chosen, train_views, backend=backend, progress=progress).gaussians
+        elif op == "remove" and fill is not None:
+            edited = fill_run_removal(run, chosen, train_views, options=fill, backend=backend, progress=progress)
+            edited = edited.gaussians
         else:
             edited = apply_edit(run.gaussians, chosen, op, tuple(c / 255 for c in color))
         edited = edited.to(backend.device)
@@ -321,7 +323,7 @@ def report_run(
     selection: Selection | None = None,
     color: tuple[int, int, int] = (255, 40, 200),
     removal: Gaussians | None = None,
-    fill: bool = True,
+    fill: FillOptions | None = FillOptions(),
     backend: str = "auto",
     lpips: Path | str | None = None,
     overwrite: bool = False,
@@ -332,7 +334,8 @@ def report_run(
     (LPIPS with the network file ``lpips``, else reported as not available). The edits shown
     are of ``object_id``, or of a ``selection`` made by clicks (:func:`gsseg.edits.select`), or
     of the largest object; ``removal``: the model after that object's removal where it was
-    made already (``gsseg edit``'s, filled), else it is made here (filled unless not ``fill``)."""
+    made already (``gsseg edit``'s, filled), else it is made here (filled with the options ``fill``,
+    unless None)."""
     run_dir, scene_dir, out_dir = Path(run_dir), Path(scene_dir), Path(out_dir)
     refuse_overlap(
         out_dir,

@@ -14,8 +14,10 @@ from dataset_tools.infra.cli_support import (
     none_means_off,
     other_scene_option,
     run_cli,
+    switched_fields,
 )
 from dataset_tools.scene import Split
+from gsseg.fill_options import FillOptions
 from gsseg.segment.label_options import METHODS, MODES, LabelOptions
 from gsseg.train.config import SCHEDULES, TrainConfig
 from pipeline.demo_options import (
@@ -32,6 +34,9 @@ BACKEND = Registry("gsseg.render.backends:BACKENDS", ("auto",))
 SPLITS = get_args(Split)
 SCHEDULE_LENGTHS = ", ".join(f"{s.iters} on {name}" for name, s in SCHEDULES.items())
 SCHEDULE_CAPS = ", ".join(f"{s.max_gaussians:,} on {name}" for name, s in SCHEDULES.items())
+FILL_STEPS = field_option(
+    FillOptions, "steps", "--fill-steps", type=click.IntRange(1), help="Optimisation steps of a removal's fill."
+)
 
 
 @click.group(name="gsseg", context_settings={"help_option_names": ["-h", "--help"]})
@@ -242,16 +247,17 @@ def _clicks(click_: tuple, exclude_click: tuple) -> list:
     default=None,
     help="Whether a removal fills what no training view saw behind the object (by default it does).",
 )
+@FILL_STEPS
 @click.option("--backend", type=BACKEND, default="auto", show_default=True)
 @click.option("--force", is_flag=True, help="Replace the edit folder if it exists.")
 @other_scene_option
-def edit(run: Path, point, click_, exclude_click, scene, force: bool, **options) -> None:
+def edit(run: Path, point, click_, exclude_click, scene, force: bool, fill, steps, **options) -> None:
     """Select an object by a 3D point, clicks or its ID; remove, extract or recolour it."""
     from gsseg.edits import edit_run
 
     clicks = _clicks(click_, exclude_click)
-    given = {k: v for k, v in options.items() if v is not None or k != "fill"}  # edit_run's default decides
-    out = edit_run(run, point=point or None, clicks=clicks, scene_dir=scene, overwrite=force, **given)
+    fill = switched_fields(click.get_current_context(), FillOptions, "fill")  # edit_run's default decides
+    out = edit_run(run, point=point or None, clicks=clicks, scene_dir=scene, overwrite=force, **fill, **options)
     click.echo(f"wrote {out}")
 
 
@@ -267,16 +273,18 @@ def edit(run: Path, point, click_, exclude_click, scene, force: bool, **options)
     show_default=True,
     help="Frames are rendered at most this many pixels on their long side.",
 )
+@FILL_STEPS
 @click.option("--backend", type=BACKEND, default="auto", show_default=True)
 @other_scene_option
-def view(run: Path, scene: Path | None, **options) -> None:
+def view(run: Path, scene: Path | None, steps: int, **options) -> None:
     """Open RUN in the browser: click an object to select it, remove / extract / recolour it, save the edit."""
     try:
         from gsseg.viewer.server import serve
     except ImportError as e:
         raise click.UsageError(f"the viewer needs viser ({e}); install it with `pip install -e .[viewer]`.") from None
 
-    serve(run, scene_dir=scene, on_ready=click.echo, **options)
+    fill = FillOptions(**given_fields(click.get_current_context(), FillOptions))
+    serve(run, scene_dir=scene, fill=fill, on_ready=click.echo, **options)
 
 
 def _object_option(ctx: click.Context, param: click.Parameter, value: str | None) -> int | None:

@@ -19,6 +19,7 @@ from dataset_tools.infra.names import plain_name
 from dataset_tools.infra.overlap import refuse_overlap, scene_entries
 from dataset_tools.scene import Scene
 from gsseg.fill import fill_run_removal
+from gsseg.fill_options import FillOptions
 from gsseg.model.gaussians import Gaussians
 from gsseg.model.ply import write_ply
 from gsseg.model.sh import rgb_to_sh_dc
@@ -170,8 +171,8 @@ def edit_run(
     removal or an extraction (:mod:`gsseg.segment.served`), apply ``op`` and write ``RUN/edits/NAME/``:
     ``gaussians.ply``, ``renders/<view>.png`` of the scene's ``split`` views, ``video.mp4`` of
     those renders, and ``edit.json``. ``fill``: a removal fills what no training view saw
-    behind the object (:mod:`gsseg.fill`). ``options``: the prompt and the rest of
-    :func:`edit_runs`' keywords, whose defaults are the defaults here."""
+    behind the object with these options (:mod:`gsseg.fill`; None: the removal alone).
+    ``options``: the prompt and the rest of :func:`edit_runs`' keywords, whose defaults are the defaults here."""
     return edit_runs(run_dir, {op: color}, names=None if name is None else {op: name}, **options)[1][0]
 
 
@@ -187,7 +188,7 @@ def edit_runs(
     split: str = "test",
     k: int = 20,
     fps: int = 8,
-    fill: bool = True,
+    fill: FillOptions | None = FillOptions(),
     backend: str | Backend = "auto",
     overwrite: bool = False,
     other_scene: bool = False,
@@ -223,8 +224,8 @@ def edit_runs(
     for op, color in ops.items():
         mask = served.mask if op in COMPLETED_OPS else chosen.mask
         filled = None
-        if op == "remove" and fill:
-            filled = fill_run_removal(run, mask, scene.split("train"), backend=backend, progress=progress)
+        if op == "remove" and fill is not None:
+            filled = fill_run_removal(run, mask, scene.split("train"), options=fill, backend=backend, progress=progress)
             edited = filled.gaussians
         else:
             edited = apply_edit(run.gaussians, mask, op, None if color is None else tuple(c / 255 for c in color))

@@ -52,50 +52,18 @@ from tqdm import tqdm
 from dataset_tools.cameras import PinholeCamera
 from dataset_tools.infra.engine import task_cpus
 from dataset_tools.label_maps import mask_box
+from gsseg.fill_options import FillOptions
 from gsseg.model.environment import Environment, background_image
 from gsseg.model.gaussians import Gaussians, gaussians_from_points
 from gsseg.render import Backend, get_backend, render, surface_depth, to_uint8
 from gsseg.render.contributions import Masked
 from gsseg.render.pixel_labels import render_labels
 from gsseg.run.loaded import Run
-from gsseg.train.config import LearningRates, TrainConfig
+from gsseg.train.config import LearningRates
 from gsseg.train.losses import photometric_loss
 from gsseg.train.optim import GaussianOptimizer
 
 FITTED = ("means", "opacity_logits", "sh_dc")  # what the fit moves; sizes stay those of the seeding grid
-
-
-@dataclass(frozen=True)
-class FillOptions:
-    """How a removal is filled.
-
-    Attributes:
-        steps: optimisation steps of the fill, one view each.
-        views: at most this many of the views with unseen pixels seed new Gaussians.
-        fit_views: the unseen pixels are found, inpainted and fitted to in at most this many
-            of the views the object shows in, spread over them (each is tested against every
-            training view, each of which is still rendered once).
-        stride: pixels between the new Gaussians seeded in each fitted view.
-        rim: pixels the object's silhouettes are widened by (its blurred edge).
-        margin: pixels of the removal's render kept as they are around each hole in the fit.
-        depth_tolerance: relative depth difference under which another view sees a point.
-        depth_radius: width in pixels of the ring around a hole whose surface is carried across it.
-        initial_opacity: opacity of a new Gaussian.
-        lambda_dssim: weight of the SSIM term in the fit's loss, training's.
-        seed: seeds the choice of view at each step.
-    """
-
-    steps: int = 600
-    views: int = 12
-    fit_views: int = 32
-    stride: int = 3
-    rim: int = 2
-    margin: int = 12
-    depth_tolerance: float = 0.02
-    depth_radius: int = 5
-    initial_opacity: float = 0.9
-    lambda_dssim: float = TrainConfig.lambda_dssim
-    seed: int = 0
 
 
 @dataclass(frozen=True)
@@ -108,12 +76,14 @@ class Filled:
         unseen_share: share of the silhouettes' pixels, over the views tested, that no other
             view saw behind the object.
         seconds: wall time of the fill.
+        steps: optimisation steps of the fit (:attr:`FillOptions.steps`; 0 where nothing was unseen).
     """
 
     gaussians: Gaussians
     added: int
     unseen_share: float
     seconds: float
+    steps: int
 
     def record(self) -> dict:
         """What ``edit.json`` says of the fill."""
@@ -121,6 +91,7 @@ class Filled:
             "added": self.added,
             "unseen_share": round(self.unseen_share, 4),
             "seconds": round(self.seconds, 1),
+            "steps": self.steps,
         }
 
 
@@ -309,7 +280,7 @@ def fill_removal(
     share = sum(int(s.unseen.sum()) for s in shown) / max(sum(int(s.silhouette.sum()) for s in shown), 1)
     holes = [s for s in shown if s.unseen.any()]
     if not holes:
-        return Filled(kept.to(gaussians.means.device), 0, share, time.perf_counter() - start)
+        return Filled(kept.to(gaussians.means.device), 0, share, time.perf_counter() - start, 0)
     with ThreadPoolExecutor(task_cpus()) as pool:  # OpenCV's inpainting runs on one core, without the GIL
         targets = dict(
             zip(
@@ -326,7 +297,7 @@ def fill_removal(
         )
         fill = fill.select(torch.as_tensor(visible, device=fill.means.device))
     out = Gaussians.concat(kept, fill)
-    return Filled(out.to(gaussians.means.device), len(fill), share, time.perf_counter() - start)
+    return Filled(out.to(gaussians.means.device), len(fill), share, time.perf_counter() - start, options.steps)
 
 
 def fill_run_removal(

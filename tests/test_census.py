@@ -160,7 +160,7 @@ def world(tmp_path_factory) -> Path:
     scene = scene_with_exact_masks(SynthConfig(views=6, res=64, objects=3, seed=2), world / "scene").root
     train(scene, world / "run", TrainConfig(iters=5, backend="cpu"), progress=False)
     segment_run(world / "run", scene, backend="cpu", progress=False)
-    report_run(world / "run", scene, world / "report", backend="cpu", fill=False, progress=False)
+    report_run(world / "run", scene, world / "report", backend="cpu", fill=None, progress=False)
     _damage_scenes(world)
     _damage_runs(world)
     return world

@@ -143,6 +143,8 @@ def test_report_writes_tables_images_and_a_self_contained_page(segmented, small_
             str(small_scene.root),
             "--out",
             str(out),
+            "--fill-steps",
+            "60",
             "--backend",
             "cpu",
         ],
@@ -173,7 +175,7 @@ def test_report_scores_edits_where_the_scene_has_edit_truth(segmented, small_sce
     scene = tmp_path / "scene"
     shutil.copytree(small_scene.root, scene)
     write_edit_truth(scene, progress=False)
-    ev = report_run(segmented, scene, tmp_path / "report", backend="cpu", fill=False, progress=False)
+    ev = report_run(segmented, scene, tmp_path / "report", backend="cpu", fill=None, progress=False)
     test_views = load_scene(scene).split("test")
     assert {r["object"] for r in ev.edits} == set(ev.id_map.values())
     assert len(ev.edits) == len(ev.id_map) * len(test_views)
@@ -189,7 +191,7 @@ def test_report_scores_edits_where_the_scene_has_edit_truth(segmented, small_sce
     for view in test_views:
         row = read_image(tmp_path / "report" / "images" / f"{view.stem}_truth.png")
         assert row.shape == (view.camera.height, 4 * view.camera.width + 12, 3)
-    plain = report_run(segmented, small_scene.root, tmp_path / "plain", backend="cpu", fill=False, progress=False)
+    plain = report_run(segmented, small_scene.root, tmp_path / "plain", backend="cpu", fill=None, progress=False)
     assert not plain.edits and "edits" not in plain.summary()
 
 
@@ -197,7 +199,7 @@ def test_report_scores_edits_where_the_scene_has_edit_truth(segmented, small_sce
 def test_report_page_renders_in_chromium(segmented, small_scene, tmp_path):
     from eval.report import report_run
 
-    report_run(segmented, small_scene.root, tmp_path / "report", backend="cpu", fill=False, progress=False)
+    report_run(segmented, small_scene.root, tmp_path / "report", backend="cpu", fill=None, progress=False)
     shot = tmp_path / "shot.png"
     subprocess.run(
         [
@@ -264,7 +266,7 @@ def test_lpips_plumbing_reports_the_networks_value_per_view(segmented, small_sce
     net = tmp_path / "lpips.onnx"
     _standin_lpips(net)
     ev = report_run(
-        segmented, small_scene.root, tmp_path / "report", backend="cpu", fill=False, lpips=net, progress=False
+        segmented, small_scene.root, tmp_path / "report", backend="cpu", fill=None, lpips=net, progress=False
     )
     renders = render_run(
         segmented, small_scene.root, tmp_path / "renders", what=("rgb",), backend="cpu", progress=False

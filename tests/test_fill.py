@@ -15,7 +15,6 @@ from helpers import script
 
 from dataset_tools.cameras import PinholeCamera
 from gsseg.fill import (
-    FillOptions,
     crop_camera,
     fill_removal,
     inpaint,
@@ -23,6 +22,7 @@ from gsseg.fill import (
     surface_across,
     unseen_pixels,
 )
+from gsseg.fill_options import FillOptions
 from gsseg.model.gaussians import gaussians_from_points
 from gsseg.model.ply import read_ply
 from gsseg.render import render
@@ -166,16 +166,22 @@ def test_fill_puts_the_wall_back(fit_views):
 
 def test_gsseg_edit_fills_a_removal_unless_told_not_to_plumbing(segmented, small_scene, tmp_path):
     """Plumbing: ``gsseg edit --op remove`` writes the removal with its fill after it, and says
-    so in edit.json; ``--no-fill`` writes the removal alone."""
+    so in edit.json (with the fit's steps, here 60 of ``--fill-steps``); ``--no-fill`` writes the
+    removal alone, and with ``--fill-steps`` too is one sentence, exit 2, nothing written."""
     run_dir = Path(shutil.copytree(segmented, tmp_path / "run"))
     obj = int(load_run(run_dir).labels().objects[0])
     common = ["edit", str(run_dir), "--object-id", str(obj), "--op", "remove", "--backend", "cpu"]
-    for name, flags in (("filled", []), ("plain", ["--no-fill"])):
+    for name, flags in (("filled", ["--fill-steps", "60"]), ("plain", ["--no-fill"])):
         r = subprocess.run([script("gsseg"), *common, "--name", name, *flags], capture_output=True, text=True)
         assert r.returncode == 0, r.stderr
+    both = ["--name", "both", "--no-fill", "--fill-steps", "60"]
+    r = subprocess.run([script("gsseg"), *common, *both], capture_output=True, text=True)
+    assert r.returncode == 2 and "--fill-steps with --no-fill" in r.stderr, r.stderr
+    assert not (run_dir / "edits" / "both").exists()
     filled, plain = (read_ply(run_dir / "edits" / n / "gaussians.ply") for n in ("filled", "plain"))
     record = json.loads((run_dir / "edits" / "filled" / "edit.json").read_text())["removal_fill"]
     assert record["added"] == len(filled) - len(plain) and 0 <= record["unseen_share"] <= 1
+    assert record["steps"] == 60
     assert json.loads((run_dir / "edits" / "plain" / "edit.json").read_text())["removal_fill"] is None
     for name, value in plain.tensors().items():
         assert torch.equal(getattr(filled, name)[: len(plain)], value), name

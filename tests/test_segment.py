@@ -221,7 +221,7 @@ def test_segment_edit_and_render_segments_from_the_command_line(trained, small_s
         names={"remove": "gone2"},
         point=point,
         split="train",
-        fill=False,
+        fill=None,
         progress=False,
     )
     assert [p.name for p in both] == ["gone2", "recolor_2"] and chosen.object_id == 2

@@ -26,6 +26,7 @@ from dataset_tools.infra.errors import InputError
 from dataset_tools.scene import load_scene
 from eval.standard_render import read_splats, render_reference
 from gsseg.export import export_run, read_splat, splat_records
+from gsseg.fill_options import FillOptions
 from gsseg.model.ply import read_ply
 from gsseg.model.sh import C0
 from gsseg.run.loaded import load_run
@@ -35,6 +36,7 @@ from gsseg.segment.served import complete_selection
 from gsseg.viewer.session import ViewCamera, ViewerSession, browser_camera
 
 CHROMIUM, CHROMEDRIVER = shutil.which("chromium"), shutil.which("chromedriver")
+QUICK_FILL = FillOptions(steps=60)  # a removal's fill where what it fits is not looked at
 
 
 def _copy(run: Path, tmp_path: Path) -> Path:
@@ -179,7 +181,7 @@ def test_a_click_selects_what_gsseg_edit_click_selects(segmented, small_scene, t
 @pytest.mark.slow
 def test_edits_undo_and_save_write_what_gsseg_edit_writes(segmented, small_scene, tmp_path):
     run = _copy(segmented, tmp_path)
-    session = ViewerSession(load_run(run), scene_dir=small_scene.root, backend="cpu")
+    session = ViewerSession(load_run(run), scene_dir=small_scene.root, backend="cpu", fill=QUICK_FILL)
     base, _ = session.current()
     obj, count = session.objects()[0]
     session.selected = obj
@@ -197,6 +199,8 @@ def test_edits_undo_and_save_write_what_gsseg_edit_writes(segmented, small_scene
             "remove",
             "--name",
             "cli",
+            "--fill-steps",
+            str(QUICK_FILL.steps),
             "--backend",
             "cpu",
         ],
@@ -237,9 +241,7 @@ def test_an_extracted_object_shows_on_white_a_removal_over_the_environment(segme
     behind = run.render_rgb(view, gaussians=kept, backend="cpu")
     assert empty.mean() > 0.3 and (behind[empty] < 250).any()  # the environment is no white
     for op in ("extract", "remove"):
-        out = edit_run(
-            run_dir, op, object_id=obj, scene_dir=small_scene.root, fill=False, backend="cpu", progress=False
-        )
+        out = edit_run(run_dir, op, object_id=obj, scene_dir=small_scene.root, fill=None, backend="cpu", progress=False)
         frame = read_image(out / "renders" / f"{view.stem}.png")
         expected = np.full_like(behind[empty], 255) if op == "extract" else behind[empty]
         np.testing.assert_array_equal(frame[empty], expected)
@@ -411,7 +413,7 @@ def test_the_viewer_in_headless_chromium_selects_and_removes_by_click(segmented,
     from gsseg.viewer.server import Viewer
 
     run = Path(os.environ["VIEWER_RUN"]) if "VIEWER_RUN" in os.environ else _copy(segmented, tmp_path)
-    viewer = Viewer(ViewerSession(load_run(run), backend="cpu"), port=0)
+    viewer = Viewer(ViewerSession(load_run(run), backend="cpu", fill=QUICK_FILL), port=0)
     session, view = viewer.session, viewer.views[1]
     # the pixel of the view's largest object, found before the page opens (nothing renders beside it)
     mask = segment_pixels(

@@ -173,6 +173,25 @@ def given_fields(ctx: click.Context, config: type | Callable) -> dict:
     }
 
 
+def switched_fields(ctx: click.Context, config: type, switch: str) -> dict:
+    """The keyword ``switch`` of a library function that takes options of the dataclass
+    ``config``, or None for the feature off, from the command line's ``--switch/--no-switch``
+    (the parameter ``switch`` of ``ctx``, None where not given) and the fields of ``config``
+    the user gave (:func:`given_fields`): {} where neither was given, so that the function's
+    default decides.
+
+    Raises:
+        click.UsageError: a field given with the feature turned off.
+    """
+    given = given_fields(ctx, config)
+    if ctx.params[switch] is not False:
+        return {switch: config(**given)} if given else {}
+    if given:
+        flags = [p.opts[0] for p in ctx.command.params if p.name in given]
+        raise click.UsageError(f"{', '.join(flags)} with --no-{switch}: give the one or the other.")
+    return {switch: None}
+
+
 def none_means_off(ctx: click.Context, param: click.Parameter, value: str | None) -> str | None:
     """A click callback: the option value ``none`` becomes None (the feature turned off)."""
     return None if value == "none" else value

@@ -23,6 +23,7 @@ from scipy.spatial.transform import Rotation
 from dataset_tools.image_files import label_palette
 from dataset_tools.infra.errors import InputError, OptionError
 from dataset_tools.infra.interrupts import Interrupted, stop_requests
+from gsseg.fill_options import FillOptions
 from gsseg.run.loaded import load_run
 from gsseg.segment.label_options import METHODS
 from gsseg.viewer.session import ViewCamera, ViewerSession, browser_camera
@@ -368,14 +369,16 @@ def serve(
     max_size: int = 640,
     backend: str = "auto",
     other_scene: bool = False,
+    fill: FillOptions = FillOptions(),
     on_ready=print,
 ) -> None:
     """Serve a run until Ctrl-C or SIGTERM (then :class:`Interrupted`, which the command line
     prints as one line with exit code 130, as every command); ``on_ready`` is called with a
-    line saying where; ``other_scene``: show it on a scene other than the run's."""
+    line saying where; ``other_scene``: show it on a scene other than the run's; ``fill``: the
+    options of a removal's fill (:mod:`gsseg.fill`)."""
     # A frame queued for a tab that closed meanwhile is dropped; viser warns of it with a source line.
     warnings.filterwarnings("ignore", message=r"Queued a \w+ on a closed connection", category=UserWarning)
-    session = ViewerSession(load_run(run_dir, other_scene=other_scene), scene_dir=scene_dir, backend=backend)
+    session = ViewerSession(load_run(run_dir, other_scene=other_scene), scene_dir=scene_dir, backend=backend, fill=fill)
     viewer = Viewer(session, host=host, port=port, max_size=max_size)
     on_ready(f"serving {run_dir} at {viewer.url} (Ctrl-C stops)")
     if session.segments_missing:

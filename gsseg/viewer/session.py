@@ -19,6 +19,7 @@ from dataset_tools.image_files import label_palette
 from dataset_tools.infra.errors import InputError
 from gsseg.edits import COMPLETED_OPS, apply_edit, check_edit, edit_background, write_edit
 from gsseg.fill import Filled, fill_run_removal
+from gsseg.fill_options import FillOptions
 from gsseg.model.gaussians import Gaussians
 from gsseg.model.sh import rgb_to_sh_dc
 from gsseg.render import get_backend
@@ -81,6 +82,7 @@ class ViewerSession:
 
     Objects are selected and edited through the labels of ``RUN/labels.npz``; without it the
     model is shown but ``segments_missing`` says how to make labels and selection is off.
+    A removal is filled with the options ``fill`` (:mod:`gsseg.fill`), as ``gsseg edit`` fills it.
     """
 
     def __init__(
@@ -91,8 +93,10 @@ class ViewerSession:
         masks: str | None = None,
         backend: str = "auto",
         k: int = 20,
+        fill: FillOptions = FillOptions(),
     ) -> None:
         self.run = run
+        self.fill_options = fill
         self.scene_dir = scene_dir
         self.masks = masks or run.masks
         self.backend = get_backend(backend)
@@ -159,7 +163,13 @@ class ViewerSession:
         for name, t in whole.tensors().items():
             t[torch.from_numpy(kept)] = getattr(g, name)  # recolours kept
         filled = fill_run_removal(
-            self.run, ~kept, self.scene.split("train"), gaussians=whole, backend=self.backend, progress=False
+            self.run,
+            ~kept,
+            self.scene.split("train"),
+            gaussians=whole,
+            options=self.fill_options,
+            backend=self.backend,
+            progress=False,
         )
         with self._lock:
             if self.steps == steps:
