@@ -18,7 +18,6 @@ from dataset_tools.infra.cli_support import (
 )
 from dataset_tools.scene import GT_MASKS, Split
 from eval.lpips import NETS, export_lpips
-from gsseg.cli import FILL_STEPS
 from gsseg.fill_options import FillOptions
 
 BACKEND = Registry("gsseg.render.backends:BACKENDS", ("auto",))
@@ -65,7 +64,9 @@ def cli() -> None:
     help="Whether the removal shown fills what no training view saw behind the object, as `gsseg edit` does "
     "(by default it does).",
 )
-@FILL_STEPS
+@field_option(
+    FillOptions, "steps", "--fill-steps", type=click.IntRange(1), help="Optimisation steps of the removal's fill."
+)
 @click.option("--force", is_flag=True, help="Replace --out if it exists.")
 @other_scene_option
 def report(
