@@ -256,8 +256,8 @@ def edit(run: Path, point, click_, exclude_click, scene, force: bool, fill, step
     from gsseg.edits import edit_run
 
     clicks = _clicks(click_, exclude_click)
-    fill = switched_fields(click.get_current_context(), FillOptions, "fill")  # edit_run's default decides
-    out = edit_run(run, point=point or None, clicks=clicks, scene_dir=scene, overwrite=force, **fill, **options)
+    filling = switched_fields(click.get_current_context(), FillOptions, "fill")  # edit_run's default decides
+    out = edit_run(run, point=point or None, clicks=clicks, scene_dir=scene, overwrite=force, **filling, **options)
     click.echo(f"wrote {out}")
 
 

@@ -176,7 +176,8 @@ def test_gsseg_edit_fills_a_removal_unless_told_not_to_plumbing(segmented, small
         assert r.returncode == 0, r.stderr
     both = ["--name", "both", "--no-fill", "--fill-steps", "60"]
     r = subprocess.run([script("gsseg"), *common, *both], capture_output=True, text=True)
-    assert r.returncode == 2 and "--fill-steps with --no-fill" in r.stderr, r.stderr
+    assert r.returncode == 2, r.stderr
+    assert r.stderr == "error: --fill-steps 60 with --no-fill: give the one or the other.\n"
     assert not (run_dir / "edits" / "both").exists()
     filled, plain = (read_ply(run_dir / "edits" / n / "gaussians.ply") for n in ("filled", "plain"))
     record = json.loads((run_dir / "edits" / "filled" / "edit.json").read_text())["removal_fill"]

@@ -19,7 +19,7 @@ import click
 from click.core import ParameterSource
 from tqdm import tqdm
 
-from dataset_tools.infra.errors import NO_VALUE, InputError, RunFailed, Spelling
+from dataset_tools.infra.errors import NO_VALUE, InputError, OptionError, RunFailed, Spelling
 from dataset_tools.infra.interrupts import Interrupted
 from dataset_tools.infra.threads import configure_threads
 
@@ -181,14 +181,14 @@ def switched_fields(ctx: click.Context, config: type, switch: str) -> dict:
     default decides.
 
     Raises:
-        click.UsageError: a field given with the feature turned off.
+        OptionError: a field given with the feature turned off.
     """
     given = given_fields(ctx, config)
     if ctx.params[switch] is not False:
         return {switch: config(**given)} if given else {}
     if given:
-        flags = [p.opts[0] for p in ctx.command.params if p.name in given]
-        raise click.UsageError(f"{', '.join(flags)} with --no-{switch}: give the one or the other.")
+        named = " ".join(f"{{{name}}}" for name in given)
+        raise OptionError(f"{named} with {{{switch}}}: give the one or the other.", **given, **{switch: False})
     return {switch: None}
 
 
