@@ -1,5 +1,5 @@
 """What several test modules share: command-line runners, synthetic scenes with training
-masks, small random Gaussian scenes, and numba's thread count."""
+masks, small random Gaussian scenes, numba's thread count and the plumbing tests' fill."""
 
 from __future__ import annotations
 
@@ -18,7 +18,10 @@ from dataset_tools.infra.atomic import write_bytes_atomic
 from dataset_tools.mask_manifest import MANIFEST, manifest_bytes
 from dataset_tools.scene import GT_MASKS, MASKS
 from dataset_tools.synth import SynthConfig, SynthResult, generate_scene
+from gsseg.fill_options import FillOptions
 from gsseg.model.gaussians import Gaussians
+
+QUICK_FILL = FillOptions(steps=60)  # a removal's fill in the plumbing tests, which do not look at what it fits
 
 
 def run(*args: str, **kwargs) -> subprocess.CompletedProcess:

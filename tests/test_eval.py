@@ -6,7 +6,6 @@ from __future__ import annotations
 import json
 import shutil
 import subprocess
-import sys
 from dataclasses import dataclass
 from pathlib import Path
 from types import SimpleNamespace
@@ -14,6 +13,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 import torch
+from helpers import QUICK_FILL, script
 
 from dataset_tools import InputError
 from dataset_tools.cameras import PinholeCamera
@@ -30,10 +30,6 @@ from gsseg.run.loaded import Run
 from gsseg.run.record import RunRecord
 from gsseg.segment.reassign import Segmentation
 from gsseg.train.config import TrainConfig
-
-
-def script(name: str) -> str:
-    return str(Path(sys.executable).parent / name)
 
 
 def test_binary_scores_known_values():
@@ -144,7 +140,7 @@ def test_report_writes_tables_images_and_a_self_contained_page(segmented, small_
             "--out",
             str(out),
             "--fill-steps",
-            "60",
+            str(QUICK_FILL.steps),
             "--backend",
             "cpu",
         ],

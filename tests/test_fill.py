@@ -11,7 +11,7 @@ import cv2
 import numpy as np
 import pytest
 import torch
-from helpers import script
+from helpers import QUICK_FILL, script
 
 from dataset_tools.cameras import PinholeCamera
 from gsseg.fill import (
@@ -166,12 +166,12 @@ def test_fill_puts_the_wall_back(fit_views):
 
 def test_gsseg_edit_fills_a_removal_unless_told_not_to_plumbing(segmented, small_scene, tmp_path):
     """Plumbing: ``gsseg edit --op remove`` writes the removal with its fill after it, and says
-    so in edit.json (with the fit's steps, here 60 of ``--fill-steps``); ``--no-fill`` writes the
-    removal alone, and with ``--fill-steps`` too is one sentence, exit 2, nothing written."""
+    so in edit.json (with the fit's steps, those of ``QUICK_FILL`` here); ``--no-fill`` writes
+    the removal alone, and with ``--fill-steps`` too is one sentence, exit 2, nothing written."""
     run_dir = Path(shutil.copytree(segmented, tmp_path / "run"))
     obj = int(load_run(run_dir).labels().objects[0])
     common = ["edit", str(run_dir), "--object-id", str(obj), "--op", "remove", "--backend", "cpu"]
-    for name, flags in (("filled", ["--fill-steps", "60"]), ("plain", ["--no-fill"])):
+    for name, flags in (("filled", ["--fill-steps", str(QUICK_FILL.steps)]), ("plain", ["--no-fill"])):
         r = subprocess.run([script("gsseg"), *common, "--name", name, *flags], capture_output=True, text=True)
         assert r.returncode == 0, r.stderr
     both = ["--name", "both", "--no-fill", "--fill-steps", "60"]
@@ -182,7 +182,7 @@ def test_gsseg_edit_fills_a_removal_unless_told_not_to_plumbing(segmented, small
     filled, plain = (read_ply(run_dir / "edits" / n / "gaussians.ply") for n in ("filled", "plain"))
     record = json.loads((run_dir / "edits" / "filled" / "edit.json").read_text())["removal_fill"]
     assert record["added"] == len(filled) - len(plain) and 0 <= record["unseen_share"] <= 1
-    assert record["steps"] == 60
+    assert record["steps"] == QUICK_FILL.steps
     assert json.loads((run_dir / "edits" / "plain" / "edit.json").read_text())["removal_fill"] is None
     for name, value in plain.tensors().items():
         assert torch.equal(getattr(filled, name)[: len(plain)], value), name

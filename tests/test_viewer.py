@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from helpers import random_gaussians, script
+from helpers import QUICK_FILL, random_gaussians, script
 from plyfile import PlyData
 from scipy import ndimage
 from scipy.spatial.transform import Rotation
@@ -26,7 +26,6 @@ from dataset_tools.infra.errors import InputError
 from dataset_tools.scene import load_scene
 from eval.standard_render import read_splats, render_reference
 from gsseg.export import export_run, read_splat, splat_records
-from gsseg.fill_options import FillOptions
 from gsseg.model.ply import read_ply
 from gsseg.model.sh import C0
 from gsseg.run.loaded import load_run
@@ -36,7 +35,6 @@ from gsseg.segment.served import complete_selection
 from gsseg.viewer.session import ViewCamera, ViewerSession, browser_camera
 
 CHROMIUM, CHROMEDRIVER = shutil.which("chromium"), shutil.which("chromedriver")
-QUICK_FILL = FillOptions(steps=60)  # a removal's fill where what it fits is not looked at
 
 
 def _copy(run: Path, tmp_path: Path) -> Path:
