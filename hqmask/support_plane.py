@@ -30,10 +30,12 @@ class Heights:
     """One view's ``values`` (H, W) float32, the height above the support plane of the surface
     each pixel sees (NaN where nothing is seen, -inf beyond the plane's reach), and whether
     what rises from the plane is cut from it where it leaves it (``contact``: a plane found
-    under an orbit's focus, the surface the orbited object stands on)."""
+    under an orbit's focus, the surface the orbited object stands on); ``observed`` (H, W)
+    bool, the pixels where the view observes an SfM point (None: not known)."""
 
     values: np.ndarray
     contact: bool
+    observed: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -55,7 +57,8 @@ class SupportPlane:
         """The height above the plane of the surface each pixel of ``view`` sees (``depth``
         (H, W), 0 where nothing is opaque), in units of :attr:`scale`: NaN where nothing is
         seen, -inf where the surface lies beyond the scene's reach (nothing of the scene rises
-        there); to be cut at the contact where the plane lies under an orbit's focus."""
+        there); to be cut at the contact where the plane lies under an orbit's focus; and the
+        pixels where ``view`` observes its SfM points (``view.uv``)."""
         cam = view.camera
         H, W = depth.shape
         u, v = np.meshgrid(np.arange(W) + 0.5, np.arange(H) + 0.5)
@@ -66,7 +69,11 @@ class SupportPlane:
         from_centre = x_world - self.centre
         along = from_centre - np.multiply.outer(from_centre @ self.normal, self.normal)  # its part in the plane
         height = np.where(np.linalg.norm(along, axis=-1) > self.reach * self.scale, -np.inf, height)
-        return Heights(np.where(depth > 0, height, np.nan).astype(np.float32), self.under_focus)
+        observed = np.zeros((H, W), bool)
+        uv = np.floor(view.uv).astype(np.int64).reshape(-1, 2)
+        inside = (uv >= 0).all(1) & (uv[:, 0] < W) & (uv[:, 1] < H)
+        observed[uv[inside, 1], uv[inside, 0]] = True
+        return Heights(np.where(depth > 0, height, np.nan).astype(np.float32), self.under_focus, observed)
 
 
 @dataclass(frozen=True)

@@ -220,6 +220,26 @@ def test_what_rises_from_the_floor_is_an_object_even_at_the_border():
     assert len(masks) == 1 and masks[0][60, 10] and not masks[0][60, 100]
 
 
+def test_in_an_orbit_only_what_the_points_see_rises():
+    """A red model cut by the frame and a green table beside it, both rising in the run's
+    depth; the view's SfM points lie on the model alone (the table is a surface they never
+    saw, as the still room around a turntable). Under a plane found elsewhere both stand;
+    under an orbit's focus the table, with no point, is background; without any point in the
+    view the rule says nothing."""
+    image, depth = _drawn(
+        [("rect", (0, 30, 50, 100), (170, 60, 50), 3.0), ("rect", (70, 0, 127, 127), (40, 140, 40), 3.0)]
+    )
+    height = np.where((image[..., 0] == 170) | (image[..., 1] == 140), 0.6, 0.0).astype(np.float32)
+    observed = np.zeros(height.shape, bool)
+    observed[35:95:4, 5:45:4] = True  # on the model
+    proposer = GraphProposer()
+    assert len(proposer.propose(image, None, depth, Heights(height, False, observed)).masks) == 2
+    masks = proposer.propose(image, None, depth, Heights(height, True, observed)).masks
+    assert len(masks) == 1 and masks[0][60, 20] and not masks[0][60, 100]
+    none = np.zeros_like(observed)
+    assert len(proposer.propose(image, None, depth, Heights(height, True, none)).masks) == 2
+
+
 def test_an_object_of_its_supports_colour_comes_apart_where_it_rises():
     """A grey model on a grey floor, at the floor's depth where it stands (no jump): colour
     and depth see one region touching the border, all background, and so do the heights
@@ -322,7 +342,7 @@ def test_heights_beyond_the_reach_of_the_scene_are_minus_infinity():
     down = np.array([[1.0, 0, 0, 0], [0, -1, 0, 0], [0, 0, -1, 4.0]])  # camera at z = 4, looking along -z
     depth = np.full((64, 64), 4.0, np.float32)
     depth[0, 0] = 0.0
-    heights = plane.heights(SimpleNamespace(camera=camera, cam_from_world=down), depth).values
+    heights = plane.heights(SimpleNamespace(camera=camera, cam_from_world=down, uv=np.zeros((0, 2))), depth).values
     assert heights[32, 32] == pytest.approx(0.0, abs=1e-5) and heights[32, 37] == pytest.approx(0.0, abs=1e-5)
     assert np.isneginf(heights[32, 38]) and np.isneginf(heights[5, 5]) and np.isnan(heights[0, 0])  # 3.26 units out
     assert np.isfinite(heights[32, 26]) and np.isneginf(heights[32, 25])  # 2.76 and 3.26 units out

@@ -40,6 +40,14 @@ def _median_heights(seg: np.ndarray, height: np.ndarray) -> np.ndarray:
     return np.asarray(ndimage.median(np.where(seen, height, 0.0), np.where(seen, seg, -1), np.arange(n)), float)
 
 
+def _backed(seg: np.ndarray, counts: np.ndarray, observed: np.ndarray, share: float) -> np.ndarray:
+    """(n,) bool: regions of ``seg`` (H, W) whose SfM observations (``observed`` (H, W) bool,
+    of ``counts`` (n,) pixels each) are at least ``share`` of the view's mean density; all of
+    them where the view observes none."""
+    n = len(counts)
+    return np.bincount(seg[observed], minlength=n) >= share * observed.mean() * counts
+
+
 def _contact(height: np.ndarray, level: float) -> np.ndarray:
     """(H, W) bool: the line where the surface rises past ``level`` above the support plane
     (``height`` (H, W), NaN or -inf where there is none): pixels on either side of it."""
@@ -142,8 +150,10 @@ class GraphProposer:
     shares the longest boundary with. With heights above the support plane, a region whose
     median height is at least ``standing_height`` is no background; where the plane lies
     under an orbit's focus, regions are cut where the surface rises past ``contact_height`` (an
-    object of its support's colour comes apart from it) and a region beyond the plane's reach
-    (behind the cameras) is background (docs/masks.md).
+    object of its support's colour comes apart from it), a region stands only where the view's
+    SfM points back it (at least ``backed_share`` of the view's mean density of observations:
+    the still room around a turntable object, which the run draws as haze, does not) and a
+    region beyond the plane's reach (behind the cameras) is background (docs/masks.md).
     """
 
     scale: float = 100.0
@@ -156,6 +166,7 @@ class GraphProposer:
     depth_jump: float = 0.2
     occluding_share: float = 0.25
     standing_height: float = 0.25
+    backed_share: float = 0.2
     contact_height: float = 0.1
     cache_name = "graph"
     threadable = True
@@ -222,7 +233,10 @@ class GraphProposer:
             background |= alike
         if height is not None:
             rise = _median_heights(seg, height.values)
-            background &= ~(rise >= self.standing_height)
+            stands = rise >= self.standing_height
+            if height.contact and height.observed is not None:  # in an orbit, only where points see it
+                stands &= _backed(seg, counts, height.observed, self.backed_share)
+            background &= ~stands
             if height.contact:  # in an orbit, what lies beyond the cameras is no object
                 background |= np.isneginf(rise)
         return background
